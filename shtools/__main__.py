@@ -1,0 +1,5 @@
+import sys
+
+from shtools.cli.main import main
+
+sys.exit(main())

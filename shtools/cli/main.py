@@ -1,0 +1,106 @@
+"""The ``shtools`` command: a click group whose subcommands load lazily.
+
+Every command is thin: parse options, call the library, report.  Errors a user
+can fix (:class:`shtools.errors.ShtoolsError`, click usage errors) become one
+line ``error: <file>: <what to do>`` on stderr with exit status 2 (usage) or 1;
+anything else is a bug and prints a traceback only with ``--debug``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+
+import click
+
+from shtools import __version__
+from shtools.errors import ShtoolsError
+
+#: command name -> "module:attribute" (module under shtools.cli).  Commands whose
+#: module is not present are not listed.
+COMMANDS = {
+    "spheres": "shtools.cli.spheres:spheres",
+    "tables": "shtools.cli.tables:tables",
+    "field": "shtools.cli.field:field",
+    "light": "shtools.cli.light:light",
+    "bake": "shtools.cli.bake:bake",
+    "export": "shtools.cli.export:export",
+    "eval": "shtools.cli.eval:eval_cmd",
+    "info": "shtools.cli.assets:info",
+    "check": "shtools.cli.assets:check",
+    "diff": "shtools.cli.assets:diff",
+}
+
+
+class LazyGroup(click.Group):
+    """A group that imports a subcommand's module only when it is used."""
+
+    def list_commands(self, ctx):
+        return sorted(
+            name
+            for name, target in COMMANDS.items()
+            if importlib.util.find_spec(target.split(":")[0]) is not None
+        )
+
+    def get_command(self, ctx, name):
+        target = COMMANDS.get(name)
+        if target is None:
+            return None
+        module_name, attr = target.split(":")
+        if importlib.util.find_spec(module_name) is None:
+            return None
+        return getattr(importlib.import_module(module_name), attr)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="shtools")
+@click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
+@click.pass_context
+def cli(ctx, debug):
+    """Soft shadows with spherical harmonics: preprocessing stages and baker.
+
+    Each stage reads files and writes one HDF5 asset named by -o/--output.
+    """
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``shtools`` console script."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    debug = "--debug" in argv
+    try:
+        cli.main(args=argv, prog_name="shtools", standalone_mode=False)
+    except ShtoolsError as exc:
+        if debug:
+            raise
+        click.echo(f"error: {exc.one_line()}", err=True)
+        return 1
+    except click.exceptions.Abort:
+        click.echo("error: interrupted; no output was written", err=True)
+        return 130
+    except click.ClickException as exc:
+        if debug:
+            raise
+        click.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
+        return exc.exit_code
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except KeyboardInterrupt:
+        click.echo("error: interrupted; no output was written", err=True)
+        return 130
+    except Exception as exc:  # a bug: one line unless --debug
+        if debug:
+            raise
+        click.echo(
+            f"error: internal error ({type(exc).__name__}: {exc}); rerun with --debug "
+            "and report it",
+            err=True,
+        )
+        return 3
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,393 @@
+"""Shared machinery for every asset kind: atomic writes, provenance, validated reads.
+
+Each asset kind has its own module (``spheres.py``, ``tables.py``, ...) that
+declares a :class:`Schema` and thin ``write_*``/``read_*`` functions on top of
+:func:`write_asset` and :func:`read_asset`.
+
+Determinism: datasets are written without HDF5 object timestamps
+(``track_times=False``), attributes in a fixed order, and nothing
+time-dependent is stored, so the same inputs give byte-identical datasets.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from shtools.errors import AssetError
+
+FORMAT_PREFIX = "shtools/"
+
+#: Root attributes every asset carries (DESIGN.md, "Asset files").
+PROVENANCE_ATTRS = ("generator", "inputs", "parameters")
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """Expected layout of one dataset.
+
+    Parameters
+    ----------
+    name : str
+        Path inside the file (``"centers"``, ``"shells/0/ocv"``).
+    shape : tuple
+        Expected shape; each entry an int (exact), a str (a named dimension
+        that must agree across datasets of the same asset, e.g. ``"N"``) or
+        ``None`` (any length).
+    dtype_kind : str
+        Allowed numpy dtype kinds, e.g. ``"f"`` for floats, ``"iu"`` for ints.
+    finite : bool
+        Reject NaN/inf (floats only).
+    optional : bool
+        The dataset may be absent.
+    ndim_options : tuple of tuple, optional
+        Alternative shapes (e.g. ``(("V", 3), ("T", "V", 3))``); used instead of
+        ``shape`` when given.
+    """
+
+    name: str
+    shape: tuple = ()
+    dtype_kind: str = "f"
+    finite: bool = True
+    optional: bool = False
+    ndim_options: tuple = ()
+
+
+@dataclass(frozen=True)
+class Schema:
+    """One asset kind: its name, current version, known versions and datasets."""
+
+    kind: str
+    version: int
+    datasets: tuple[DatasetSpec, ...] = ()
+    known_versions: tuple[int, ...] = ()
+    required_attrs: tuple[str, ...] = ()
+    has_sh: bool = False
+    #: extra validation on the open file, after the generic checks; raise AssetError
+    check: Callable[[h5py.File, dict], None] | None = None
+
+    def versions(self) -> tuple[int, ...]:
+        return self.known_versions or (self.version,)
+
+
+@dataclass
+class Asset:
+    """A validated, fully-loaded asset.
+
+    Attributes
+    ----------
+    kind : str
+    version : int
+    attrs : dict
+        Root attributes (``parameters`` and ``inputs`` decoded from JSON).
+    data : dict
+        Dataset path -> ndarray, every dataset in the file.
+    dims : dict
+        Named dimensions resolved during validation (e.g. ``{"N": 64}``).
+    path : str
+    """
+
+    kind: str
+    version: int
+    attrs: dict
+    data: dict[str, np.ndarray]
+    dims: dict[str, int] = field(default_factory=dict)
+    path: str = ""
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.data[name]
+
+    @property
+    def sh_order(self) -> int | None:
+        v = self.attrs.get("sh_order")
+        return None if v is None else int(v)
+
+    @property
+    def parameters(self) -> dict:
+        return self.attrs.get("parameters", {})
+
+
+SCHEMAS: dict[str, Schema] = {}
+
+
+def register(schema: Schema) -> Schema:
+    """Register an asset kind so ``read_asset``/``shtools check`` know it."""
+    SCHEMAS[schema.kind] = schema
+    return schema
+
+
+#: Every asset kind of DESIGN.md; each has a module ``shtools.data_formats.<kind>``
+#: that registers its :class:`Schema` on import.
+KINDS = ("spheres", "tree", "bound", "tables", "scaling", "field", "light", "bake")
+
+
+def get_schema(kind: str) -> Schema | None:
+    """The registered schema of ``kind``, importing its module on first use."""
+    if kind not in SCHEMAS and kind in KINDS:
+        import importlib
+
+        try:
+            importlib.import_module(f"shtools.data_formats.{kind}")
+        except ModuleNotFoundError:
+            return None
+    return SCHEMAS.get(kind)
+
+
+def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def generator_string() -> str:
+    from shtools import __version__
+
+    return f"shtools {__version__}"
+
+
+def _json(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, default=_json_default)
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, os.PathLike):
+        return os.fspath(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+@contextlib.contextmanager
+def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``target``; rename it into place on success.
+
+    On any exception (including KeyboardInterrupt) the temporary file is removed
+    and ``target`` is left untouched, so ``make`` never sees a half-written file.
+    """
+    target = Path(target)
+    directory = target.parent if str(target.parent) else Path(".")
+    if not directory.is_dir():
+        raise AssetError("output folder does not exist; create it first", target)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise
+
+
+def write_asset(
+    path: str | os.PathLike,
+    kind: str,
+    datasets: Mapping[str, Any],
+    *,
+    attrs: Mapping[str, Any] | None = None,
+    sh_order: int | None = None,
+    inputs: Mapping[str, str | os.PathLike] | None = None,
+    parameters: Mapping[str, Any] | None = None,
+    dataset_attrs: Mapping[str, Mapping[str, Any]] | None = None,
+    compression: str | None = None,
+) -> Path:
+    """Write an asset atomically, with provenance, deterministically.
+
+    Parameters
+    ----------
+    path : path-like
+        Target file.  Written to a temporary file beside it, then renamed.
+    kind : str
+        Asset kind (a registered :class:`Schema`), e.g. ``"spheres"``.
+    datasets : mapping of str to array_like
+        Dataset path (``"/"``-separated groups allowed) to data.
+    attrs : mapping, optional
+        Extra root attributes (scalars, strings, small arrays).
+    sh_order : int, optional
+        Recorded with ``sh_convention`` when the asset holds SH data.
+    inputs : mapping of str to path-like, optional
+        Input files; their names and sha256 are recorded in ``inputs``.
+    parameters : mapping, optional
+        The stage's parameters, recorded as JSON.
+    dataset_attrs : mapping, optional
+        Dataset path -> attributes for that dataset.
+    compression : str, optional
+        h5py compression filter (e.g. ``"gzip"``); deterministic.
+
+    Returns
+    -------
+    pathlib.Path
+        The written path.
+    """
+    from shtools.sh.basis import SH_CONVENTION
+
+    schema = get_schema(kind)
+    if schema is None:
+        raise ValueError(f"unknown asset kind {kind!r}")
+    input_hashes = {
+        Path(p).name: sha256_file(p) for p in (inputs or {}).values() if p is not None
+    }
+    root = {
+        "format": FORMAT_PREFIX + kind,
+        "format_version": np.int64(schema.version),
+        "generator": generator_string(),
+        "inputs": _json(input_hashes),
+        "parameters": _json(dict(parameters or {})),
+    }
+    if sh_order is not None:
+        root["sh_order"] = np.int64(sh_order)
+        root["sh_convention"] = SH_CONVENTION
+    for k, v in (attrs or {}).items():
+        root[k] = v
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w", track_order=True) as f:
+            for k in sorted(root):
+                f.attrs[k] = root[k]
+            for name in sorted(datasets):
+                arr = np.asarray(datasets[name])
+                kwargs = {"track_times": False}
+                if compression and arr.size > 1024:
+                    kwargs.update(compression=compression, shuffle=True)
+                ds = f.create_dataset(name, data=arr, **kwargs)
+                for k, v in sorted((dataset_attrs or {}).get(name, {}).items()):
+                    ds.attrs[k] = v
+    return Path(path)
+
+
+def _decode(v):
+    if isinstance(v, bytes):
+        return v.decode()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool = True) -> Asset:
+    """Open, validate and (by default) load an asset.
+
+    Parameters
+    ----------
+    path : path-like
+    kind : str, optional
+        Required kind; ``None`` accepts any registered kind.
+    load : bool
+        Read every dataset into memory (default).  With ``False`` only the
+        attributes are read and validated.
+
+    Returns
+    -------
+    Asset
+
+    Raises
+    ------
+    AssetError
+        With a one-line reason naming the file: missing, not HDF5, wrong kind,
+        unknown version, missing dataset, wrong shape or dtype, NaN/inf.
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise AssetError("file not found; check the path or build it first", path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError:
+        raise AssetError(
+            "not a readable HDF5 file (truncated or another format); rebuild it", path
+        ) from None
+    with f:
+        attrs = {k: _decode(v) for k, v in f.attrs.items()}
+        fmt = attrs.get("format")
+        if not isinstance(fmt, str) or not fmt.startswith(FORMAT_PREFIX):
+            raise AssetError("not an shtools asset (no 'format' attribute)", path)
+        file_kind = fmt[len(FORMAT_PREFIX):]
+        if kind is not None and file_kind != kind:
+            raise AssetError(f"is a '{file_kind}' asset, expected a '{kind}' asset", path)
+        schema = get_schema(file_kind)
+        if schema is None:
+            raise AssetError(f"unknown asset kind '{file_kind}'; upgrade shtools", path)
+        version = attrs.get("format_version")
+        if version not in schema.versions():
+            raise AssetError(
+                f"'{file_kind}' format version {version} is not supported by this shtools "
+                f"(knows {', '.join(map(str, schema.versions()))}); rebuild the asset or upgrade",
+                path,
+            )
+        for key in ("inputs", "parameters"):
+            if isinstance(attrs.get(key), str):
+                try:
+                    attrs[key] = json.loads(attrs[key])
+                except json.JSONDecodeError:
+                    raise AssetError(f"attribute '{key}' is not valid JSON", path) from None
+        for key in schema.required_attrs + (("sh_order",) if schema.has_sh else ()):
+            if key not in attrs:
+                raise AssetError(f"missing root attribute '{key}'", path)
+        dims: dict[str, int] = {}
+        data: dict[str, np.ndarray] = {}
+        for spec in schema.datasets:
+            _check_dataset(f, spec, dims, path, load, data)
+        if schema.check is not None:
+            schema.check(f, {"attrs": attrs, "dims": dims, "path": path})
+        if load:
+            def visit(name, obj):
+                if isinstance(obj, h5py.Dataset) and name not in data:
+                    data[name] = obj[()]
+            f.visititems(visit)
+    return Asset(file_kind, int(version), attrs, data, dims, path)
+
+
+def _check_dataset(f, spec: DatasetSpec, dims, path, load, data) -> None:
+    if spec.name not in f:
+        if spec.optional:
+            return
+        raise AssetError(f"missing dataset '{spec.name}'; the file is incomplete, rebuild it", path)
+    ds = f[spec.name]
+    if not isinstance(ds, h5py.Dataset):
+        raise AssetError(f"'{spec.name}' is not a dataset", path)
+    if ds.dtype.kind not in spec.dtype_kind:
+        raise AssetError(f"dataset '{spec.name}' has dtype {ds.dtype}, expected kind "
+                         f"'{spec.dtype_kind}'", path)
+    options = spec.ndim_options or (spec.shape,)
+    matched = None
+    for shape in options:
+        if len(shape) != ds.ndim:
+            continue
+        trial = dict(dims)
+        ok = True
+        for want, got in zip(shape, ds.shape, strict=True):
+            if want is None:
+                continue
+            if isinstance(want, str):
+                if trial.setdefault(want, got) != got:
+                    ok = False
+                    break
+            elif want != got:
+                ok = False
+                break
+        if ok:
+            matched = trial
+            break
+    if matched is None:
+        want = " or ".join(str(tuple(s)) for s in options)
+        raise AssetError(f"dataset '{spec.name}' has shape {ds.shape}, expected {want}", path)
+    dims.update(matched)
+    if spec.finite and ds.dtype.kind == "f" or load:
+        arr = ds[()]
+        if spec.finite and ds.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+            raise AssetError(f"dataset '{spec.name}' contains NaN or inf; rebuild it", path)
+        if load:
+            data[spec.name] = arr
