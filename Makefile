@@ -1,33 +1,42 @@
-# shtools — every target sets itself up: a fresh machine needs only Python 3.11 and make.
+# shtools — every target sets itself up: a fresh machine needs only Python >= 3.11 and make.
+#   make demo    create .venv, install, bake the bundled demo scene into out/
+#   make test    create .venv if needed, install with the test extra, run the whole suite
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
+# Reinstall whenever pyproject.toml changes (the stamp's name carries its checksum).
+STAMP  := $(VENV)/.installed-$(shell cksum < pyproject.toml | cut -d' ' -f1)
+OUT    ?= out
+QUICK  ?=
 
 .DEFAULT_GOAL := help
 .PHONY: help demo test bench lint clean
 
 help: ## Show this help
+	@echo "shtools make targets (a fresh clone needs only $(PYTHON) >= 3.11 and make):"
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-8s\033[0m %s\n", $$1, $$2}'
+	@echo "Variables: PYTHON=$(PYTHON)  OUT=$(OUT) (demo output)  QUICK=1 (short benchmarks)"
 
 $(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
+	  { echo "error: shtools needs Python >= 3.11; run e.g. 'make PYTHON=python3.11 $(MAKECMDGOALS)'" >&2; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	rm -f $(VENV)/.installed-* && touch $@
 
-demo: $(STAMP) ## Set up and bake the bundled demo scene into out/
-	$(PY) -m shtools.demo out
+demo: $(STAMP) ## Set up and bake the bundled demo scene into out/ (baked.h5, GLB, PNGs)
+	$(PY) -m shtools.demo $(OUT)
 
-test: $(STAMP) ## Set up and run the whole test suite
+test: $(STAMP) ## Set up and run the whole test suite (2 workers)
 	$(PY) -m pytest -n 2 -q
 
-bench: $(STAMP) ## Run the benchmarks and print their tables
-	$(PY) -m benchmarks
+bench: $(STAMP) ## Run every benchmarks/bench_*.py and print their tables (QUICK=1: short)
+	$(PY) -m benchmarks $(if $(QUICK),--quick)
 
 lint: $(STAMP) ## ruff check
 	$(VENV)/bin/ruff check shtools tests benchmarks
 
 clean: ## Remove the venv, outputs and caches
-	rm -rf $(VENV) out .pytest_cache build *.egg-info
+	rm -rf $(VENV) $(OUT) .pytest_cache build *.egg-info
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

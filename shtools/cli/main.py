@@ -37,13 +37,17 @@ class LazyGroup(click.Group):
     """A group that imports a subcommand's module only when it is used."""
 
     def list_commands(self, ctx):
-        return sorted(
+        lazy = {
             name
             for name, target in COMMANDS.items()
             if importlib.util.find_spec(target.split(":")[0]) is not None
-        )
+        }
+        return sorted(lazy | set(super().list_commands(ctx)))
 
     def get_command(self, ctx, name):
+        eager = super().get_command(ctx, name)
+        if eager is not None:
+            return eager
         target = COMMANDS.get(name)
         if target is None:
             return None
@@ -71,7 +75,8 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in argv
     try:
-        cli.main(args=argv, prog_name="shtools", standalone_mode=False)
+        # standalone_mode=False returns ctx.exit(n)'s code instead of raising it
+        rv = cli.main(args=argv, prog_name="shtools", standalone_mode=False)
     except ShtoolsError as exc:
         if debug:
             raise
@@ -99,7 +104,7 @@ def main(argv=None) -> int:
             err=True,
         )
         return 3
-    return 0
+    return rv if isinstance(rv, int) else 0
 
 
 if __name__ == "__main__":  # pragma: no cover

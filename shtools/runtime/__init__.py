@@ -1,1 +1,74 @@
+"""SHEXP runtime: per-vertex soft shadows from sphere blockers (NumPy + h5py only).
 
+This package ships into other pipelines without the geometry stack: it imports
+only numpy, h5py, :mod:`shtools.sh`, :mod:`shtools.data_formats` and its own
+modules (``tests/test_runtime_imports.py`` enforces it).
+
+Usage (one frame)::
+
+    from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker, SphereLight
+
+    rt = ShadowRuntime(ShadowSettings(order=4))          # tables built if not given
+    clusters = rt.clusters(rest_vertices)                # Lloyd, once; reuse every frame
+    blockers = [SphereBlocker(centers, radii, tree=(parent, leaf))]
+    g = rt.visibility(vertices, normals, blockers, clusters)          # (V, 16)
+    rgb = rt.shade(g, vertices, normals, env_sh,                       # (V, 3)
+                   sphere_lights=[SphereLight((0, 3, 0), 0.5, (5, 5, 4))])
+
+Pipeline per frame (SHEXP sections 6–7):
+
+1. refit the blocker trees from their moved leaves; per receiver cluster take
+   the eq. 36 cut (``theta_max``) and the eq. 37 ratio vectors at the cluster
+   centre (:mod:`~shtools.runtime.hierarchy`);
+2. per vertex, accumulate eq. 38 log vectors of the cut spheres after the
+   self-shadow rules of Sec. 6.2 (:mod:`~shtools.runtime.accumulate`,
+   :mod:`~shtools.runtime.self_shadow`) at the accumulation order ``n_acc``;
+3. exponentiate (HYB at ``n_acc <= 4``, PS*-p above, or any method of
+   :func:`shtools.sh.exp`) and truncate to the shading order ``n``;
+4. shade white Lambertian receivers with environment lighting and spherical
+   lights, windowed (:mod:`~shtools.runtime.shading`).
+
+Public API
+----------
+``ShadowSettings(order=4, acc_order=None, exp_method="auto", window="cosine",
+window_h=None, theta_max=radians(25), theta_min=radians(1), hierarchy=True,
+vertices_per_cluster=400, ...)``
+    Parameters (:mod:`~shtools.runtime.settings`); ``acc_order=None`` means
+    ``min(n + 2, 6)``.
+``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``
+``SphereLight(position (3,), radius, color (3,))``
+``ShadowRuntime(settings=None, tables=None)``
+    ``.clusters(vertices, groups=None) -> ReceiverClusters``;
+    ``.visibility(vertices, normals, blockers, clusters=None) -> (V, n*n)``;
+    ``.log_visibility(...) -> (V, n_acc^2)``; ``.exponentiate(f)``;
+    ``.shade(visibility, vertices, normals, env_sh=None, sphere_lights=(),
+    local_visibility=None, form="tabulated") -> (V, 3)``; ``.last_stats``.
+``ReceiverClusters``, ``lloyd_clusters(vertices, vertices_per_cluster, groups=None)``
+``accumulate_log(points, normals, centers, radii, table, weights=None, ...)``
+``apply_self_shadow_rules(dx, dy, dz, radius, nx, ny, nz)``
+``CapLogTable(tables, order)``
+"""
+
+from shtools.runtime.accumulate import accumulate_log
+from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
+from shtools.runtime.evaluator import ShadowRuntime
+from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.self_shadow import apply_self_shadow_rules
+from shtools.runtime.settings import ShadowSettings
+from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
+
+__all__ = [
+    "CapLogTable",
+    "ReceiverClusters",
+    "ShadowRuntime",
+    "ShadowSettings",
+    "SphereBlocker",
+    "SphereLight",
+    "accumulate_log",
+    "apply_self_shadow_rules",
+    "cosine_transfer",
+    "lloyd_clusters",
+    "shade",
+    "sphere_light_sh",
+]

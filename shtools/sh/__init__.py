@@ -12,13 +12,48 @@ from shtools.sh.basis import (
     order_from_size,
     sh_index,
 )
+from shtools.sh.exponential import EXP_METHODS, exp, squarings
+from shtools.sh.logarithm import LOG_EPS, log
+from shtools.sh.quadrature import project, reconstruct, sphere_quadrature
+from shtools.sh.rotation import rotate, rotation_matrix
+from shtools.sh.triple import TripleTensor, product, product_matrix, square, triple, triple_tensor
+from shtools.sh.zonal import (
+    apply_window,
+    cap,
+    cap_zh,
+    clamped_cosine_zh,
+    window,
+    zonal_to_sh,
+)
 
 __all__ = [
+    "EXP_METHODS",
+    "LOG_EPS",
     "SH_CONVENTION",
+    "TripleTensor",
+    "apply_window",
     "band_of",
     "basis",
+    "cap",
+    "cap_zh",
     "check_order",
+    "clamped_cosine_zh",
+    "exp",
+    "log",
     "n_coeffs",
     "order_from_size",
+    "product",
+    "product_matrix",
+    "project",
+    "reconstruct",
+    "rotate",
+    "rotation_matrix",
     "sh_index",
+    "sphere_quadrature",
+    "square",
+    "squarings",
+    "triple",
+    "triple_tensor",
+    "window",
+    "zonal_to_sh",
 ]

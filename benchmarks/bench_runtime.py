@@ -1,0 +1,285 @@
+"""Runtime benchmarks (issue 4 §7): battle-scale frame time, accuracy/time of the
+accumulation order, log space vs product space, peak memory.
+
+``python -m benchmarks -k runtime`` or ``python benchmarks/bench_runtime.py [--quick]``.
+
+Scenes are procedural (capsule-built characters and columns over a ground grid,
+sphere sets bounding the capsules exactly), so the figures do not depend on
+the data directory.  Timings are wall-clock minima over the frames of one run;
+the machine is shared, so expect noise of tens of percent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import tracemalloc
+
+import numpy as np
+
+from shtools.geometry.sphere_tree import build_tree
+from shtools.reference import (
+    product_space_visibility,
+    relative_rmse,
+    sphere_union_visibility,
+)
+from shtools.reference.scenes import capsule_scene, capsule_spheres, ground_grid, sky_light
+from shtools.runtime import (
+    ShadowRuntime,
+    ShadowSettings,
+    SphereBlocker,
+    SphereLight,
+)
+
+#: Targets from issue 4 §7.
+FRAME_TARGET_S = 0.150
+MEMORY_TARGET_BYTES = 1 << 30
+SPEEDUP_TARGETS = {4: 10.0, 6: 20.0}
+
+
+# -- battle-scale scene ------------------------------------------------------------
+def _capsule_mesh(p0, p1, radius, count):
+    import trimesh
+
+    axis = np.asarray(p1, float) - np.asarray(p0, float)
+    length = float(np.linalg.norm(axis))
+    m = trimesh.creation.capsule(height=length, radius=radius, count=[count, count])
+    m.apply_transform(trimesh.geometry.align_vectors([0, 0, 1], axis / length))
+    m.apply_translation(0.5 * (np.asarray(p0, float) + np.asarray(p1, float)))
+    return m
+
+
+# (p0, p1, radius) of a character's parts at unit scale, standing at the origin
+_BODY = [
+    ((0.0, 0.95, 0.0), (0.0, 1.55, 0.0), 0.28),    # torso
+    ((0.0, 1.85, 0.0), (0.0, 1.9, 0.0), 0.2),      # head
+    ((-0.38, 1.5, 0.0), (-0.7, 0.95, 0.15), 0.09),  # arms
+    ((0.38, 1.5, 0.0), (0.75, 1.0, 0.2), 0.09),
+    ((-0.15, 0.9, 0.0), (-0.18, 0.12, 0.05), 0.12),  # legs
+    ((0.15, 0.9, 0.0), (0.2, 0.12, -0.05), 0.12),
+    ((0.75, 1.0, 0.2), (1.2, 1.6, 0.5), 0.1),      # club
+]
+
+
+class BattleScene:
+    """Two capsule characters and four columns over a ground grid.
+
+    Parameters
+    ----------
+    grid : int
+        Ground receivers per side.
+    mesh_count : int
+        Capsule tessellation (vertices per part ~ count^2).
+    """
+
+    def __init__(self, grid: int = 200, mesh_count: int = 26):
+        import trimesh
+
+        self.parts = []  # (mesh, centers, radii, object index)
+        self.objects = []  # (scale, base position) of moving characters
+        for k, (scale, base) in enumerate([(1.4, (-1.2, 0.0, 0.3)), (1.0, (1.1, 0.0, -0.4))]):
+            meshes, cs, rs = [], [], []
+            for p0, p1, r in _BODY:
+                p0s = np.asarray(p0) * scale
+                p1s = np.asarray(p1) * scale
+                meshes.append(_capsule_mesh(p0s, p1s, r * scale, mesh_count))
+                n = max(2, math.ceil(np.linalg.norm(p1s - p0s) / (0.9 * r * scale)) + 1)
+                c, rr = capsule_spheres(p0s, p1s, r * scale, n)
+                cs.append(c)
+                rs.append(rr)
+            mesh = trimesh.util.concatenate(meshes)
+            self.parts.append((mesh, np.vstack(cs), np.concatenate(rs), k))
+            self.objects.append(np.asarray(base, float))
+        # four static columns (static receivers and blockers)
+        col_meshes, ccs, crs = [], [], []
+        for x, z in [(-3.5, -3.0), (3.4, -2.8), (-3.2, 3.3), (3.6, 3.1)]:
+            col_meshes.append(_capsule_mesh((x, 0.0, z), (x, 2.6, z), 0.3, mesh_count))
+            c, rr = capsule_spheres((x, 0.0, z), (x, 2.6, z), 0.3, 11)
+            ccs.append(c)
+            crs.append(rr)
+        self.columns = (trimesh.util.concatenate(col_meshes), np.vstack(ccs), np.concatenate(crs))
+        self.ground_v, self.ground_n = ground_grid(grid, (0.0, 0.0), 6.0)
+        self.trees = [build_tree(c, r) for _, c, r, _ in self.parts]
+        self.column_tree = build_tree(self.columns[1], self.columns[2])
+        self.env = sky_light(4)
+        self.lights = [SphereLight((2.0, 3.5, 2.0), 0.4, (6.0, 5.0, 3.5)),
+                       SphereLight((-2.5, 2.5, -1.5), 0.3, (2.0, 3.0, 6.0))]
+
+    @property
+    def n_spheres(self) -> int:
+        return sum(c.shape[0] for _, c, _, _ in self.parts) + self.columns[1].shape[0]
+
+    def frame(self, t: float):
+        """Receivers (V,3), normals (V,3), group ids (V,) and blockers at time ``t``."""
+        verts, norms, groups, blockers = [self.ground_v], [self.ground_n], [
+            np.zeros(len(self.ground_v), int)], []
+        for (mesh, c, r, k), base, tree in zip(self.parts, self.objects, self.trees, strict=True):
+            ang = 0.6 * math.sin(1.3 * t + k)
+            rot = np.array([[math.cos(ang), 0, math.sin(ang)], [0, 1, 0],
+                            [-math.sin(ang), 0, math.cos(ang)]])
+            offset = base + np.array([0.4 * math.sin(t + 2 * k), 0.0, 0.3 * math.cos(0.7 * t)])
+            verts.append(np.asarray(mesh.vertices) @ rot.T + offset)
+            norms.append(np.asarray(mesh.vertex_normals) @ rot.T)
+            groups.append(np.full(len(mesh.vertices), k + 1))
+            blockers.append(SphereBlocker(c @ rot.T + offset, r, tree=(tree.parent, tree.leaf)))
+        cm, cc, cr = self.columns
+        verts.append(np.asarray(cm.vertices))
+        norms.append(np.asarray(cm.vertex_normals))
+        groups.append(np.full(len(cm.vertices), 9))
+        blockers.append(SphereBlocker(cc, cr, tree=(self.column_tree.parent,
+                                                   self.column_tree.leaf)))
+        return np.vstack(verts), np.vstack(norms), np.concatenate(groups), blockers
+
+
+def battle_frames(scene: BattleScene, settings: ShadowSettings, frames: int):
+    """Run ``frames`` frames; returns (per-stage minima dict, stats of the last frame)."""
+    rt = ShadowRuntime(settings)
+    v, n, groups, _ = scene.frame(0.0)
+    clusters = rt.clusters(v, groups)
+    best: dict[str, float] = {}
+    stats = {}
+    for i in range(frames):
+        v, n, _, blockers = scene.frame(0.1 * i)
+        t0 = time.perf_counter()
+        g = rt.visibility(v, n, blockers, clusters)
+        t1 = time.perf_counter()
+        rt.shade(g, v, n, scene.env, scene.lights)
+        t2 = time.perf_counter()
+        st = rt.last_stats
+        sec = dict(st["seconds"], shade=t2 - t1, frame=t2 - t0)
+        for k, val in sec.items():
+            best[k] = min(best.get(k, math.inf), val)
+        stats = st
+    return best, stats, rt
+
+
+def peak_memory(scene: BattleScene, settings: ShadowSettings) -> int:
+    """tracemalloc peak (bytes) of one battle-scale frame (clusters excluded)."""
+    rt = ShadowRuntime(settings)
+    v, n, groups, blockers = scene.frame(0.3)
+    clusters = rt.clusters(v, groups)
+    tracemalloc.start()
+    tracemalloc.reset_peak()
+    g = rt.visibility(v, n, blockers, clusters)
+    rt.shade(g, v, n, scene.env, scene.lights)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak
+
+
+# -- tables ------------------------------------------------------------------------
+def table_battle(quick: bool) -> list[dict]:
+    scene = BattleScene(grid=90 if quick else 200, mesh_count=14 if quick else 26)
+    v, _, _, _ = scene.frame(0.0)
+    frames = 2 if quick else 5
+    rows = []
+    configs = [(4, 4, "auto"), (4, 5, "auto"), (4, 6, "hyb"), (4, 6, "auto")]
+    if quick:
+        configs = configs[:1] + configs[-1:]
+    for order, acc, method in configs:
+        s = ShadowSettings(order=order, acc_order=acc, exp_method=method)
+        best, st, rt = battle_frames(scene, s, frames)
+        rows.append({
+            "order": order, "acc_order": acc, "exp": rt.exp_method,
+            "vertices": len(v), "leaf spheres": scene.n_spheres,
+            "clusters": st["clusters"], "spheres/vertex": st["spheres_per_vertex"],
+            "cuts ms": 1e3 * best["cuts"], "accumulate ms": 1e3 * best["accumulate"],
+            "exp ms": 1e3 * best["exp"], "shade ms": 1e3 * best["shade"],
+            "frame ms": 1e3 * best["frame"],
+            "Mpairs/s": st["pairs"] / best["accumulate"] / 1e6,
+        })
+    mem = peak_memory(scene, ShadowSettings())
+    return rows, mem, len(v)
+
+
+def table_accuracy(quick: bool) -> list[dict]:
+    """Accuracy vs accumulation order on the capsule scene (errors vs sphere-union rays)."""
+    sc = capsule_scene(grid=24 if quick else 48)
+    gs = sphere_union_visibility(sc.vertices, sc.normals, sc.centers, sc.radii, 4)
+    rows = []
+    base = None
+    for acc in ([4, 6] if quick else [4, 5, 6, 8]):
+        for method in ("hyb", "ps*"):
+            rt = ShadowRuntime(ShadowSettings(order=4, acc_order=acc, exp_method=method,
+                                              vertices_per_cluster=100))
+            ref = rt.shade(gs, sc.vertices, sc.normals, sc.env_sh)
+            blk = [SphereBlocker(sc.centers, sc.radii)]
+            rt.visibility(sc.vertices, sc.normals, blk)
+            best = math.inf
+            for _ in range(3):
+                t0 = time.perf_counter()
+                g = rt.visibility(sc.vertices, sc.normals, blk)
+                best = min(best, time.perf_counter() - t0)
+            rad = rt.shade(g, sc.vertices, sc.normals, sc.env_sh)
+            err_vis = np.median(np.linalg.norm(g - gs, axis=1) / np.linalg.norm(gs, axis=1))
+            if base is None:
+                base = best
+            rows.append({"acc_order": acc, "exp": method,
+                         "radiance rel. RMSE": relative_rmse(rad, ref),
+                         "visibility median rel. L2": float(err_vis),
+                         "time (x acc 4)": best / base})
+    return rows
+
+
+def table_log_vs_product(quick: bool) -> list[dict]:
+    """60 spheres, no hierarchy: log-space runtime vs product-space accumulation."""
+    rng = np.random.default_rng(0)
+    n_spheres = 60
+    centers = np.column_stack([rng.uniform(-2, 2, n_spheres), rng.uniform(0.3, 2.0, n_spheres),
+                               rng.uniform(-2, 2, n_spheres)])
+    radii = rng.uniform(0.08, 0.3, n_spheres)
+    grid = 24 if quick else 64
+    v, nrm = ground_grid(grid, (0.0, 0.0), 3.0)
+    rows = []
+    for order in (4, 6):
+        s = ShadowSettings(order=order, acc_order=order, hierarchy=False)
+        rt = ShadowRuntime(s)
+        blk = [SphereBlocker(centers, radii)]
+        rt.visibility(v, nrm, blk)
+        t_log = math.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            g_log = rt.visibility(v, nrm, blk)
+            t_log = min(t_log, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        g_prod = product_space_visibility(v, nrm, (centers, radii), order, dtype=np.float32)
+        t_prod = time.perf_counter() - t0
+        rows.append({"order": order, "vertices": len(v), "spheres": n_spheres,
+                     "exp": rt.exp_method, "log ms": 1e3 * t_log, "product ms": 1e3 * t_prod,
+                     "speed-up": t_prod / t_log,
+                     "target": SPEEDUP_TARGETS[order],
+                     "log vs product rel. L2": float(np.linalg.norm(g_log - g_prod)
+                                                     / np.linalg.norm(g_prod))})
+    return rows
+
+
+def _markdown(rows: list[dict]) -> str:
+    keys = list(rows[0])
+    out = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    for r in rows:
+        cells = [f"{r[k]:.4g}" if isinstance(r[k], float) else str(r[k]) for k in keys]
+        out.append("| " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small scenes, few frames")
+    args = parser.parse_args(argv)
+    rows, mem, n_v = table_battle(args.quick)
+    print(f"\n### Runtime: battle-scale frame ({n_v} receivers; target <= "
+          f"{1e3 * FRAME_TARGET_S:.0f} ms at full scale)\n")
+    print(_markdown(rows))
+    print(f"\nPeak memory of one default-settings frame (tracemalloc): {mem / 2**20:.1f} MiB "
+          f"(target <= {MEMORY_TARGET_BYTES / 2**20:.0f} MiB)")
+    print("\n### Runtime: accuracy vs accumulation order (capsule scene, n = 4, radiance "
+          "vs sphere-union ray tracing)\n")
+    print(_markdown(table_accuracy(args.quick)))
+    print("\n### Runtime: log space vs product space (60 spheres, no hierarchy)\n")
+    print(_markdown(table_log_vs_product(args.quick)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

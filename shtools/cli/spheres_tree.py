@@ -1,0 +1,135 @@
+"""``shtools spheres tree`` and ``shtools spheres bind``: sphere hierarchies and skin binding.
+
+The ``spheres`` click group (``shtools/cli/spheres.py``) registers the two
+commands defined here.  Both are thin: read the sphere set, call
+:func:`shtools.geometry.sphere_tree.build_tree` or
+:func:`shtools.geometry.binding.bind_spheres`, write one asset, report.
+"""
+
+from __future__ import annotations
+
+import click
+import numpy as np
+
+from shtools.cli._common import json_option, output_option, report
+from shtools.errors import InputError
+
+
+def _read_sphere_set(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """Centres ``(N, 3)`` and radii ``(N,)`` of a ``spheres`` asset (validated)."""
+    from shtools.data_formats import read_asset
+
+    asset = read_asset(path, "spheres")
+    return np.asarray(asset["centers"], dtype=np.float64), np.asarray(
+        asset["radii"], dtype=np.float64
+    )
+
+
+@click.command("tree")
+@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@output_option
+@click.option("--branching", default=4, show_default=True, type=click.IntRange(min=2),
+              help="Target average number of children per inner node.")
+@click.option("--seed", default=0, show_default=True, type=int,
+              help="Seed of the Lloyd clustering (same seed -> identical tree).")
+@json_option
+def tree(spheres_path, output, branching, seed, as_json):
+    """Build a bounding-sphere hierarchy over the spheres of SPHERES (bottom-up Lloyd).
+
+    Every parent is the minimal sphere bounding its children's spheres.
+    """
+    from shtools.data_formats.tree import write_tree
+    from shtools.geometry.sphere_tree import build_tree, tree_statistics
+
+    centers, radii = _read_sphere_set(spheres_path)
+    result = build_tree(centers, radii, branching=branching, seed=seed)
+    write_tree(
+        output,
+        result,
+        inputs={"spheres": spheres_path},
+        parameters={"branching": branching, "seed": seed},
+    )
+    stats = tree_statistics(result)
+    summary = {"output": output, **stats}
+    report(
+        summary,
+        as_json,
+        f"wrote {output}: {stats['nodes']} nodes over {stats['leaves']} leaves, "
+        f"{stats['levels']} levels, average branching {stats['average_branching']:.2f}",
+    )
+
+
+@click.command("bind")
+@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@click.argument("rig_path", metavar="RIGGED", type=click.Path(dir_okay=False))
+@output_option
+@click.option("--bones-per-sphere", default=4, show_default=True, type=click.IntRange(min=1),
+              help="Bones kept per sphere centre (the rest is folded into the kept ones).")
+@click.option("--check-frames", default=16, show_default=True, type=click.IntRange(min=0),
+              help="Frames per animation at which the posed spheres' coverage of the "
+                   "skinned vertices is measured for the summary (0: skip).")
+@click.option("--cover-animations", is_flag=True,
+              help="Grow each radius so the sphere keeps covering its rest vertices at "
+                   "every checked frame of every animation in RIGGED (the paper keeps the "
+                   "rest radii); the fitted radii are kept as 'fit_radii'.")
+@json_option
+def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_animations,
+         as_json):
+    """Bind the spheres of SPHERES to the skin of the glTF rig RIGGED (.glb/.gltf).
+
+    Mean value coordinates of each centre on the rest (bind-space) mesh,
+    premultiplied by the vertex bone weights, keep a few bones per sphere; radii
+    are kept unless --cover-animations.  The spheres must be in the rig's bind
+    space (fit them to the rig's rest mesh).
+    """
+    from shtools.data_formats.bound import write_bound
+    from shtools.geometry.binding import bind_spheres, covering_radii, posed_coverage
+    from shtools.geometry.skin import load_skinned_gltf
+
+    centers, radii = _read_sphere_set(spheres_path)
+    model = load_skinned_gltf(rig_path)
+    if cover_animations and not model.animations:
+        raise InputError("--cover-animations needs an animation but the rig has none; "
+                         "drop the flag or export a clip", rig_path)
+    bones_per_sphere = min(bones_per_sphere, model.joint_count)
+    binding = bind_spheres(centers, model, bones_per_sphere=bones_per_sphere)
+    if not np.all(np.isfinite(binding.bone_vectors)):
+        raise InputError("binding produced non-finite weights; check the rest mesh", rig_path)
+    fit_radii = radii
+    if cover_animations:
+        radii = covering_radii(binding, fit_radii, model, frames=max(check_frames, 16))
+    coverage = (
+        posed_coverage(binding, radii, model, frames=check_frames) if check_frames else {}
+    )
+    write_bound(
+        output,
+        centers,
+        radii,
+        binding,
+        fit_radii=fit_radii if cover_animations else None,
+        inputs={"spheres": spheres_path, "rig": rig_path},
+        parameters={"bones_per_sphere": bones_per_sphere,
+                    "cover_animations": bool(cover_animations),
+                    "check_frames": check_frames},
+    )
+    summary = {
+        "output": output,
+        "spheres": int(centers.shape[0]),
+        "joints": int(model.inverse_bind.shape[0]),
+        "bones_per_sphere": int(bones_per_sphere),
+        "mesh_closed": bool(binding.mesh_closed),
+        "mvc_fallback_spheres": int(binding.fallback.sum()),
+        "max_dropped_weight": float(binding.dropped_weight.max(initial=0.0)),
+        "max_rest_residual": float(binding.rest_residual.max(initial=0.0)),
+        "animations": list(model.animations),
+        "max_radius_growth": float(np.max(radii / np.maximum(fit_radii, 1e-300))),
+        **coverage,
+    }
+    cov = coverage.get("posed_vertex_coverage")
+    human = (
+        f"wrote {output}: {summary['spheres']} spheres bound to {summary['joints']} joints "
+        f"({bones_per_sphere} per sphere)"
+        + (f", posed vertex coverage {cov:.3f}" if cov is not None else "")
+        + ("" if binding.mesh_closed else "; rest mesh is not closed (see --json)")
+    )
+    report(summary, as_json, human)

@@ -1,0 +1,158 @@
+"""``shtools tables``: precomputed tables the runtime needs (``tables log``)."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from shtools.cli._common import json_option, output_option, report
+from shtools.errors import InputError
+
+
+@click.group()
+def tables():
+    """Precompute lookup tables (cap log tables, OL exponential tables)."""
+
+
+@tables.command("log")
+@click.option("--order", "-n", type=click.IntRange(1, 16), required=True, help="SH order n.")
+@output_option
+@click.option(
+    "--samples",
+    type=click.IntRange(2, 100_000),
+    default=256,
+    show_default=True,
+    help="Number of cap radii theta in (0, pi/2].",
+)
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False, writable=True),
+    default=None,
+    help="Also draw the OL a/b curves against ||f_hat|| (like Figure 3 of Ren et al. 2006) "
+    "into this PNG.",
+)
+@json_option
+def log_cmd(order, output, samples, plot_path, as_json):
+    """Write the cap log tables and the OL tables for SH order N.
+
+    The asset holds cap visibility (vis_zh) and its log by eigen-inversion
+    (log_zh) over theta in (0, pi/2], and the OL tables ol_norm, ol_a, ol_b.
+    """
+    from shtools.data_formats.tables import read_tables, write_tables
+    from shtools.sh.tables import build_log_tables
+
+    if plot_path and order < 2:
+        raise InputError("order 1 has no band above DC, so there are no OL curves to plot; "
+                         "use --order 2 or more with --plot", plot_path)
+    start = time.perf_counter()
+    built = build_log_tables(order, samples=samples)
+    write_tables(output, built, order, parameters={"samples": samples})
+    seconds = time.perf_counter() - start
+    summary = {
+        "output": output,
+        "order": order,
+        "samples": samples,
+        "theta_count": len(built["theta"]),
+        "ol_count": len(built["ol_norm"]),
+        "ol_norm_max": float(max(built["ol_norm"])) if len(built["ol_norm"]) else 0.0,
+        "seconds": round(seconds, 3),
+    }
+    if plot_path:
+        plot_ol_curves(read_tables(output), plot_path)
+        summary["plot"] = plot_path
+    human = (
+        f"wrote {output}: order {order}, {summary['theta_count']} cap radii, "
+        f"{summary['ol_count']} OL samples (||f_hat|| up to {summary['ol_norm_max']:.2f}) "
+        f"in {seconds:.2f} s"
+    )
+    if plot_path:
+        human += f"; plot {plot_path}"
+    report(summary, as_json, human)
+
+
+#: ||f_hat|| up to which the paper finds OL accurate at order 4 (Section 4.2).
+OL_ACCURATE_NORM = 4.8
+
+
+def cap_ol_points(tab: dict):
+    """Per-cap (||f_hat||, a, b) by eq. 24, straight from ``vis_zh``/``log_zh``.
+
+    Parameters
+    ----------
+    tab : dict
+        As :func:`shtools.data_formats.tables.read_tables` returns.
+
+    Returns
+    -------
+    norm, a, b : ndarray, shape (T,)
+    """
+    import numpy as np
+
+    order = tab["vis_zh"].shape[1]
+    l = np.arange(order)
+    unscale = np.sqrt((2 * l + 1) / (4 * np.pi))  # g_l = g*_l sqrt((2l+1)/4pi)
+    g = tab["vis_zh"] * unscale
+    f = tab["log_zh"] * unscale
+    # Coefficient vectors are zh_l * y_lm(s); summing over m gives the zonal dot products
+    # weighted by 1 (sum_m y_lm(s)^2 (4pi/(2l+1)) = 1 after the unscaling above).
+    dc = np.exp(-f[:, 0] / np.sqrt(4 * np.pi))
+    a = dc * g[:, 0] / np.sqrt(4 * np.pi)
+    ff = np.sum(f[:, 1:] ** 2, axis=1)
+    norm = np.sqrt(ff)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        b = dc * np.sum(g[:, 1:] * f[:, 1:], axis=1) / ff
+    return norm, a, b
+
+
+def plot_ol_curves(tab: dict, path) -> None:
+    """Draw the OL coefficients a and b against ||f_hat|| (cf. Ren et al. 2006, Fig. 3).
+
+    Lines are the tabulated ``ol_a``/``ol_b``; dots are eq. 24 evaluated on each
+    cap of the cap tables, with the cap radius on a secondary axis.  Written
+    atomically as a PNG.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from shtools.data_formats import atomic_path
+
+    order = int(tab["order"])
+    norm, a, b = cap_ol_points(tab)
+    fig, (ax, ax_theta) = plt.subplots(
+        2, 1, figsize=(7.5, 6.2), height_ratios=(3, 1.2), sharex=True, layout="constrained"
+    )
+    ax.plot(tab["ol_norm"], tab["ol_a"], color="tab:blue", lw=2, label="a  (table ol_a)")
+    ax.plot(tab["ol_norm"], tab["ol_b"], color="tab:red", lw=2, label="b  (table ol_b)")
+    step = max(1, len(norm) // 40)
+    ax.plot(norm[::step], a[::step], "o", ms=3.5, mfc="none", color="tab:blue",
+            label="a of single caps (eq. 24)")
+    ax.plot(norm[::step], b[::step], "s", ms=3.5, mfc="none", color="tab:red",
+            label="b of single caps (eq. 24)")
+    ax.axhline(1.0, color="0.6", lw=0.8, ls=":", label="two-term series 1 + f (a = b = 1)")
+    xmax = float(max(np.nanmax(tab["ol_norm"]), np.nanmax(norm)))
+    if OL_ACCURATE_NORM < xmax:
+        for axis in (ax, ax_theta):
+            axis.axvline(OL_ACCURATE_NORM, color="0.3", lw=0.8, ls="--")
+        ax.text(OL_ACCURATE_NORM, 0.98,
+                r"OL accurate for $\|\hat{\mathbf{f}}\| < 4.8$ (order 4, paper)  ",
+                transform=ax.get_xaxis_transform(), va="top", ha="right", fontsize=8,
+                color="0.3")
+    ax.set_ylabel("OL coefficient")
+    ax.set_title(f"Optimal linear (OL) exponential coefficients, SH order {order}")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", framealpha=0.9)
+    ax_theta.plot(norm, np.degrees(tab["theta"]), color="0.2")
+    ax_theta.set_ylabel("cap radius (deg)")
+    ax_theta.set_xlabel(
+        r"$\|\hat{\mathbf{f}}\|$  (norm of the cap's log vector without its DC term)"
+    )
+    ax_theta.grid(alpha=0.3)
+    ax_theta.set_xlim(0, xmax * 1.02)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
+    plt.close(fig)

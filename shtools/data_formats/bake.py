@@ -1,0 +1,419 @@
+"""The ``bake`` asset: per-frame, per-vertex outgoing radiance of the receivers.
+
+Layout (DESIGN.md "Asset files"; all frames ``T``, receiver vertices ``V``):
+
+=====================  =================  ==============================================
+dataset                shape / dtype      meaning
+=====================  =================  ==============================================
+``vertices``           (V,3) or (T,V,3)   receiver positions (world, Y up); per frame
+                       f4                 when receivers move
+``normals``            like vertices      unit vertex normals
+``faces``              (F,3) i4           triangles into ``vertices``
+``radiance``           (T,V,3) f4         outgoing radiance of a white Lambertian
+                                          receiver, linear RGB
+``visibility``         (T,V,n*n) f4       optional (``--store-visibility``)
+``times``              (T,) f8            scene time of each frame, seconds
+``frame_index``        (T,) i4            scene frame number of each frame
+``albedo``             (V,3) f4           optional per-vertex albedo from the scene;
+                                          multiplies ``radiance`` at export only
+``object_offsets``     (O+1,) i8          receiver object ``o`` owns vertices
+                                          ``object_offsets[o]:object_offsets[o+1]``
+=====================  =================  ==============================================
+
+Root attributes: the provenance set of every asset plus ``sh_order``,
+``object_names`` (JSON list) and ``fps``.
+
+:class:`BakeWriter` streams frames into the file as they are computed (memory
+stays bounded by one frame) and renames the temporary file into place only when
+every frame was written; an exception or Ctrl-C leaves no file behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from shtools.data_formats._base import (
+    FORMAT_PREFIX,
+    DatasetSpec,
+    Schema,
+    _json,
+    atomic_path,
+    generator_string,
+    read_asset,
+    register,
+    sha256_file,
+)
+from shtools.errors import AssetError
+
+VERSION = 1
+
+
+def _check(f: h5py.File, ctx: dict) -> None:
+    dims, path = ctx["dims"], ctx["path"]
+    if "object_offsets" in f:
+        offsets = f["object_offsets"][()]
+        if offsets[0] != 0 or offsets[-1] != dims["V"] or np.any(np.diff(offsets) < 0):
+            raise AssetError("dataset 'object_offsets' does not partition the vertices", path)
+    faces = f["faces"][()]
+    if faces.size and (faces.min() < 0 or faces.max() >= dims["V"]):
+        raise AssetError("dataset 'faces' indexes vertices that do not exist; rebuild it", path)
+
+
+SCHEMA = register(
+    Schema(
+        kind="bake",
+        version=VERSION,
+        has_sh=True,
+        datasets=(
+            DatasetSpec("radiance", ("T", "V", 3)),
+            DatasetSpec("vertices", ndim_options=(("V", 3), ("T", "V", 3))),
+            DatasetSpec("normals", ndim_options=(("V", 3), ("T", "V", 3))),
+            DatasetSpec("faces", ("F", 3), dtype_kind="iu", finite=False),
+            DatasetSpec("visibility", ("T", "V", None), optional=True),
+            DatasetSpec("times", ("T",), optional=True),
+            DatasetSpec("frame_index", ("T",), dtype_kind="iu", finite=False, optional=True),
+            DatasetSpec("albedo", ("V", 3), optional=True),
+            DatasetSpec("object_offsets", (None,), dtype_kind="iu", finite=False, optional=True),
+        ),
+        check=_check,
+    )
+)
+
+
+@dataclass
+class Bake:
+    """A loaded bake asset.
+
+    Attributes
+    ----------
+    radiance : ndarray, shape (T, V, 3)
+        Linear RGB outgoing radiance (white Lambertian receiver).
+    vertices, normals : ndarray, shape (V, 3) or (T, V, 3)
+    faces : ndarray, shape (F, 3)
+    visibility : ndarray, shape (T, V, n*n), or None
+    times : ndarray, shape (T,)
+    frame_index : ndarray, shape (T,)
+    albedo : ndarray, shape (V, 3), or None
+    object_offsets : ndarray, shape (O+1,)
+    object_names : list of str
+    sh_order : int
+    attrs : dict
+        Root attributes (``parameters`` and ``inputs`` decoded).
+    path : str
+    """
+
+    radiance: np.ndarray
+    vertices: np.ndarray
+    normals: np.ndarray
+    faces: np.ndarray
+    visibility: np.ndarray | None
+    times: np.ndarray
+    frame_index: np.ndarray
+    albedo: np.ndarray | None
+    object_offsets: np.ndarray
+    object_names: list[str]
+    sh_order: int
+    attrs: dict = field(default_factory=dict)
+    path: str = ""
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.radiance.shape[0])
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.radiance.shape[1])
+
+    @property
+    def parameters(self) -> dict:
+        return self.attrs.get("parameters", {})
+
+    def frame_position(self, frame: int) -> int:
+        """Index into the asset's frames of scene frame number ``frame``.
+
+        Raises :class:`~shtools.errors.InputError` naming the available range.
+        """
+        from shtools.errors import InputError
+
+        hits = np.flatnonzero(self.frame_index == frame)
+        if hits.size == 0:
+            lo, hi = int(self.frame_index.min()), int(self.frame_index.max())
+            raise InputError(
+                f"frame {frame} is not in this bake (it holds frames {lo}..{hi}); "
+                "pick one in that range",
+                self.path,
+            )
+        return int(hits[0])
+
+    def frame_vertices(self, t: int) -> np.ndarray:
+        """Vertex positions ``(V, 3)`` of asset frame ``t`` (0-based position)."""
+        return self.vertices if self.vertices.ndim == 2 else self.vertices[t]
+
+    def frame_normals(self, t: int) -> np.ndarray:
+        """Vertex normals ``(V, 3)`` of asset frame ``t``."""
+        return self.normals if self.normals.ndim == 2 else self.normals[t]
+
+
+def read_bake(path: str | os.PathLike) -> Bake:
+    """Read and validate a bake asset.
+
+    Raises
+    ------
+    AssetError
+        Missing file, wrong kind, unknown version, bad shapes, NaN/inf.
+    """
+    asset = read_asset(path, "bake")
+    d = asset.data
+    T = d["radiance"].shape[0]
+    V = d["radiance"].shape[1]
+    names = asset.attrs.get("object_names")
+    names = json.loads(names) if isinstance(names, str) else ["receivers"]
+    return Bake(
+        radiance=d["radiance"],
+        vertices=d["vertices"],
+        normals=d["normals"],
+        faces=d["faces"].astype(np.int64),
+        visibility=d.get("visibility"),
+        times=d.get("times", np.arange(T, dtype=np.float64)),
+        frame_index=d.get("frame_index", np.arange(T)).astype(np.int64),
+        albedo=d.get("albedo"),
+        object_offsets=d.get("object_offsets", np.array([0, V])).astype(np.int64),
+        object_names=list(names),
+        sh_order=int(asset.sh_order),
+        attrs=asset.attrs,
+        path=os.fspath(path),
+    )
+
+
+class BakeWriter:
+    """Stream a bake asset frame by frame into a temporary file, rename on success.
+
+    Use as a context manager::
+
+        with BakeWriter(path, n_frames=T, faces=F, ...) as w:
+            for t in range(T):
+                w.write_frame(t, radiance, vertices=..., normals=...)
+
+    Parameters
+    ----------
+    path : path-like
+        Target file.
+    n_frames : int
+        Number of frames ``T`` that will be written.
+    faces : ndarray, shape (F, 3)
+    sh_order : int
+    static_vertices, static_normals : ndarray, shape (V, 3), optional
+        Given when the receivers do not move; then ``write_frame`` takes no
+        geometry.  Otherwise ``n_vertices`` must be given and every frame
+        passes its vertices and normals.
+    n_vertices : int, optional
+    visibility_size : int, optional
+        ``n*n`` to store visibility vectors per frame.
+    times, frame_index : ndarray, shape (T,)
+    albedo : ndarray, shape (V, 3), optional
+    object_offsets : ndarray, shape (O+1,), optional
+    object_names : list of str, optional
+    parameters, inputs : mapping, optional
+        Provenance, as for :func:`~shtools.data_formats.write_asset`.
+    compression : str or None
+        h5py filter for the per-frame datasets (deterministic).
+    """
+
+    def __init__(
+        self,
+        path,
+        *,
+        n_frames: int,
+        faces,
+        sh_order: int,
+        static_vertices=None,
+        static_normals=None,
+        n_vertices: int | None = None,
+        visibility_size: int | None = None,
+        times=None,
+        frame_index=None,
+        albedo=None,
+        object_offsets=None,
+        object_names=None,
+        parameters=None,
+        inputs=None,
+        fps: float | None = None,
+        compression: str | None = "gzip",
+    ):
+        self.path = Path(path)
+        self.n_frames = int(n_frames)
+        self.faces = np.asarray(faces, dtype=np.int32).reshape(-1, 3)
+        self.sh_order = int(sh_order)
+        self.static = static_vertices is not None
+        if self.static:
+            self.static_vertices = np.asarray(static_vertices, dtype=np.float32)
+            self.static_normals = np.asarray(static_normals, dtype=np.float32)
+            self.n_vertices = len(self.static_vertices)
+        else:
+            if n_vertices is None:
+                raise ValueError("n_vertices is required when receivers move")
+            self.n_vertices = int(n_vertices)
+        self.visibility_size = visibility_size
+        T = self.n_frames
+        self.times = np.arange(T, dtype=np.float64) if times is None else np.asarray(times, float)
+        self.frame_index = (
+            np.arange(T, dtype=np.int32) if frame_index is None
+            else np.asarray(frame_index, dtype=np.int32)
+        )
+        self.albedo = None if albedo is None else np.asarray(albedo, dtype=np.float32)
+        self.object_offsets = (
+            np.array([0, self.n_vertices], dtype=np.int64) if object_offsets is None
+            else np.asarray(object_offsets, dtype=np.int64)
+        )
+        self.object_names = list(object_names or ["receivers"])
+        self.parameters = dict(parameters or {})
+        self.inputs = {
+            Path(p).name: sha256_file(p) for p in (inputs or {}).values() if p is not None
+        }
+        self.fps = fps
+        self.compression = compression
+        self._written = np.zeros(T, dtype=bool)
+        self._stack: contextlib.ExitStack | None = None
+        self._file: h5py.File | None = None
+
+    # -- context management -------------------------------------------------
+    def __enter__(self) -> BakeWriter:
+        from shtools.sh.basis import SH_CONVENTION
+
+        stack = contextlib.ExitStack()
+        try:
+            tmp = stack.enter_context(atomic_path(self.path))
+            f = h5py.File(tmp, "w", track_order=True)
+            stack.callback(f.close)
+        except BaseException:
+            stack.close()
+            raise
+        self._stack, self._file = stack, f
+        root = {
+            "format": FORMAT_PREFIX + "bake",
+            "format_version": np.int64(VERSION),
+            "generator": generator_string(),
+            "inputs": _json(self.inputs),
+            "parameters": _json(self.parameters),
+            "sh_order": np.int64(self.sh_order),
+            "sh_convention": SH_CONVENTION,
+            "object_names": json.dumps(self.object_names),
+        }
+        if self.fps is not None:
+            root["fps"] = float(self.fps)
+        for k in sorted(root):
+            f.attrs[k] = root[k]
+        T, V = self.n_frames, self.n_vertices
+        plain = {"track_times": False}
+        f.create_dataset("faces", data=self.faces, **plain)
+        f.create_dataset("times", data=self.times, **plain)
+        f.create_dataset("frame_index", data=self.frame_index, **plain)
+        f.create_dataset("object_offsets", data=self.object_offsets, **plain)
+        if self.albedo is not None:
+            f.create_dataset("albedo", data=self.albedo, **plain)
+        frame = dict(plain, compression=self.compression, shuffle=bool(self.compression))
+        if self.static:
+            f.create_dataset("vertices", data=self.static_vertices, **plain)
+            f.create_dataset("normals", data=self.static_normals, **plain)
+        else:
+            for name in ("vertices", "normals"):
+                f.create_dataset(name, (T, V, 3), "f4", chunks=(1, V, 3), **frame)
+        f.create_dataset("radiance", (T, V, 3), "f4", chunks=(1, V, 3), **frame)
+        if self.visibility_size:
+            k = int(self.visibility_size)
+            f.create_dataset("visibility", (T, V, k), "f4", chunks=(1, V, k), **frame)
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        stack, self._stack = self._stack, None
+        if exc_type is None and not self._written.all():
+            missing = np.flatnonzero(~self._written)
+            exc = AssetError(f"bake ended with {missing.size} frame(s) unwritten", self.path)
+            stack.__exit__(type(exc), exc, None)
+            raise exc
+        return bool(stack.__exit__(exc_type, exc, tb))
+
+    # -- frames -------------------------------------------------------------
+    def write_frame(self, t: int, radiance, *, vertices=None, normals=None, visibility=None):
+        """Write asset frame ``t`` (0-based).
+
+        Parameters
+        ----------
+        t : int
+        radiance : ndarray, shape (V, 3)
+        vertices, normals : ndarray, shape (V, 3)
+            Required when the receivers move.
+        visibility : ndarray, shape (V, n*n), optional
+            Required when the writer stores visibility.
+        """
+        f = self._file
+        if f is None or self._stack is None:
+            raise RuntimeError("BakeWriter.write_frame outside its context")
+        radiance = np.asarray(radiance, dtype=np.float32)
+        if radiance.shape != (self.n_vertices, 3):
+            raise ValueError(
+                f"radiance has shape {radiance.shape}, expected ({self.n_vertices}, 3)")
+        if not np.all(np.isfinite(radiance)):
+            raise AssetError(f"frame {int(self.frame_index[t])} produced NaN/inf radiance",
+                             self.path)
+        f["radiance"][t] = radiance
+        if not self.static:
+            f["vertices"][t] = np.asarray(vertices, dtype=np.float32)
+            f["normals"][t] = np.asarray(normals, dtype=np.float32)
+        if self.visibility_size:
+            f["visibility"][t] = np.asarray(visibility, dtype=np.float32)
+        self._written[t] = True
+
+
+def write_bake(
+    path,
+    *,
+    vertices,
+    normals,
+    faces,
+    radiance,
+    sh_order: int,
+    visibility=None,
+    **kwargs,
+) -> Path:
+    """Write a whole bake asset at once (small bakes, tests).
+
+    Parameters
+    ----------
+    vertices, normals : ndarray, shape (V, 3) or (T, V, 3)
+    faces : ndarray, shape (F, 3)
+    radiance : ndarray, shape (T, V, 3)
+    sh_order : int
+    visibility : ndarray, shape (T, V, n*n), optional
+    **kwargs
+        Passed to :class:`BakeWriter` (times, frame_index, albedo, ...).
+    """
+    radiance = np.asarray(radiance)
+    vertices = np.asarray(vertices)
+    normals = np.asarray(normals)
+    T, V = radiance.shape[:2]
+    static = vertices.ndim == 2
+    writer = BakeWriter(
+        path, n_frames=T, faces=faces, sh_order=sh_order,
+        static_vertices=vertices if static else None,
+        static_normals=normals if static else None,
+        n_vertices=V,
+        visibility_size=None if visibility is None else np.asarray(visibility).shape[-1],
+        **kwargs,
+    )
+    with writer as w:
+        for t in range(T):
+            w.write_frame(
+                t, radiance[t],
+                vertices=None if static else vertices[t],
+                normals=None if static else normals[t],
+                visibility=None if visibility is None else visibility[t],
+            )
+    return Path(path)

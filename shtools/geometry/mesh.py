@@ -1,0 +1,172 @@
+"""Load and validate triangle meshes; clean what can be cleaned, refuse what cannot.
+
+Every stage that reads a mesh goes through :func:`load_mesh`, so the errors a user
+sees for a bad file are the same everywhere.  Problems a mesh can carry without
+being unusable — duplicate vertices, degenerate (zero-area) triangles, open
+boundaries, several components — are repaired or tolerated here; missing,
+unreadable, unsupported, empty and non-finite meshes raise :class:`InputError`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from shtools.errors import InputError
+
+#: File extensions trimesh can read as triangle meshes (lower case, with dot).
+SUPPORTED_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+#: Relative area below which a triangle counts as degenerate (fraction of the
+#: squared bounding-box diagonal); such triangles carry no surface and break
+#: normals, so they are dropped.
+DEGENERATE_AREA_FRACTION = 1e-14
+
+
+def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
+    """Read a triangle mesh and validate it.
+
+    Scenes (glTF, multi-object OBJ) are flattened into one mesh in world space.
+    Exact duplicate vertices are merged, degenerate and duplicate triangles and
+    unreferenced vertices are removed; open boundaries and several components
+    are kept as they are (the solid is defined by generalized winding numbers
+    downstream, which tolerate both).
+
+    Parameters
+    ----------
+    path : path-like
+        Mesh file (``.obj``, ``.ply``, ``.stl``, ``.off``, ``.glb``, ``.gltf``).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Cleaned mesh with ``vertices (V, 3) float64`` and ``faces (F, 3) int64``.
+
+    Raises
+    ------
+    InputError
+        The file is missing, not a supported format, unreadable, has no
+        triangles, or has NaN/inf vertex coordinates.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError("mesh file not found; check the path", path)
+    if path.is_dir():
+        raise InputError("is a folder, expected a mesh file", path)
+    ext = path.suffix.lower()
+    if ext not in SUPPORTED_EXTENSIONS:
+        raise InputError(
+            f"unsupported mesh format '{ext or '(no extension)'}'; use one of "
+            f"{', '.join(SUPPORTED_EXTENSIONS)}",
+            path,
+        )
+    try:
+        loaded = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        raise InputError(
+            f"cannot read the mesh ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); "
+            "check that the file is a valid triangle mesh",
+            path,
+        ) from None
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise InputError("the file holds no triangle mesh (points or lines only?)", path)
+    return validate_mesh(loaded, path)
+
+
+def validate_mesh(mesh: trimesh.Trimesh, path: str | os.PathLike | None = None) -> trimesh.Trimesh:
+    """Validate and clean an in-memory mesh (see :func:`load_mesh`).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+    path : path-like, optional
+        Named in error messages.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        A new cleaned mesh.
+    """
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if len(faces) == 0 or len(vertices) == 0:
+        raise InputError("the mesh is empty (no triangles); export it with its faces", path)
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise InputError("the mesh is not made of triangles; triangulate it first", path)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InputError("faces refer to vertices that do not exist; re-export the mesh", path)
+    used = np.unique(faces)
+    if not np.all(np.isfinite(vertices[used])):
+        raise InputError(
+            "vertex coordinates contain NaN or inf; fix or re-export the mesh", path
+        )
+    # Merge exact duplicates so that shared edges are recognised (UV seams split
+    # vertices in OBJ files).
+    unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    faces = inverse.reshape(-1)[faces]
+    tri = unique[faces]
+    diag = float(np.linalg.norm(np.ptp(tri.reshape(-1, 3), axis=0)))
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    keep = (area > DEGENERATE_AREA_FRACTION * max(diag, 1e-300) ** 2)
+    keep &= (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    faces = faces[keep]
+    if len(faces) == 0:
+        raise InputError("every triangle is degenerate (zero area); the mesh is empty", path)
+    # Identical triangles (same vertex set) would be counted twice by winding numbers.
+    _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    faces = faces[np.sort(first)]
+    used, compact = np.unique(faces, return_inverse=True)
+    return trimesh.Trimesh(unique[used], compact.reshape(-1, 3), process=False, validate=False)
+
+
+def boundary_edges(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Edges used by exactly one triangle, oriented as in that triangle.
+
+    Returns
+    -------
+    ndarray, shape (B, 2), int64
+    """
+    edges = np.asarray(mesh.edges)  # (3F, 2) oriented
+    key = np.sort(edges, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return edges[counts[inverse.reshape(-1)] == 1]
+
+
+def thicken(mesh: trimesh.Trimesh, thickness: float) -> trimesh.Trimesh:
+    """Turn a surface into a closed shell of the given thickness.
+
+    Each vertex is offset by ``±thickness/2`` along its (area-weighted) normal;
+    the outer layer keeps the orientation, the inner layer is flipped, and
+    boundary edges are closed by quads, so a flat sheet becomes a slab that
+    encloses volume.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+    thickness : float
+        Shell thickness in mesh units, > 0.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Closed shell (watertight when the input is edge-manifold).
+    """
+    if not thickness > 0:
+        raise InputError(f"--thickness must be > 0 (got {thickness})")
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    normals = np.asarray(mesh.vertex_normals, dtype=np.float64)
+    half = 0.5 * thickness
+    nv = len(v)
+    vertices = np.vstack([v + half * normals, v - half * normals])
+    faces = [f, f[:, ::-1] + nv]
+    edges = boundary_edges(mesh)
+    if len(edges):
+        a, b = edges[:, 0], edges[:, 1]
+        # outer edge a->b is matched by the side quad (b, a, a', b') oriented outward
+        faces.append(np.stack([b, a, a + nv], axis=1))
+        faces.append(np.stack([b, a + nv, b + nv], axis=1))
+    return trimesh.Trimesh(vertices, np.vstack(faces), process=False, validate=False)

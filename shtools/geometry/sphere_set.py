@@ -1,0 +1,146 @@
+"""The sphere set: spheres bounding a solid, as SHEXP uses for blockers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class SphereSet:
+    """A set of spheres bounding a solid.
+
+    Attributes
+    ----------
+    centers : ndarray, shape (N, 3), float64
+    radii : ndarray, shape (N,), float64
+    outside_volume_ratio : float
+        E = sum_i V(S_i - T) / V(T): the volume the spheres add outside the
+        solid T, summed over spheres, relative to T's volume (NaN if unknown,
+        e.g. after importing a ``.sph`` file without its mesh).
+    coverage : float
+        Fraction of surface samples inside at least one sphere (1.0 for a
+        bounding set; NaN if unknown).
+    method : str
+        How the set was made (``"variational"``, ``"octree"``, ``"kmeans"``,
+        ``"import"``).
+    info : dict
+        Extra diagnostics (iterations, timings, solid volume, ...).
+    """
+
+    centers: np.ndarray
+    radii: np.ndarray
+    outside_volume_ratio: float = float("nan")
+    coverage: float = float("nan")
+    method: str = ""
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.centers = np.ascontiguousarray(self.centers, dtype=np.float64).reshape(-1, 3)
+        self.radii = np.ascontiguousarray(self.radii, dtype=np.float64).reshape(-1)
+        if len(self.centers) != len(self.radii):
+            raise ValueError(
+                f"centers {self.centers.shape} and radii {self.radii.shape} disagree"
+            )
+
+    def __len__(self) -> int:
+        return len(self.radii)
+
+    def contains(self, points: np.ndarray, *, tolerance: float = 0.0) -> np.ndarray:
+        """Which points lie inside at least one sphere.
+
+        Parameters
+        ----------
+        points : ndarray, shape (P, 3)
+        tolerance : float
+            Added to every radius.
+
+        Returns
+        -------
+        ndarray, shape (P,), bool
+        """
+        from scipy.spatial import cKDTree
+
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        inside = np.zeros(len(points), dtype=bool)
+        if len(self) == 0 or len(points) == 0:
+            return inside
+        tree = cKDTree(points)
+        for c, r in zip(self.centers, self.radii + tolerance, strict=True):
+            inside[tree.query_ball_point(c, r)] = True
+        return inside
+
+
+#: Iterations of the Badoiu–Clarkson core-set walk; its radius is within a
+#: factor (1 + 1/sqrt(iterations)) of the minimum before the polish step.
+_BC_ITERATIONS = 400
+
+
+def bounding_sphere_of_spheres(
+    centers: np.ndarray, radii: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """A near-minimal sphere containing every given sphere.
+
+    Badoiu–Clarkson walk toward the farthest sphere, polished by Nelder–Mead on
+    the exact objective ``max_i |c_i - c| + r_i``; the returned radius is that
+    exact maximum, so the result always bounds every sphere.
+
+    Parameters
+    ----------
+    centers : ndarray, shape (K, 3)
+    radii : ndarray, shape (K,)
+        Zero radii make this the bounding sphere of points.
+
+    Returns
+    -------
+    center : ndarray, shape (3,)
+    radius : float
+    """
+    from scipy.optimize import minimize
+
+    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+    if len(centers) == 1:
+        return centers[0].copy(), float(radii[0])
+
+    def reach(c):
+        return np.linalg.norm(centers - c, axis=1) + radii
+
+    c = centers[np.argmax(radii)].copy()
+    for k in range(1, _BC_ITERATIONS + 1):
+        d = centers - c
+        dist = np.linalg.norm(d, axis=1)
+        j = int(np.argmax(dist + radii))
+        direction = d[j] / dist[j] if dist[j] > 0 else np.zeros(3)
+        far = centers[j] + radii[j] * direction
+        c += (far - c) / (k + 1)
+    scale = float(np.max(reach(c))) or 1.0
+    res = minimize(lambda x: float(np.max(reach(x))), c, method="Nelder-Mead",
+                   options={"xatol": 1e-9 * scale, "fatol": 1e-12 * scale, "maxiter": 400})
+    if res.fun < np.max(reach(c)):
+        c = res.x
+    return np.asarray(c, dtype=np.float64), float(np.max(reach(c)))
+
+
+def minimal_bounding_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """A near-minimal sphere containing every point (exactly bounding).
+
+    Parameters
+    ----------
+    points : ndarray, shape (P, 3)
+
+    Returns
+    -------
+    center : ndarray, shape (3,)
+    radius : float
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) >= 5:
+        from scipy.spatial import ConvexHull, QhullError
+
+        try:
+            points = points[ConvexHull(points).vertices]
+        except (QhullError, ValueError):
+            pass  # coplanar or collinear: use every point
+    return bounding_sphere_of_spheres(points, np.zeros(len(points)))

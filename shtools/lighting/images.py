@@ -1,0 +1,106 @@
+"""Loading high-dynamic-range environment images as linear RGB arrays.
+
+Radiance ``.hdr``/``.pic`` and ``.pfm`` files are read with OpenCV.  OpenEXR
+(``.exr``) files are read with the ``OpenEXR`` package (the Academy Software
+Foundation's bindings, a dependency): the ``opencv-python-headless`` wheels on
+PyPI are built without OpenEXR, so OpenCV cannot read them even with
+``OPENCV_IO_ENABLE_OPENEXR`` set.  An EXR must have R, G and B channels (half or
+float); other layers and alpha are ignored.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from shtools.errors import InputError
+
+#: File suffixes read as HDR images.
+HDR_SUFFIXES = (".hdr", ".pic", ".pfm", ".exr")
+
+
+def _read_opencv(path: Path, suffix: str) -> np.ndarray:
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR)
+    if img is None:
+        raise InputError(f"cannot decode the image as {suffix}; the file is damaged or not "
+                         "an HDR image", path)
+    if img.ndim != 3 or img.shape[2] != 3 or img.size == 0:
+        raise InputError(f"expected an RGB image, got shape {img.shape}", path)
+    if img.dtype.kind != "f":
+        raise InputError(f"the image holds {img.dtype} integers, not HDR floats; use a "
+                         "linear HDR file", path)
+    return np.ascontiguousarray(img[..., ::-1], dtype=np.float32)  # OpenCV gives BGR
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as exr:
+            channels = {name: ch.pixels for name, ch in exr.channels().items()}
+    except Exception as exc:  # the bindings raise plain RuntimeError/IOError on bad files
+        raise InputError(f"cannot decode the image as .exr ({' '.join(str(exc).split())}); "
+                         "the file is damaged or not OpenEXR", path) from None
+    missing = [c for c in "RGB" if c not in channels]
+    if missing:
+        names = ", ".join(sorted(channels)) or "none"
+        raise InputError(f"the EXR has no {'/'.join(missing)} channel (channels: {names}); "
+                         "export the environment as RGB", path)
+    rgb = np.stack([np.asarray(channels[c]) for c in "RGB"], axis=-1)
+    if rgb.dtype.kind != "f" or rgb.ndim != 3 or rgb.size == 0:
+        raise InputError(f"expected float RGB channels, got {rgb.dtype} of shape {rgb.shape}",
+                         path)
+    return np.ascontiguousarray(rgb, dtype=np.float32)
+
+
+def load_hdr_image(path: str | os.PathLike) -> np.ndarray:
+    """Read an HDR image as linear RGB.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.hdr``/``.pic`` (Radiance RGBE), ``.pfm`` or ``.exr``.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32
+        Linear RGB, row 0 at the top of the image.
+
+    Raises
+    ------
+    shtools.errors.InputError
+        Missing file, unsupported suffix, unreadable data, NaN/inf or negative
+        pixels.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("image not found; check the path", path)
+    suffix = path.suffix.lower()
+    if suffix not in HDR_SUFFIXES:
+        raise InputError(
+            f"unsupported image type '{suffix or '(none)'}'; give an HDR environment map "
+            f"({', '.join(HDR_SUFFIXES)})",
+            path,
+        )
+    rgb = _read_exr(path) if suffix == ".exr" else _read_opencv(path, suffix)
+    bad = ~np.isfinite(rgb)
+    if bad.any():
+        rows, cols = np.nonzero(bad.any(axis=2))
+        raise InputError(
+            f"{rows.size} pixels are NaN or inf (first at row {rows[0]}, column {cols[0]}); "
+            "fix or clamp the image",
+            path,
+        )
+    negative = rgb < 0
+    if negative.any():
+        rows, cols = np.nonzero(negative.any(axis=2))
+        raise InputError(
+            f"{rows.size} pixels are negative (first at row {rows[0]}, column {cols[0]}); "
+            "radiance cannot be negative, clamp the image at 0",
+            path,
+        )
+    return rgb

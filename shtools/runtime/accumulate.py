@@ -1,0 +1,302 @@
+r"""Log-space accumulation of sphere blockers at receiver points (eqs. 34 and 38).
+
+For every receiver ``p`` and every sphere ``(P, r)`` of its list, with
+:math:`d = |P - p|` and :math:`s = (P - p)/d`,
+
+.. math::
+
+    \mathbf f(p) \mathrel{+}= \mathbf W\,\mathbf F(\theta)\,\mathbf y(s),
+    \qquad \sin\theta = r/d,
+
+where ``W`` holds per-band ratio weights (eq. 38; ones for leaf spheres).
+
+The kernel works on blocks ``(v, S)`` of vertices x spheres in float32, one
+array pass per operation with preallocated buffers:
+
+* no arcsin: the table is indexed by :math:`1 - \cos\theta = 1 - \sqrt{1 - r^2/d^2}`
+  (:mod:`shtools.runtime.log_table`);
+* the self-shadow rules (:mod:`shtools.runtime.self_shadow`) run only on the
+  pairs whose sphere straddles the tangent plane (a small subset), the others
+  are kept or dropped with one comparison;
+* the SH basis is built by the Legendre/complex-power recurrence of
+  :mod:`shtools.sh.basis`, and each coefficient is reduced over the spheres at
+  once (``einsum("ij,ij->i")``), so the ``(v, S, n*n)`` array of per-pair
+  vectors is never formed; the basis normalisation is applied once per vertex.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.self_shadow import apply_self_shadow_rules
+
+#: d^2 floor (scene units^2): guards 1/d for a zero-radius sphere at the receiver.
+MIN_DIST2 = 1e-20
+
+
+def _normalisation(order: int) -> np.ndarray:
+    """K_lm (with sqrt 2 for m != 0) indexed [l, |m|]."""
+    k = np.zeros((order, order))
+    for l in range(order):
+        for m in range(l + 1):
+            k[l, m] = math.sqrt(
+                (2 * l + 1) / (4 * math.pi) * math.factorial(l - m) / math.factorial(l + m)
+            )
+            if m > 0:
+                k[l, m] *= math.sqrt(2.0)
+    return k
+
+
+def _double_factorial(n: int) -> int:
+    return 1 if n <= 0 else n * _double_factorial(n - 2)
+
+
+def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weights=None,
+                   self_shadow: bool = True, chunk_pairs: int = 1 << 16,
+                   out: np.ndarray | None = None) -> np.ndarray:
+    """Sum of sphere log-visibility vectors at each receiver (float32), one sphere list.
+
+    Parameters
+    ----------
+    points : array_like, shape (V, 3)
+        Receiver positions.
+    normals : array_like, shape (V, 3)
+        Unit receiver normals (used by the self-shadow rules).
+    centers : array_like, shape (S, 3)
+        Sphere centres (the same list for every receiver).
+    radii : array_like, shape (S,)
+        Sphere radii; radius 0 contributes nothing.
+    table : CapLogTable
+        Cap log table of order ``n`` (the accumulation order).
+    weights : array_like, shape (S, n), optional
+        Per-band ratio weights ``w_l`` of eq. 38 (default ones).
+    self_shadow : bool
+        Apply the Sec. 6.2 rules.
+    chunk_pairs : int
+        Pairs per block (memory ~ ``(20 + n) * 4 * chunk_pairs`` bytes).
+    out : ndarray, shape (V, n*n), optional
+        float32 destination; the sums are *added* to it when given.
+
+    Returns
+    -------
+    ndarray, shape (V, n*n) float32
+    """
+    order = table.order
+    pts = np.asarray(points, dtype=np.float32)
+    nrm = np.asarray(normals, dtype=np.float32)
+    cen = np.asarray(centers, dtype=np.float32)
+    rad = np.asarray(radii, dtype=np.float32)
+    n_v, n_s = pts.shape[0], cen.shape[0]
+    if out is None:
+        out = np.zeros((n_v, order * order), dtype=np.float32)
+    if n_v == 0 or n_s == 0:
+        return out
+    w = None if weights is None else np.asarray(weights, dtype=np.float32)[None]
+    step = max(1, chunk_pairs // n_s)
+    kernel = BlockKernel(table)
+    for start in range(0, n_v, step):
+        stop = min(n_v, start + step)
+        out[start:stop] += accumulate_blocks(
+            pts[None, start:stop], nrm[None, start:stop], cen[None], rad[None], table,
+            weights=w, self_shadow=self_shadow, kernel=kernel)[0]
+    return out
+
+
+def accumulate_blocks(points, normals, centers, radii, table: CapLogTable, *, weights=None,
+                      self_shadow: bool = True, kernel: BlockKernel | None = None
+                      ) -> np.ndarray:
+    """Log-visibility sums for ``K`` tiles of receivers, each with its own sphere list.
+
+    Parameters
+    ----------
+    points, normals : ndarray, shape (K, T, 3) float32
+        ``T`` receivers per tile.
+    centers : ndarray, shape (K, S, 3) float32
+        Sphere list of each tile (pad with radius-0 spheres).
+    radii : ndarray, shape (K, S) float32
+    table : CapLogTable
+        Log table of the accumulation order ``n``.
+    weights : ndarray, shape (K, S, n) float32, optional
+        Per-band ratio weights (eq. 38).
+    self_shadow : bool
+        Apply the Sec. 6.2 rules.
+    kernel : BlockKernel, optional
+        Reused kernel (keeps its scratch buffers between calls).
+
+    Returns
+    -------
+    ndarray, shape (K, T, n*n) float32
+    """
+    if kernel is None or kernel.table is not table:
+        kernel = BlockKernel(table)
+    return kernel.run(np.asarray(points, np.float32), np.asarray(normals, np.float32),
+                      np.asarray(centers, np.float32), np.asarray(radii, np.float32),
+                      None if weights is None else np.asarray(weights, np.float32), self_shadow)
+
+
+#: Scratch arrays of the kernel (each ``K*T*S`` float32); bands need ``n`` more.
+_N_SCRATCH = 12
+
+
+class BlockKernel:
+    """Accumulation over blocks of ``(K, T, S)`` pairs, every op in place.
+
+    Scratch buffers are kept between calls: allocating fresh multi-100-KB arrays
+    per block costs page faults (system time) comparable to the arithmetic.
+    """
+
+    def __init__(self, table: CapLogTable):
+        self.order = table.order
+        self.table = table
+        self.norm = _normalisation(self.order).astype(np.float32)
+        self._scratch = np.empty((_N_SCRATCH + self.order, 0), np.float32)
+        self._idx = np.empty(0, np.int32)
+
+    def _buffers(self, shape):
+        size = int(np.prod(shape))
+        if self._scratch.shape[1] < size:
+            self._scratch = np.empty((_N_SCRATCH + self.order, size), np.float32)
+            self._idx = np.empty(size, np.int32)
+        views = [self._scratch[i, :size].reshape(shape) for i in range(self._scratch.shape[0])]
+        return views, self._idx[:size].reshape(shape)
+
+    def run(self, pts, nrm, cen, rad, w, self_shadow):
+        n_k, n_t, _ = pts.shape
+        n_s = cen.shape[1]
+        shape = (n_k, n_t, n_s)
+        views, idx = self._buffers(shape)
+        dx, dy, dz, r, t0, t1, t2, t3 = views[:8]
+        extra = views[8:_N_SCRATCH]
+        bands = views[_N_SCRATCH:]
+        np.subtract(cen[:, None, :, 0], pts[:, :, 0:1], out=dx)
+        np.subtract(cen[:, None, :, 1], pts[:, :, 1:2], out=dy)
+        np.subtract(cen[:, None, :, 2], pts[:, :, 2:3], out=dz)
+        r[...] = rad[:, None, :]
+        if self_shadow:
+            nx, ny, nz = nrm[:, :, 0:1], nrm[:, :, 1:2], nrm[:, :, 2:3]
+            # h = (P - p) . N
+            np.multiply(dx, nx, out=t0)
+            np.multiply(dy, ny, out=t1)
+            t0 += t1
+            np.multiply(dz, nz, out=t1)
+            t0 += t1
+            np.negative(r, out=t1)
+            behind = np.less_equal(t0, t1, out=idx.view(np.bool_)[..., : n_s])
+            np.copyto(r, 0.0, where=behind)  # entirely behind the plane: dropped
+            np.abs(t0, out=t1)
+            straddle = np.less(t1, r, out=behind)
+            sel = np.flatnonzero(straddle)  # straddling the plane (includes p inside)
+            if sel.size:
+                rows = sel // n_s
+                nflat = nrm.reshape(-1, 3)
+                ndx, ndy, ndz, nr = apply_self_shadow_rules(
+                    dx.ravel()[sel].astype(np.float64), dy.ravel()[sel].astype(np.float64),
+                    dz.ravel()[sel].astype(np.float64), r.ravel()[sel].astype(np.float64),
+                    nflat[rows, 0].astype(np.float64), nflat[rows, 1].astype(np.float64),
+                    nflat[rows, 2].astype(np.float64))
+                dx.ravel()[sel] = ndx
+                dy.ravel()[sel] = ndy
+                dz.ravel()[sel] = ndz
+                r.ravel()[sel] = nr
+        # inverse distance and unit direction (x, y, z overwrite dx, dy, dz)
+        d2, inv = t0, t1
+        np.multiply(dx, dx, out=d2)
+        np.multiply(dy, dy, out=t2)
+        d2 += t2
+        np.multiply(dz, dz, out=t2)
+        d2 += t2
+        np.maximum(d2, MIN_DIST2, out=d2)
+        np.sqrt(d2, out=inv)
+        np.reciprocal(inv, out=inv)
+        x, y, z = dx, dy, dz
+        x *= inv
+        y *= inv
+        z *= inv
+        # 1 - cos(theta) = 1 - sqrt(1 - (r/d)^2)
+        u = r
+        u *= inv
+        np.multiply(u, u, out=u)
+        np.subtract(1.0, u, out=u)
+        np.maximum(u, 0.0, out=u)
+        np.sqrt(u, out=u)
+        np.subtract(1.0, u, out=u)
+        self._lookup(u, bands, t0, t1, idx)
+        if w is not None:
+            for l in range(self.order):
+                bands[l] *= w[:, None, :, l]
+        flat = (n_k * n_t, n_s)
+        out = np.empty((n_k * n_t, self.order * self.order), np.float32)
+        self._accumulate([b.reshape(flat) for b in bands], x.reshape(flat), y.reshape(flat),
+                         z.reshape(flat), [a.reshape(flat) for a in (t0, t1, t2, t3, *extra)],
+                         out)
+        return out.reshape(n_k, n_t, -1)
+
+    def _lookup(self, u, bands, frac, tmp, idx):
+        tbl = self.table
+        np.multiply(u, tbl.scale, out=frac)
+        np.minimum(frac, tbl.scale, out=frac)
+        np.copyto(idx, frac, casting="unsafe")  # truncation == floor since >= 0
+        np.subtract(frac, idx, out=frac, casting="unsafe")
+        for l in range(self.order):
+            np.take(tbl.values[l], idx, out=bands[l])
+            np.take(tbl.slopes[l], idx, out=tmp)
+            tmp *= frac
+            bands[l] += tmp
+
+    def _accumulate(self, bands, x, y, z, scratch, out):
+        """out[:, lm] = K_lm * sum_s bands[l] * Q_lm(z) * Re/Im (x + i y)^m."""
+        order = self.order
+        k = self.norm
+        c_m, s_m, prod = scratch[0], scratch[1], scratch[2]
+        q_buf = (scratch[3], scratch[4], scratch[5])
+        c_new, s_new = scratch[6], scratch[7]
+        for m in range(order):
+            if m == 1:
+                c_m[...] = x
+                s_m[...] = y
+            elif m > 1:
+                # (c + i s) * (x + i y)
+                np.multiply(c_m, x, out=c_new)
+                np.multiply(s_m, y, out=prod)
+                c_new -= prod
+                np.multiply(c_m, y, out=s_new)
+                np.multiply(s_m, x, out=prod)
+                s_new += prod
+                c_m, c_new = c_new, c_m
+                s_m, s_new = s_new, s_m
+            q_mm = float(_double_factorial(2 * m - 1))
+            q_prev2 = q_prev1 = None
+            for l in range(m, order):
+                if l == m:
+                    q = None  # the constant q_mm, folded into the scale below
+                    term = bands[l]
+                    scale = q_mm
+                elif l == m + 1:
+                    q = q_buf[l % 3]
+                    np.multiply(z, (2 * m + 1) * q_mm, out=q)
+                    np.multiply(bands[l], q, out=prod)
+                    term, scale = prod, 1.0
+                else:
+                    q = q_buf[l % 3]
+                    a = (2 * l - 1) / (l - m)
+                    c = (l + m - 1) / (l - m)
+                    np.multiply(z, q_prev1, out=q)
+                    q *= a
+                    if q_prev2 is None:  # Q_{l-2,m} is the constant q_mm
+                        q -= c * q_mm
+                    else:
+                        np.multiply(q_prev2, c, out=prod)
+                        q -= prod
+                    np.multiply(bands[l], q, out=prod)
+                    term, scale = prod, 1.0
+                base = l * l + l
+                if m == 0:
+                    out[:, base] = np.einsum("ij->i", term) * (scale * k[l, 0])
+                else:
+                    out[:, base + m] = np.einsum("ij,ij->i", term, c_m) * (scale * k[l, m])
+                    out[:, base - m] = np.einsum("ij,ij->i", term, s_m) * (scale * k[l, m])
+                if l > m:
+                    q_prev2, q_prev1 = q_prev1, q

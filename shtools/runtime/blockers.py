@@ -1,0 +1,100 @@
+"""Inputs of the runtime: sphere blockers (optionally with a hierarchy) and spherical lights."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from shtools.errors import InputError
+
+
+@dataclass
+class SphereBlocker:
+    """One blocker: a sphere set, optionally organised in a sphere tree.
+
+    Parameters
+    ----------
+    centers : array_like, shape (N, 3)
+        Leaf sphere centres in scene coordinates for the current frame.
+    radii : array_like, shape (N,)
+        Leaf sphere radii (>= 0).
+    tree : tuple (parent (M,), leaf (M,)) or object with ``parent``/``leaf``, optional
+        Hierarchy over the leaves: ``parent`` is -1 at the root, ``leaf`` the
+        sphere-set index of leaf nodes and -1 for inner nodes.  Only the topology
+        is used: the inner spheres are refit from the leaves every frame
+        (:func:`shtools.runtime.spheres.refit_tree`).
+    """
+
+    centers: Any
+    radii: Any
+    tree: Any = None
+    parent: np.ndarray | None = field(init=False, default=None, repr=False)
+    leaf: np.ndarray | None = field(init=False, default=None, repr=False)
+
+    def __post_init__(self):
+        self.centers = np.asarray(self.centers, dtype=np.float64)
+        self.radii = np.asarray(self.radii, dtype=np.float64)
+        if self.centers.ndim != 2 or self.centers.shape[1] != 3:
+            raise InputError(f"blocker centers must have shape (N, 3), got {self.centers.shape}")
+        if self.radii.shape != (self.centers.shape[0],):
+            raise InputError(
+                f"blocker radii must have shape ({self.centers.shape[0]},), got {self.radii.shape}"
+            )
+        if not (np.isfinite(self.centers).all() and np.isfinite(self.radii).all()):
+            raise InputError("blocker spheres contain NaN or infinite values")
+        if (self.radii < 0).any():
+            raise InputError("blocker sphere radii must be >= 0")
+        if self.tree is not None:
+            if isinstance(self.tree, tuple | list):
+                parent, leaf = self.tree
+            else:
+                parent, leaf = self.tree.parent, self.tree.leaf
+            parent = np.asarray(parent, dtype=np.int64)
+            leaf = np.asarray(leaf, dtype=np.int64)
+            n = self.centers.shape[0]
+            if parent.ndim != 1 or leaf.shape != parent.shape:
+                raise InputError("blocker tree parent and leaf must be 1-D arrays of equal length")
+            leaves = np.sort(leaf[leaf >= 0])
+            if leaves.shape[0] != n or not np.array_equal(leaves, np.arange(n)):
+                raise InputError(
+                    f"blocker tree must have each of the {n} spheres as exactly one leaf; "
+                    "rebuild it with `shtools spheres tree`"
+                )
+            if ((parent < -1) | (parent >= parent.shape[0])).any() or (parent == -1).sum() != 1:
+                raise InputError("blocker tree parent array must name one root (-1) and valid nodes")
+            self.parent, self.leaf = parent, leaf
+
+    @property
+    def n_spheres(self) -> int:
+        """Number of leaf spheres ``N``."""
+        return int(self.centers.shape[0])
+
+
+@dataclass
+class SphereLight:
+    """A spherical light of uniform radiance.
+
+    Parameters
+    ----------
+    position : array_like, shape (3,)
+        Centre in scene coordinates.
+    radius : float
+        Radius (> 0); with the distance it sets the per-vertex angular radius.
+    color : array_like, shape (3,)
+        Linear RGB radiance of the light's surface.
+    """
+
+    position: Any
+    radius: float
+    color: Any
+
+    def __post_init__(self):
+        self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
+        self.color = np.asarray(self.color, dtype=np.float64).reshape(3)
+        self.radius = float(self.radius)
+        if not self.radius > 0 or not np.isfinite(self.position).all():
+            raise InputError("a sphere light needs a finite position and a radius > 0")
+        if not np.isfinite(self.color).all() or (self.color < 0).any():
+            raise InputError("a sphere light colour must be finite and >= 0")

@@ -1,0 +1,158 @@
+"""Receiver clustering (Sec. 6.3): Lloyd (k-means) on receiver positions.
+
+Clusters are computed once (on the first frame's positions) and reused across
+frames; their bounding spheres are recomputed from the current positions every
+frame (:meth:`ReceiverClusters.bounds`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from shtools.errors import InputError
+
+#: Lloyd iterations; assignments on receiver meshes settle within a few.
+LLOYD_ITERATIONS = 8
+#: Points per distance block in the assignment step (bounds memory).
+_ASSIGN_BLOCK = 1 << 21
+
+
+@dataclass(frozen=True)
+class ReceiverClusters:
+    """A partition of the receiver vertices into clusters.
+
+    Attributes
+    ----------
+    labels : ndarray of int, shape (V,)
+        Cluster of each vertex, ``0..C-1``.
+    order : ndarray of int, shape (V,)
+        Vertex indices sorted by cluster.
+    offsets : ndarray of int, shape (C + 1,)
+        Cluster ``c`` holds ``order[offsets[c]:offsets[c+1]]``.
+    """
+
+    labels: np.ndarray
+    order: np.ndarray
+    offsets: np.ndarray
+
+    @property
+    def n_clusters(self) -> int:
+        """Number of clusters ``C``."""
+        return int(self.offsets.shape[0] - 1)
+
+    @property
+    def n_vertices(self) -> int:
+        """Number of receiver vertices ``V``."""
+        return int(self.labels.shape[0])
+
+    @classmethod
+    def from_labels(cls, labels) -> ReceiverClusters:
+        """Build from per-vertex labels (relabelled to ``0..C-1``, empty clusters dropped)."""
+        labels = np.asarray(labels)
+        _, dense = np.unique(labels, return_inverse=True)
+        dense = dense.astype(np.int64)
+        order = np.argsort(dense, kind="stable")
+        counts = np.bincount(dense)
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        return cls(dense, order, offsets)
+
+    def bounds(self, vertices) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding sphere of every cluster at the given positions.
+
+        Parameters
+        ----------
+        vertices : array_like, shape (V, 3)
+
+        Returns
+        -------
+        centers : ndarray, shape (C, 3)
+            Cluster centroids (``p_R`` of eq. 36, also the ratio-vector point ``p*``).
+        radii : ndarray, shape (C,)
+            Largest distance of a cluster vertex from its centroid (``r_R``).
+        """
+        v = np.asarray(vertices, dtype=np.float64)
+        if v.shape != (self.n_vertices, 3):
+            raise InputError(
+                f"receiver clusters were built for {self.n_vertices} vertices, got {v.shape[0]}"
+            )
+        counts = np.diff(self.offsets)
+        sums = np.stack([np.bincount(self.labels, v[:, k], minlength=counts.size)
+                         for k in range(3)], axis=1)
+        centers = sums / counts[:, None]
+        dist = np.linalg.norm(v - centers[self.labels], axis=1)
+        radii = np.maximum.reduceat(dist[self.order], self.offsets[:-1])
+        return centers, radii
+
+
+def lloyd_clusters(vertices, vertices_per_cluster: int = 400, *, groups=None,
+                   iterations: int = LLOYD_ITERATIONS, seed: int = 0) -> ReceiverClusters:
+    """Cluster receiver vertices with Lloyd's algorithm.
+
+    Parameters
+    ----------
+    vertices : array_like, shape (V, 3)
+        Receiver positions (e.g. the first frame).
+    vertices_per_cluster : int
+        Average cluster size; ``C = ceil(V / vertices_per_cluster)`` per group.
+    groups : array_like of int, shape (V,), optional
+        Object id per vertex; clusters never mix groups (a cluster spanning a
+        moving character and the ground would get a needlessly large bound).
+    iterations : int
+        Lloyd iterations.
+    seed : int
+        Seed of the initial centre choice (deterministic).
+
+    Returns
+    -------
+    ReceiverClusters
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3 or not np.isfinite(v).all():
+        raise InputError("receiver vertices must be a finite (V, 3) array")
+    if groups is None:
+        groups = np.zeros(v.shape[0], dtype=np.int64)
+    groups = np.asarray(groups)
+    if groups.shape != (v.shape[0],):
+        raise InputError(f"groups must have shape ({v.shape[0]},), got {groups.shape}")
+    labels = np.zeros(v.shape[0], dtype=np.int64)
+    next_label = 0
+    rng = np.random.default_rng(seed)
+    for g in np.unique(groups):
+        idx = np.flatnonzero(groups == g)
+        k = max(1, int(np.ceil(idx.size / vertices_per_cluster)))
+        local = _kmeans(v[idx], k, iterations, rng)
+        labels[idx] = local + next_label
+        next_label += k
+    return ReceiverClusters.from_labels(labels)
+
+
+def _kmeans(points: np.ndarray, k: int, iterations: int, rng) -> np.ndarray:
+    """Lloyd iterations from a random (seeded) choice of ``k`` distinct points."""
+    if k == 1:
+        return np.zeros(points.shape[0], dtype=np.int64)
+    centers = points[rng.choice(points.shape[0], size=k, replace=False)].copy()
+    labels = _assign(points, centers)
+    for _ in range(iterations):
+        counts = np.bincount(labels, minlength=k)
+        sums = np.stack([np.bincount(labels, points[:, j], minlength=k) for j in range(3)], 1)
+        nonempty = counts > 0
+        centers[nonempty] = sums[nonempty] / counts[nonempty, None]
+        new = _assign(points, centers)
+        if np.array_equal(new, labels):
+            break
+        labels = new
+    return labels
+
+
+def _assign(points: np.ndarray, centers: np.ndarray) -> np.ndarray:
+    """Nearest centre per point, in blocks."""
+    out = np.empty(points.shape[0], dtype=np.int64)
+    c2 = np.einsum("ij,ij->i", centers, centers)
+    step = max(1, _ASSIGN_BLOCK // centers.shape[0])
+    for s in range(0, points.shape[0], step):
+        p = points[s : s + step]
+        d = c2[None, :] - 2.0 * (p @ centers.T)
+        out[s : s + step] = np.argmin(d, axis=1)
+    return out

@@ -1,0 +1,231 @@
+"""The per-frame evaluator: :class:`ShadowRuntime` (CONTRACTS.md section D)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from shtools.errors import InputError
+from shtools.runtime.accumulate import BlockKernel, accumulate_log
+from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
+from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
+from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
+from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.settings import ShadowSettings
+from shtools.runtime.tiling import accumulate_clusters
+from shtools.runtime.shading import shade as _shade
+from shtools.sh import exp as sh_exp
+
+
+class ShadowRuntime:
+    """SHEXP soft shadows per receiver vertex from sphere blockers.
+
+    Parameters
+    ----------
+    settings : ShadowSettings, optional
+        Defaults when omitted.
+    tables : dict, optional
+        Log tables (``theta``, ``log_zh``, ``ol_norm``, ``ol_a``, ``ol_b``) of
+        the accumulation order, as from :func:`shtools.sh.tables.build_log_tables`
+        or :func:`shtools.data_formats.tables.read_tables`; built when omitted.
+        The cap log depends on the order it was computed at, so the tables must
+        have exactly the accumulation order.
+
+    Attributes
+    ----------
+    last_stats : dict
+        Counters and timings of the last :meth:`visibility` call: ``pairs``
+        (sphere-vertex pairs accumulated), ``spheres_per_vertex``,
+        ``clusters``, ``seconds`` per stage (``cuts``, ``accumulate``, ``exp``).
+    """
+
+    def __init__(self, settings: ShadowSettings | None = None, tables: dict | None = None):
+        self.settings = settings if settings is not None else ShadowSettings()
+        self.settings.validate()
+        self.order = self.settings.order
+        self.acc_order = self.settings.resolved_acc_order()
+        self.exp_method = self.settings.resolved_exp_method()
+        if tables is None:
+            from shtools.sh.tables import default_tables
+
+            tables = default_tables(self.acc_order)
+        table_order = np.asarray(tables["log_zh"]).shape[-1]
+        if table_order != self.acc_order:
+            raise InputError(
+                f"log tables have order {table_order} but the accumulation order is "
+                f"{self.acc_order}; build them with `shtools tables log --order "
+                f"{self.acc_order}` or set acc_order={table_order}"
+            )
+        self.tables = tables
+        self.table = CapLogTable(tables, self.acc_order)
+        self._kernel = BlockKernel(self.table)
+        self._auto_clusters: ReceiverClusters | None = None
+        self.last_stats: dict = {}
+
+    # -- clusters --------------------------------------------------------------
+    def clusters(self, vertices, groups=None) -> ReceiverClusters:
+        """Lloyd receiver clusters for :meth:`visibility`; compute once, reuse every frame.
+
+        Parameters
+        ----------
+        vertices : array_like, shape (V, 3)
+            Receiver positions (e.g. the first frame).
+        groups : array_like of int, shape (V,), optional
+            Object id per vertex; clusters never span two objects.
+
+        Returns
+        -------
+        ReceiverClusters
+        """
+        return lloyd_clusters(vertices, self.settings.vertices_per_cluster, groups=groups)
+
+    # -- visibility ------------------------------------------------------------
+    def log_visibility(self, vertices, normals, blockers: list[SphereBlocker],
+                       clusters: ReceiverClusters | None = None) -> np.ndarray:
+        """Accumulated log visibility at the accumulation order, shape ``(V, n_acc^2)`` float32.
+
+        Parameters are those of :meth:`visibility`.
+        """
+        pts, nrm = _check_receivers(vertices, normals)
+        blockers = _check_blockers(blockers)
+        s = self.settings
+        stats = {"pairs": 0, "clusters": 0, "seconds": {}}
+        n_acc2 = self.acc_order * self.acc_order
+        f = np.zeros((pts.shape[0], n_acc2), dtype=np.float32)
+        t0 = time.perf_counter()
+        if not s.hierarchy:
+            centers, radii = leaf_spheres(blockers)
+            stats["seconds"]["cuts"] = time.perf_counter() - t0
+            t1 = time.perf_counter()
+            accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
+                           chunk_pairs=s.chunk_pairs, out=f)
+            stats["pairs"] = pts.shape[0] * centers.shape[0]
+            stats["seconds"]["accumulate"] = time.perf_counter() - t1
+        else:
+            if clusters is None:
+                clusters = self._clusters_for(pts)
+            if clusters.n_vertices != pts.shape[0]:
+                raise InputError(
+                    f"clusters were built for {clusters.n_vertices} vertices but "
+                    f"{pts.shape[0]} were given; call clusters() on this receiver set"
+                )
+            forest = build_forest(blockers)
+            cl_centers, cl_radii = clusters.bounds(pts)
+            cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
+            weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
+            stats["seconds"]["cuts"] = time.perf_counter() - t0
+            t1 = time.perf_counter()
+            sizes = cuts.in_cut.sum(axis=1)
+            s_max = max(1, int(sizes.max(initial=0)))
+            # each cluster's cut nodes first (stable), padded with radius 0
+            node_idx = np.argsort(~cuts.in_cut, axis=1, kind="stable")[:, :s_max]
+            valid = np.arange(s_max)[None, :] < sizes[:, None]
+            sph_c = forest.centers[node_idx]
+            sph_r = np.where(valid, forest.radii[node_idx], 0.0)
+            any_inner = bool((cuts.in_cut & ~forest.is_leaf[None, :]).any())
+            sph_w = (np.take_along_axis(weights, node_idx[:, :, None], axis=1)
+                     if any_inner else None)
+            f = accumulate_clusters(pts, nrm, clusters.order, clusters.offsets, sph_c, sph_r,
+                                    sph_w, sizes, self.table, self_shadow=s.self_shadow,
+                                    chunk_pairs=s.chunk_pairs, kernel=self._kernel)
+            pairs = int((np.diff(clusters.offsets) * sizes).sum())
+            stats["pairs"] = pairs
+            stats["clusters"] = clusters.n_clusters
+            stats["seconds"]["accumulate"] = time.perf_counter() - t1
+        stats["spheres_per_vertex"] = stats["pairs"] / max(1, pts.shape[0])
+        self.last_stats = stats
+        return f
+
+    def visibility(self, vertices, normals, blockers: list[SphereBlocker],
+                   clusters: ReceiverClusters | None = None) -> np.ndarray:
+        """Shadowing visibility per receiver vertex: accumulate logs, exp, truncate.
+
+        Parameters
+        ----------
+        vertices : array_like, shape (V, 3)
+            Receiver positions this frame.
+        normals : array_like, shape (V, 3)
+            Unit receiver normals this frame.
+        blockers : list of SphereBlocker
+            Blocker spheres this frame (trees are refit from their leaves).
+        clusters : ReceiverClusters, optional
+            From :meth:`clusters`; with ``hierarchy`` on and none given, clusters
+            are computed on the first call and reused while the vertex count
+            stays the same.
+
+        Returns
+        -------
+        ndarray, shape (V, n*n) float32
+            Visibility vectors ``g`` (eq. 8) at the shading order.
+        """
+        f = self.log_visibility(vertices, normals, blockers, clusters)
+        t0 = time.perf_counter()
+        g = self.exponentiate(f)
+        self.last_stats["seconds"]["exp"] = time.perf_counter() - t0
+        return g
+
+    def exponentiate(self, log_vis) -> np.ndarray:
+        """exp at the accumulation order, truncated to the shading order, shape ``(V, n*n)``."""
+        kwargs = {}
+        if self.exp_method in ("ol", "hyb"):
+            kwargs["tables"] = self.tables
+        if self.settings.exp_degree is not None and self.exp_method in ("ps", "ps*"):
+            kwargs["degree"] = self.settings.exp_degree
+        if self.exp_method in FAST_METHODS:
+            g = fast_exp(log_vis, self.exp_method, **kwargs)
+        else:
+            g = sh_exp(log_vis, self.exp_method, **kwargs)
+        n2 = self.order * self.order
+        return np.ascontiguousarray(g[:, :n2])
+
+    # -- shading ---------------------------------------------------------------
+    def shade(self, visibility, vertices, normals, env_sh=None,
+              sphere_lights: tuple[SphereLight, ...] | list = (), *,
+              local_visibility=None, form: str = "tabulated") -> np.ndarray:
+        """White Lambertian outgoing radiance (DESIGN.md "Radiance"), shape ``(V, 3)``.
+
+        Parameters
+        ----------
+        visibility : array_like, shape (V, n*n)
+            From :meth:`visibility`.
+        vertices, normals : array_like, shape (V, 3)
+        env_sh : array_like, shape (n'*n', 3), optional
+            RGB environment lighting in SH (truncated/padded to ``n``).
+        sphere_lights : sequence of SphereLight
+        local_visibility : array_like, shape (V, n*n), optional
+            Baked visibility of static local occluders (Sec. 7).
+        form : {"tabulated", "on_the_fly"}
+            Environment evaluation (same result).
+        """
+        s = self.settings
+        pts, nrm = _check_receivers(vertices, normals)
+        return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
+                      window_kind=s.resolved_window(), window_h=s.window_h,
+                      local_visibility=local_visibility, form=form)
+
+    def _clusters_for(self, pts: np.ndarray) -> ReceiverClusters:
+        if self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]:
+            self._auto_clusters = self.clusters(pts)
+        return self._auto_clusters
+
+
+def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
+    pts = np.asarray(vertices, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or nrm.shape != pts.shape:
+        raise InputError(
+            f"vertices and normals must both have shape (V, 3), got {pts.shape} and {nrm.shape}"
+        )
+    if not (np.isfinite(pts).all() and np.isfinite(nrm).all()):
+        raise InputError("receiver vertices or normals contain NaN or infinite values")
+    return pts, nrm
+
+
+def _check_blockers(blockers) -> list[SphereBlocker]:
+    blockers = list(blockers)
+    for b in blockers:
+        if not isinstance(b, SphereBlocker):
+            raise InputError(f"blockers must be SphereBlocker objects, got {type(b).__name__}")
+    return blockers

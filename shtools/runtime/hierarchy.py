@@ -1,0 +1,237 @@
+r"""Sphere hierarchies over receiver clusters (SHEXP Sec. 6.3).
+
+Every frame:
+
+1. the inner spheres of each blocker tree are refit bottom-up from the moved
+   leaves (:func:`shtools.runtime.spheres.refit_tree`);
+2. per receiver cluster (bounding sphere :math:`(p_R, r_R)`) a *cut* is taken:
+   a node is used when it passes eq. 36,
+   :math:`r_i < \sin\theta_{max}\,(\|P_i - p_R\| - r_R)`, and no ancestor
+   does; otherwise the search recurses to its children (a leaf that fails is
+   used as is);
+3. for each inner node of a cut, the ratio vector of eq. 37 rescales, per
+   band, the node's log vector at the cluster centre :math:`p^* = p_R` to the
+   least-squares best match of the sum of its leaves' log vectors there (leaves
+   subtending less than :math:`\theta_{min}` at :math:`p^*` are skipped).
+
+The per-vertex accumulation (eq. 38) then runs over the cut with these weights.
+Several blockers form a forest: their trees are concatenated, and a blocker
+without a tree contributes its spheres as single-node trees.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from shtools.runtime.blockers import SphereBlocker
+from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.spheres import refit_tree
+from shtools.sh.basis import band_of, basis
+
+#: |f*_l(theta)| below this (relative to the band's largest value) leaves w_l = 1:
+#: the bounding sphere has no content in that band to rescale.
+RATIO_DENOMINATOR_FLOOR = 1e-9
+
+
+@dataclass
+class Forest:
+    """All blocker spheres of a frame as one forest.
+
+    Attributes
+    ----------
+    centers, radii : ndarray, shapes (M, 3), (M,)
+        Node spheres (inner nodes refit this frame).
+    parent : ndarray of int, shape (M,)
+        Parent node (-1 for roots).
+    leaf : ndarray of int, shape (M,)
+        Index into the concatenated leaf spheres, -1 for inner nodes.
+    levels : list of ndarray
+        Node indices by depth, roots first.
+    leaf_nodes : ndarray of int, shape (N,)
+        Node of each leaf sphere.
+    """
+
+    centers: np.ndarray
+    radii: np.ndarray
+    parent: np.ndarray
+    leaf: np.ndarray
+    levels: list
+    leaf_nodes: np.ndarray
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.parent.shape[0])
+
+    @property
+    def is_leaf(self) -> np.ndarray:
+        return self.leaf >= 0
+
+
+def leaf_spheres(blockers: list[SphereBlocker]) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenated leaf spheres of all blockers: ``(N, 3)``, ``(N,)``."""
+    if not blockers:
+        return np.zeros((0, 3)), np.zeros(0)
+    return (np.concatenate([b.centers for b in blockers]),
+            np.concatenate([b.radii for b in blockers]))
+
+
+def build_forest(blockers: list[SphereBlocker]) -> Forest:
+    """Concatenate the blockers' trees (refitting inner spheres) into one forest."""
+    centers, radii, parents, leaves = [], [], [], []
+    node_off = leaf_off = 0
+    for b in blockers:
+        n = b.n_spheres
+        if b.parent is None:
+            centers.append(b.centers)
+            radii.append(b.radii)
+            parents.append(np.full(n, -1, dtype=np.int64))
+            leaves.append(np.arange(n, dtype=np.int64) + leaf_off)
+            m = n
+        else:
+            c, r = refit_tree(b.parent, b.leaf, b.centers, b.radii)
+            centers.append(np.asarray(c, dtype=np.float64))
+            radii.append(np.asarray(r, dtype=np.float64))
+            parents.append(np.where(b.parent >= 0, b.parent + node_off, -1))
+            leaves.append(np.where(b.leaf >= 0, b.leaf + leaf_off, -1))
+            m = b.parent.shape[0]
+        node_off += m
+        leaf_off += n
+    if not centers:
+        empty = np.zeros(0, dtype=np.int64)
+        return Forest(np.zeros((0, 3)), np.zeros(0), empty, empty, [], empty)
+    parent = np.concatenate(parents)
+    leaf = np.concatenate(leaves)
+    depth = np.zeros(parent.shape[0], dtype=np.int64)
+    anc = parent.copy()
+    while (anc >= 0).any():
+        up = anc >= 0
+        depth[up] += 1
+        anc[up] = parent[anc[up]]
+    levels = [np.flatnonzero(depth == k) for k in range(int(depth.max()) + 1)]
+    leaf_nodes = np.empty(leaf_off, dtype=np.int64)
+    is_leaf = leaf >= 0
+    leaf_nodes[leaf[is_leaf]] = np.flatnonzero(is_leaf)
+    return Forest(np.concatenate(centers), np.concatenate(radii), parent, leaf, levels,
+                  leaf_nodes)
+
+
+@dataclass
+class Cuts:
+    """Per-cluster cuts of a forest.
+
+    Attributes
+    ----------
+    in_cut : ndarray of bool, shape (C, M)
+        Node used for cluster ``c``.
+    owner : ndarray of int, shape (C, N)
+        Cut node standing for each leaf sphere in cluster ``c``.
+    """
+
+    in_cut: np.ndarray
+    owner: np.ndarray
+
+
+def tree_cuts(forest: Forest, cluster_centers, cluster_radii, theta_max: float) -> Cuts:
+    """Eq. 36 cuts for every receiver cluster (vectorised over clusters and nodes).
+
+    Parameters
+    ----------
+    forest : Forest
+    cluster_centers : ndarray, shape (C, 3)
+    cluster_radii : ndarray, shape (C,)
+    theta_max : float
+        Angular-radius threshold in radians.
+
+    Returns
+    -------
+    Cuts
+    """
+    pc = np.asarray(cluster_centers, dtype=np.float64)
+    rc = np.asarray(cluster_radii, dtype=np.float64)
+    dist = np.sqrt(((forest.centers[None, :, :] - pc[:, None, :]) ** 2).sum(-1))  # (C, M)
+    passes = forest.radii[None, :] < math.sin(theta_max) * (dist - rc[:, None])
+    blocked = np.zeros_like(passes)
+    owner_node = np.full(passes.shape, -1, dtype=np.int64)
+    is_leaf = forest.is_leaf
+    in_cut = np.zeros_like(passes)
+    for k, nodes in enumerate(forest.levels):
+        if k > 0:
+            par = forest.parent[nodes]
+            blocked[:, nodes] = blocked[:, par] | passes[:, par]
+        in_cut[:, nodes] = ~blocked[:, nodes] & (passes[:, nodes] | is_leaf[nodes][None, :])
+        if k > 0:
+            inherited = owner_node[:, forest.parent[nodes]]
+        else:
+            inherited = np.full((passes.shape[0], nodes.size), -1, dtype=np.int64)
+        owner_node[:, nodes] = np.where(in_cut[:, nodes], nodes[None, :], inherited)
+    return Cuts(in_cut, owner_node[:, forest.leaf_nodes])
+
+
+def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTable,
+                  theta_min: float) -> dict[tuple[int, int], np.ndarray]:
+    """Eq. 37 ratio vectors of the inner cut nodes.
+
+    Parameters
+    ----------
+    forest : Forest
+    cuts : Cuts
+    cluster_centers : ndarray, shape (C, 3)
+        The points ``p*`` where bounding and detailed logs are compared.
+    table : CapLogTable
+        Log table of the accumulation order ``n``.
+    theta_min : float
+        Leaves subtending less than this at ``p*`` are left out of the detailed sum.
+
+    Returns
+    -------
+    weights : ndarray, shape (C, M, n)
+        ``w_l`` for every (cluster, node); ones where not an inner cut node.
+    """
+    n = table.order
+    pc = np.asarray(cluster_centers, dtype=np.float64)
+    n_c = pc.shape[0]
+    weights = np.ones((n_c, forest.n_nodes, n))
+    c_idx, j_idx = np.nonzero(cuts.owner != forest.leaf_nodes[None, :])
+    if c_idx.size == 0:
+        return weights
+    o_idx = cuts.owner[c_idx, j_idx]
+    # detailed: leaf log vectors at p*, summed per (cluster, owner)
+    leaf_c = forest.centers[forest.leaf_nodes[j_idx]]
+    leaf_r = forest.radii[forest.leaf_nodes[j_idx]]
+    f_leaf, _, _ = _log_vectors(pc[c_idx], leaf_c, leaf_r, table)
+    delta = leaf_c - pc[c_idx]
+    d = np.linalg.norm(delta, axis=1)
+    keep = leaf_r > np.sin(theta_min) * d
+    f_leaf[~keep] = 0.0
+    key = c_idx * forest.n_nodes + o_idx
+    by_key = np.argsort(key, kind="stable")
+    key_sorted = key[by_key]
+    starts = np.flatnonzero(np.concatenate([[True], key_sorted[1:] != key_sorted[:-1]]))
+    f_d = np.add.reduceat(f_leaf[by_key], starts, axis=0)
+    uniq = key_sorted[starts]
+    uc, uo = uniq // forest.n_nodes, uniq % forest.n_nodes
+    # bounding: w_l = sum_m y_lm(s_b) f_d,lm * 4 pi / (2l + 1) / f*_l(theta_b)
+    _, zh_b, y_b = _log_vectors(pc[uc], forest.centers[uo], forest.radii[uo], table)
+    band_sum = (band_of(n)[:, None] == np.arange(n)[None, :]).astype(np.float64)  # (n*n, n)
+    num = (y_b * f_d) @ band_sum
+    num *= 4.0 * np.pi / (2.0 * np.arange(n) + 1.0)
+    floor = RATIO_DENOMINATOR_FLOOR * np.abs(table.values64).max(axis=1)
+    ok = np.abs(zh_b) > floor[None, :]
+    w = np.where(ok, num / np.where(ok, zh_b, 1.0), 1.0)
+    weights[uc, uo] = w
+    return weights
+
+
+def _log_vectors(points, centers, radii, table: CapLogTable):
+    """Eq. 34 in float64 for matched rows: ``(P, n*n)``, zonal ``(P, n)``, basis ``(P, n*n)``."""
+    delta = centers - points
+    d = np.linalg.norm(delta, axis=1)
+    d = np.maximum(d, 1e-300)
+    s = delta / d[:, None]
+    theta = np.arcsin(np.clip(radii / d, 0.0, 1.0))
+    zh = table.lookup64(theta)
+    y = basis(s, table.order)
+    return zh[:, band_of(table.order)] * y, zh, y

@@ -1,0 +1,100 @@
+r"""Cap log table indexed by :math:`1 - \cos\theta` (no per-pair arcsin).
+
+Eq. 34 needs :math:`F(\theta)` at :math:`\theta = \sin^{-1}(r/d)`.  The runtime
+has :math:`r^2/d^2 = \sin^2\theta` for free, so
+:math:`x = 1 - \cos\theta = 1 - \sqrt{1 - r^2/d^2}` costs one square root, and
+the table is resampled uniformly in ``x``.  ``x`` is also the natural variable:
+a small cap's log coefficients are proportional to its solid angle
+:math:`2\pi x`, so linear interpolation in ``x`` is exact to first order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shtools.errors import InputError
+
+#: Samples of the resampled table; linear interpolation error at 4096 samples is
+#: below 1e-6 of the largest coefficient (checked in tests/runtime/test_log_table.py).
+TABLE_SAMPLES = 4096
+
+
+class CapLogTable:
+    """Scaled cap-log coefficients :math:`f^*_l` tabulated uniformly in ``1 - cos(theta)``.
+
+    Parameters
+    ----------
+    tables : dict
+        As returned by :func:`shtools.sh.tables.build_log_tables` or
+        :func:`shtools.data_formats.tables.read_tables`: ``theta (T,)`` and
+        ``log_zh (T, n)``.
+    order : int
+        Number of bands to keep (``<=`` the table's order).
+    samples : int
+        Resampled table size ``K``.
+
+    Attributes
+    ----------
+    values : ndarray, shape (n, K) float32
+        :math:`f^*_l` at ``x_k = k / (K - 1)``.
+    slopes : ndarray, shape (n, K) float32
+        ``values[:, k+1] - values[:, k]`` (0 in the last column).
+    """
+
+    def __init__(self, tables: dict, order: int, samples: int = TABLE_SAMPLES):
+        theta = np.asarray(tables["theta"], dtype=np.float64)
+        log_zh = np.asarray(tables["log_zh"], dtype=np.float64)
+        if log_zh.ndim != 2 or log_zh.shape[0] != theta.shape[0] or log_zh.shape[1] < order:
+            raise InputError(
+                f"log tables have {log_zh.shape[-1]} bands, fewer than the order {order} "
+                "needed; build them with `shtools tables log --order N`"
+            )
+        self.order = int(order)
+        self.samples = int(samples)
+        # theta = 0 is an empty cap: log visibility exactly 0.
+        x_src = np.concatenate([[0.0], 1.0 - np.cos(theta)])
+        f_src = np.concatenate([np.zeros((1, order)), log_zh[:, :order]], axis=0)
+        if np.any(np.diff(x_src) <= 0):
+            raise InputError("log table theta must be strictly increasing in (0, pi/2]")
+        x = np.linspace(0.0, 1.0, self.samples)
+        values = np.stack([np.interp(x, x_src, f_src[:, l]) for l in range(order)])
+        self.values64 = values
+        self.values = values.astype(np.float32)
+        slopes = np.zeros_like(values)
+        slopes[:, :-1] = np.diff(values, axis=1)
+        self.slopes = slopes.astype(np.float32)
+        self.scale = np.float32(self.samples - 1)
+
+    def lookup(self, one_minus_cos, out: np.ndarray | None = None) -> np.ndarray:
+        """Interpolated :math:`f^*_l` for every band.
+
+        Parameters
+        ----------
+        one_minus_cos : ndarray, shape (...)
+            ``1 - cos(theta)`` in ``[0, 1]`` (values outside are clamped).
+        out : ndarray, shape (n, ...), optional
+            Destination (float32).
+
+        Returns
+        -------
+        ndarray, shape (n, ...)
+        """
+        x = np.asarray(one_minus_cos)
+        t = np.clip(x * self.scale, 0.0, self.scale).astype(np.float32, copy=False)
+        idx = t.astype(np.intp)
+        frac = t - idx
+        if out is None:
+            out = np.empty((self.order, *x.shape), dtype=np.float32)
+        tmp = np.empty(x.shape, dtype=np.float32)
+        for l in range(self.order):
+            np.take(self.values[l], idx, out=out[l])
+            np.take(self.slopes[l], idx, out=tmp)
+            tmp *= frac
+            out[l] += tmp
+        return out
+
+    def lookup64(self, theta) -> np.ndarray:
+        """float64 :math:`f^*_l(\\theta)`, shape ``(..., n)`` (for per-cluster work)."""
+        x = 1.0 - np.cos(np.asarray(theta, dtype=np.float64))
+        grid = np.linspace(0.0, 1.0, self.samples)
+        return np.stack([np.interp(x, grid, self.values64[l]) for l in range(self.order)], -1)

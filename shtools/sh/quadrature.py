@@ -1,0 +1,111 @@
+r"""Product quadrature on the sphere, projection (eq. 1) and reconstruction (eq. 2).
+
+The rule is Gauss–Legendre in :math:`z = \cos\vartheta` times the uniform
+(trapezoidal) rule in :math:`\varphi`.  With ``N`` Gauss nodes and ``M``
+azimuths it integrates exactly every polynomial in ``(x, y, z)`` of total
+degree ``<= min(2N - 1, M - 1)`` restricted to the sphere: such a polynomial
+is a sum of terms :math:`p(z)\,e^{i m \varphi}` with ``|m| <= degree``; the
+``M``-point uniform rule integrates every ``e^{i m phi}`` with ``0 < |m| < M`` to
+zero exactly, and what is left (``m = 0``) is a polynomial of degree ``<= degree``
+in ``z``, which the Gauss rule integrates exactly when ``2N - 1 >= degree``.
+:func:`sphere_quadrature` picks ``N = floor(degree/2) + 1`` and
+``M = degree + 1``.
+
+Projection of samples :math:`f(s_q)` is :math:`\mathbf f = \sum_q w_q f(s_q)
+\mathbf y(s_q)` (eq. 1), exact when ``f`` is a polynomial of degree
+``<= degree - (order - 1)``; reconstruction is :math:`\tilde f(s) = \mathbf f
+\cdot \mathbf y(s)` (eq. 2).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from shtools.sh.basis import basis, check_order, order_from_size
+
+
+@functools.lru_cache(maxsize=64)
+def _quadrature_cached(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    n_gauss = degree // 2 + 1
+    n_phi = degree + 1
+    z, wz = np.polynomial.legendre.leggauss(n_gauss)
+    phi = 2.0 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
+    zz, pp = np.meshgrid(z, phi, indexing="ij")
+    r = np.sqrt(np.clip(1.0 - zz * zz, 0.0, None))
+    dirs = np.stack([r * np.cos(pp), r * np.sin(pp), zz], axis=-1).reshape(-1, 3)
+    weights = np.repeat(wz * (2.0 * np.pi / n_phi), n_phi)
+    dirs.setflags(write=False)
+    weights.setflags(write=False)
+    return dirs, weights
+
+
+def sphere_quadrature(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Quadrature on the unit sphere exact for polynomials of total degree ``<= degree``.
+
+    Parameters
+    ----------
+    degree : int
+        Polynomial degree (>= 0) integrated exactly.
+
+    Returns
+    -------
+    dirs : ndarray, shape (Q, 3)
+        Unit directions, ``Q = (degree // 2 + 1) * (degree + 1)``.
+    weights : ndarray, shape (Q,)
+        Positive weights summing to ``4*pi``.
+
+    Notes
+    -----
+    The arrays are cached and read-only; copy them before modifying.
+    """
+    if isinstance(degree, bool) or int(degree) != degree or degree < 0:
+        raise ValueError(f"quadrature degree must be an integer >= 0, got {degree!r}")
+    return _quadrature_cached(int(degree))
+
+
+def project(values, dirs, weights, order: int) -> np.ndarray:
+    """Project sampled spherical functions onto the SH basis (eq. 1).
+
+    Parameters
+    ----------
+    values : array_like, shape (..., Q)
+        Function values at ``dirs``.
+    dirs : array_like, shape (Q, 3)
+        Quadrature directions.
+    weights : array_like, shape (Q,)
+        Quadrature weights.
+    order : int
+        SH order ``n`` of the result.
+
+    Returns
+    -------
+    ndarray, shape (..., n*n)
+        ``sum_q weights[q] * values[..., q] * y(dirs[q])``.
+    """
+    order = check_order(order)
+    y = basis(np.asarray(dirs, dtype=np.float64), order)  # (Q, n*n)
+    yw = y * np.asarray(weights, dtype=np.float64)[:, None]
+    return np.asarray(values) @ yw
+
+
+def reconstruct(coeffs, dirs) -> np.ndarray:
+    """Evaluate SH vectors at directions (eq. 2).
+
+    Parameters
+    ----------
+    coeffs : array_like, shape (..., n*n)
+        SH vectors.
+    dirs : array_like, shape (Q, 3)
+        Unit directions.
+
+    Returns
+    -------
+    ndarray, shape (..., Q)
+        ``coeffs . y(dirs[q])`` for every direction.
+    """
+    c = np.asarray(coeffs)
+    order = order_from_size(c.shape[-1])
+    y = basis(np.asarray(dirs, dtype=np.float64), order)  # (Q, n*n)
+    return c @ y.T

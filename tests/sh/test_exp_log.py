@@ -1,0 +1,185 @@
+"""SH exp and log against independent references (expm, Bessel closed form, product space)."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.special
+
+from shtools.sh import EXP_METHODS, cap, exp, log, product, product_matrix
+
+SQRT_4PI = math.sqrt(4 * math.pi)
+
+
+def rel_l2(a, b):
+    return np.linalg.norm(a - b, axis=-1) / np.linalg.norm(b, axis=-1)
+
+
+def random_cap_scenes(rng, n_scenes, order, min_caps=3, max_caps=25, radius=(0.05, 0.6)):
+    """Per scene: summed log vectors (log space) and the left-to-right truncated product
+    of the cap visibility vectors (product space, the shadow-fields baseline)."""
+    counts = rng.integers(min_caps, max_caps + 1, size=n_scenes)
+    theta = rng.uniform(*radius, size=(n_scenes, max_caps))
+    axes = rng.normal(size=(n_scenes, max_caps, 3))
+    axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
+    present = np.arange(max_caps)[None, :] < counts[:, None]
+    g = cap(theta, axes, order)
+    g[~present] = 0.0
+    g[~present, 0] = SQRT_4PI  # an absent cap is the constant 1 (log 0)
+    log_sum = np.where(present[..., None], log(g), 0.0).sum(axis=1)
+    accumulated = g[:, 0]
+    for i in range(1, max_caps):
+        accumulated = product(accumulated, g[:, i])
+    return log_sum, accumulated
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return random_cap_scenes(np.random.default_rng(2024), 300, 4)
+
+
+def test_exact_equals_matrix_exponential_of_product_matrix():
+    # eq. 26: exp*(f) = sum_k M_f^k 1 / k! = expm(M_f) 1; scipy's Padé expm is independent
+    # of the eigen-decomposition of eq. 28.  Relative 1e-10: both are backward-stable
+    # float64 evaluations of a 16x16 exponential with ||M_f|| < 10.
+    rng = np.random.default_rng(0)
+    f = rng.normal(size=(6, 16))
+    f[:, 0] -= 4.0
+    one = np.eye(16)[0] * SQRT_4PI
+    ref = np.stack([scipy.linalg.expm(m) @ one for m in product_matrix(f)])
+    np.testing.assert_allclose(exp(f, "exact"), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+
+
+def test_ps_of_high_degree_converges_to_exact():
+    # PS-p is the truncated series of exp*; at ||f|| ~ 1 the degree-30 tail is < 1e-25.
+    rng = np.random.default_rng(1)
+    f = rng.normal(size=(5, 25))
+    f /= np.linalg.norm(f, axis=1, keepdims=True)
+    np.testing.assert_allclose(exp(f, "ps", degree=30), exp(f, "exact"), atol=1e-12)
+
+
+def test_volterra_matches_bessel_closed_form():
+    # f(s) = a/sqrt(4 pi) + beta z: exp(f) has zonal coefficients
+    # e^(a/sqrt(4pi)) 2 pi K_l int_-1^1 e^(beta x) P_l(x) dx = ... 4 pi K_l i_l(beta)
+    # (modified spherical Bessel).  The default quadrature (degree 42) leaves a Taylor
+    # remainder below beta^43/43! ~ 1e-40 of e^beta: float64 round-off remains.
+    order = 4
+    beta = np.array([0.3, 1.5, 3.0])
+    a = np.array([-2.0, 0.0, 1.0])
+    k1 = math.sqrt(3 / (4 * math.pi))
+    f = np.zeros((3, 16))
+    f[:, 0] = a
+    f[:, 2] = beta / k1
+    got = exp(f, "volterra")
+    m0 = [l * l + l for l in range(order)]
+    for l in range(order):
+        kl = math.sqrt((2 * l + 1) / (4 * math.pi))
+        ref = np.exp(a / SQRT_4PI) * 4 * math.pi * kl * scipy.special.spherical_in(l, beta)
+        # atol: projection sums of terms up to e^3 ~ 20 leave ~1e-14 absolute round-off
+        np.testing.assert_allclose(got[:, m0[l]], ref, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(np.delete(got, m0, axis=1), 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", EXP_METHODS)
+def test_every_method_exact_on_constants(method):
+    # exp of the constant c is e^c: DC isolation makes PS*, OL and HYB exact; PS-8 and
+    # the references are exact up to the series remainder (c in [-1, 1]: < 3e-6 / 8!).
+    c = np.array([-1.0, 0.0, 0.5, 1.0])
+    f = np.zeros((4, 9))
+    f[:, 0] = c * SQRT_4PI
+    ref = np.zeros((4, 9))
+    ref[:, 0] = np.exp(c) * SQRT_4PI
+    tol = 1e-5 if method == "ps" else 1e-12
+    np.testing.assert_allclose(exp(f, method), ref, atol=tol)
+
+
+@pytest.mark.parametrize("method", ["ps*", "hyb", "ps"])
+def test_methods_close_to_exact_on_cap_scenes(scenes, method):
+    # Series and scaling/squaring methods approximate exp* (eq. 28).  Measured medians
+    # vs exact: PS-8 < 0.1 %, PS*-2 0.07 %, HYB 2.2 % (OL's linear term); bounds leave
+    # ~2x margin.
+    log_sum, _ = scenes
+    bound = {"ps*": 0.003, "ps": 0.003, "hyb": 0.04}[method]
+    assert np.median(rel_l2(exp(log_sum, method), exp(log_sum, "exact"))) < bound
+
+
+def test_statistical_accuracy_against_product_space(scenes):
+    """Issue 2 §5: 3–25 caps of radius 0.05–0.6 rad at order 4, relative L2 of log-space
+    exponentials against product-space accumulation of the same caps."""
+    log_sum, accumulated = scenes
+    hyb = rel_l2(exp(log_sum, "hyb", acc_order=6), accumulated)
+    ps2 = rel_l2(exp(log_sum, "ps*", degree=2), accumulated)
+    paper_hyb = rel_l2(exp(log_sum, "hyb"), accumulated)
+    exact = rel_l2(exp(log_sum, "exact"), accumulated)
+    # Targets of the issue: HYB median 3 % / p90 7 %, PS*-2 median 2.5 %.  HYB meets
+    # them with its squarings accumulated at order 6 (measured 2.9 % / 6.3 % on other
+    # seeds; 300 scenes give the median to ~ +-0.2 %).
+    assert np.median(hyb) < 0.03 and np.percentile(hyb, 90) < 0.07
+    assert np.median(ps2) < 0.025
+    # With squarings truncated to order 4 (the paper's HYB) it is measurably worse
+    # (3.6 % / 7.7 %) -- guard that figure against regressions.
+    assert np.median(paper_hyb) < 0.04 and np.percentile(paper_hyb, 90) < 0.085
+    # The log-space floor itself (exact exp*): ~2.1 %; no method can beat it by much.
+    assert np.median(exact) < 0.025
+
+
+def test_ol_accurate_below_4_8_and_not_beyond():
+    # Blocker "models": clusters of 2–5 overlapping caps.  The paper reports that the a/b
+    # curves fitted on circles hold for other models up to ||f_hat|| ~ 4.8 (Fig. 3).
+    # Measured vs exp*: median 0.5–3.2 % per norm bin below 4.8, 19–90 % above.
+    rng = np.random.default_rng(5)
+    n_scenes, most = 500, 5
+    counts = rng.integers(2, most + 1, size=n_scenes)
+    centre = rng.normal(size=(n_scenes, 1, 3))
+    axes = centre / np.linalg.norm(centre, axis=-1, keepdims=True)
+    axes = axes + rng.uniform(0, 0.5, size=(n_scenes, 1, 1)) * rng.normal(size=(n_scenes, most, 3))
+    axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
+    g = cap(rng.uniform(0.1, 1.0, size=(n_scenes, most)), axes, 4)
+    present = np.arange(most)[None, :] < counts[:, None]
+    f = np.where(present[..., None], log(g), 0.0).sum(axis=1)
+    norm = np.linalg.norm(f[:, 1:], axis=1)
+    exact = exp(f, "exact")
+    err_ol = rel_l2(exp(f, "ol"), exact)
+    err_two_term = rel_l2(exp(f, "ps", degree=1), exact)  # 1 + f
+    inside, outside = norm < 4.8, norm > 6.0
+    assert inside.sum() > 100 and outside.sum() > 100
+    assert np.median(err_ol[inside]) < 0.03 and np.percentile(err_ol[inside], 90) < 0.1
+    # "much more accurate than the simple two-term series within this domain"
+    assert np.median(err_ol[inside]) < 0.25 * np.median(err_two_term[inside])
+    assert np.median(err_ol[outside]) > 0.3
+
+
+@pytest.mark.parametrize(("order", "bound"), [(2, 0.01), (3, 0.01), (4, 0.01), (6, 0.05),
+                                             (8, 0.05)])
+def test_log_eigen_round_trip_for_caps_up_to_50_degrees(order, bound):
+    # exp*(log g) within 1 % of g (issue 2 §5) holds at the paper's low orders: measured
+    # max over 0–50 deg 1e-16 (n=2), 9e-5 (n=3), 0.85 % (n=4).  At n >= 5 the 0.02
+    # eigenvalue floor clips more of the spectrum: 3.8 % (n=5), 3.2 % (n=6), 2.3 % (n=8).
+    rng = np.random.default_rng(order)
+    theta = np.linspace(0.01, math.radians(50), 60)
+    axes = rng.normal(size=(60, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    g = cap(theta, axes, order)
+    assert rel_l2(exp(log(g), "exact"), g).max() < bound
+
+
+def test_log_naive_is_worse_than_eigen():
+    # Sec. 5: the clipped projection (eq. 25) ignores truncation; its round trip error is
+    # several times the eigen log's for large caps (measured 5.5 % vs 0.5 % at 50 deg).
+    g = cap(np.radians([40.0, 50.0]), np.array([0.0, 0.0, 1.0]), 4)
+    naive = rel_l2(exp(log(g, "naive"), "exact"), g)
+    eigen = rel_l2(exp(log(g), "exact"), g)
+    assert np.all(naive > 3 * eigen)
+
+
+def test_log_of_constant_and_bad_method():
+    g = np.zeros((2, 9))
+    g[:, 0] = SQRT_4PI * np.array([1.0, 0.5])
+    f = log(g)
+    np.testing.assert_allclose(f[:, 0], SQRT_4PI * np.log([1.0, 0.5]), atol=1e-12)
+    np.testing.assert_allclose(f[:, 1:], 0.0, atol=1e-12)
+    with pytest.raises(ValueError, match="log method"):
+        log(g, "taylor")
+    with pytest.raises(ValueError, match="exp method"):
+        exp(g, "pade")
