@@ -5,14 +5,18 @@ accumulation order, log space vs product space, peak memory.
 
 Scenes are procedural (capsule-built characters and columns over a ground grid,
 sphere sets bounding the capsules exactly), so the figures do not depend on
-the data directory.  Timings are wall-clock minima over the frames of one run;
-the machine is shared, so expect noise of tens of percent.
+the data directory.  Timings are process CPU time (``time.process_time``),
+minima over the frames of one run: the machine is shared by several jobs, and
+CPU time is what a frame costs on one otherwise idle core.  Run with
+``OPENBLAS_NUM_THREADS=1``: on a loaded 2-core machine OpenBLAS threads spin
+and multiply the cost of small matrix products many times over.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 import tracemalloc
 
@@ -73,18 +77,18 @@ class BattleScene:
         Capsule tessellation (vertices per part ~ count^2).
     """
 
-    def __init__(self, grid: int = 200, mesh_count: int = 26):
+    def __init__(self, grid: int = 200, mesh_count: int = 38):
         import trimesh
 
         self.parts = []  # (mesh, centers, radii, object index)
         self.objects = []  # (scale, base position) of moving characters
-        for k, (scale, base) in enumerate([(1.4, (-1.2, 0.0, 0.3)), (1.0, (1.1, 0.0, -0.4))]):
+        for k, (scale, base) in enumerate([(1.9, (-1.3, 0.0, 0.3)), (1.4, (1.3, 0.0, -0.4))]):
             meshes, cs, rs = [], [], []
             for p0, p1, r in _BODY:
                 p0s = np.asarray(p0) * scale
                 p1s = np.asarray(p1) * scale
                 meshes.append(_capsule_mesh(p0s, p1s, r * scale, mesh_count))
-                n = max(2, math.ceil(np.linalg.norm(p1s - p0s) / (0.9 * r * scale)) + 1)
+                n = max(2, math.ceil(np.linalg.norm(p1s - p0s) / (0.5 * r * scale)) + 1)
                 c, rr = capsule_spheres(p0s, p1s, r * scale, n)
                 cs.append(c)
                 rs.append(rr)
@@ -93,13 +97,13 @@ class BattleScene:
             self.objects.append(np.asarray(base, float))
         # four static columns (static receivers and blockers)
         col_meshes, ccs, crs = [], [], []
-        for x, z in [(-3.5, -3.0), (3.4, -2.8), (-3.2, 3.3), (3.6, 3.1)]:
+        for x, z in [(-2.6, -2.3), (2.5, -2.2), (-2.4, 2.5), (2.7, 2.3)]:
             col_meshes.append(_capsule_mesh((x, 0.0, z), (x, 2.6, z), 0.3, mesh_count))
-            c, rr = capsule_spheres((x, 0.0, z), (x, 2.6, z), 0.3, 11)
+            c, rr = capsule_spheres((x, 0.0, z), (x, 2.6, z), 0.3, 18)
             ccs.append(c)
             crs.append(rr)
         self.columns = (trimesh.util.concatenate(col_meshes), np.vstack(ccs), np.concatenate(crs))
-        self.ground_v, self.ground_n = ground_grid(grid, (0.0, 0.0), 6.0)
+        self.ground_v, self.ground_n = ground_grid(grid, (0.0, 0.0), 4.0)
         self.trees = [build_tree(c, r) for _, c, r, _ in self.parts]
         self.column_tree = build_tree(self.columns[1], self.columns[2])
         self.env = sky_light(4)
@@ -141,13 +145,15 @@ def battle_frames(scene: BattleScene, settings: ShadowSettings, frames: int):
     stats = {}
     for i in range(frames):
         v, n, _, blockers = scene.frame(0.1 * i)
-        t0 = time.perf_counter()
+        w0 = time.perf_counter()
+        t0 = time.process_time()
         g = rt.visibility(v, n, blockers, clusters)
-        t1 = time.perf_counter()
+        t1 = time.process_time()
         rt.shade(g, v, n, scene.env, scene.lights)
-        t2 = time.perf_counter()
+        t2 = time.process_time()
+        wall = time.perf_counter() - w0
         st = rt.last_stats
-        sec = dict(st["seconds"], shade=t2 - t1, frame=t2 - t0)
+        sec = dict(st["seconds"], shade=t2 - t1, frame=t2 - t0, wall=wall)
         for k, val in sec.items():
             best[k] = min(best.get(k, math.inf), val)
         stats = st
@@ -170,15 +176,16 @@ def peak_memory(scene: BattleScene, settings: ShadowSettings) -> int:
 
 # -- tables ------------------------------------------------------------------------
 def table_battle(quick: bool) -> list[dict]:
-    scene = BattleScene(grid=90 if quick else 200, mesh_count=14 if quick else 26)
+    scene = BattleScene(grid=90 if quick else 200, mesh_count=14 if quick else 38)
     v, _, _, _ = scene.frame(0.0)
     frames = 2 if quick else 5
     rows = []
-    configs = [(4, 4, "auto"), (4, 5, "auto"), (4, 6, "hyb"), (4, 6, "auto")]
+    configs = [(4, 4, "auto", 1), (4, 4, "auto", 2), (4, 5, "auto", 1), (4, 6, "hyb", 1),
+               (4, 6, "auto", 1), (4, 6, "auto", 2)]
     if quick:
         configs = configs[:1] + configs[-1:]
-    for order, acc, method in configs:
-        s = ShadowSettings(order=order, acc_order=acc, exp_method=method)
+    for order, acc, method, threads in configs:
+        s = ShadowSettings(order=order, acc_order=acc, exp_method=method, threads=threads)
         best, st, rt = battle_frames(scene, s, frames)
         rows.append({
             "order": order, "acc_order": acc, "exp": rt.exp_method,
@@ -186,8 +193,9 @@ def table_battle(quick: bool) -> list[dict]:
             "clusters": st["clusters"], "spheres/vertex": st["spheres_per_vertex"],
             "cuts ms": 1e3 * best["cuts"], "accumulate ms": 1e3 * best["accumulate"],
             "exp ms": 1e3 * best["exp"], "shade ms": 1e3 * best["shade"],
-            "frame ms": 1e3 * best["frame"],
-            "Mpairs/s": st["pairs"] / best["accumulate"] / 1e6,
+            "frame CPU ms": 1e3 * best["frame"], "threads": threads,
+            "frame wall ms": 1e3 * best["wall"],
+            "Mpairs/s (CPU)": st["pairs"] / best["accumulate"] / 1e6,
         })
     mem = peak_memory(scene, ShadowSettings())
     return rows, mem, len(v)
@@ -208,9 +216,9 @@ def table_accuracy(quick: bool) -> list[dict]:
             rt.visibility(sc.vertices, sc.normals, blk)
             best = math.inf
             for _ in range(3):
-                t0 = time.perf_counter()
+                t0 = time.process_time()
                 g = rt.visibility(sc.vertices, sc.normals, blk)
-                best = min(best, time.perf_counter() - t0)
+                best = min(best, time.process_time() - t0)
             rad = rt.shade(g, sc.vertices, sc.normals, sc.env_sh)
             err_vis = np.median(np.linalg.norm(g - gs, axis=1) / np.linalg.norm(gs, axis=1))
             if base is None:
@@ -239,12 +247,17 @@ def table_log_vs_product(quick: bool) -> list[dict]:
         rt.visibility(v, nrm, blk)
         t_log = math.inf
         for _ in range(3):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             g_log = rt.visibility(v, nrm, blk)
-            t_log = min(t_log, time.perf_counter() - t0)
-        t0 = time.perf_counter()
-        g_prod = product_space_visibility(v, nrm, (centers, radii), order, dtype=np.float32)
-        t_prod = time.perf_counter() - t0
+            t_log = min(t_log, time.process_time() - t0)
+        # warm-up: triple-tensor tables are built on first use
+        product_space_visibility(v[:4], nrm[:4], (centers, radii), order, dtype=np.float32)
+        t_prod = math.inf
+        for _ in range(2):
+            t0 = time.process_time()
+            g_prod = product_space_visibility(v, nrm, (centers, radii), order,
+                                              dtype=np.float32)
+            t_prod = min(t_prod, time.process_time() - t0)
         rows.append({"order": order, "vertices": len(v), "spheres": n_spheres,
                      "exp": rt.exp_method, "log ms": 1e3 * t_log, "product ms": 1e3 * t_prod,
                      "speed-up": t_prod / t_log,
@@ -268,8 +281,10 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="small scenes, few frames")
     args = parser.parse_args(argv)
     rows, mem, n_v = table_battle(args.quick)
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"\n### Runtime: battle-scale frame ({n_v} receivers; target <= "
-          f"{1e3 * FRAME_TARGET_S:.0f} ms at full scale)\n")
+          f"{1e3 * FRAME_TARGET_S:.0f} ms at full scale; CPU = process time, wall = "
+          f"elapsed with the machine's load average at {load:.1f} on {os.cpu_count()} cores)\n")
     print(_markdown(rows))
     print(f"\nPeak memory of one default-settings frame (tracemalloc): {mem / 2**20:.1f} MiB "
           f"(target <= {MEMORY_TARGET_BYTES / 2**20:.0f} MiB)")

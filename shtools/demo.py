@@ -29,8 +29,11 @@ FRAMES = 48
 FPS = 24.0
 STRIDE_SECONDS = 1.0
 ORDER = 4
-#: Sphere fitting method of the demo's `spheres fit` stage.
+#: Sphere fitting method of the demo's `spheres fit` stage, and its round cap: 12
+#: rounds reach within ~30 % of the 40-round outside volume at a quarter of the time
+#: (torso: E = 0.145 vs 0.113), which keeps the demo near a minute.
 FIT_METHOD = "variational"
+FIT_ITERATIONS = 12
 
 
 def sky_image(height: int = 64, width: int = 128) -> np.ndarray:
@@ -91,13 +94,13 @@ def part_meshes() -> dict[str, object]:
 
 
 #: sphere count fitted per part mesh
-SPHERES = {"torso": 6, "leg": 4, "arm": 3, "column": 8}
+SPHERES = {"torso": 6, "leg": 5, "arm": 4, "column": 8}
 
 
 def _walk_keys(duration: float) -> str:
     """TOML keyframes of the torso: across the ground with a bob at every step."""
     lines = []
-    steps = round(2 * duration / STRIDE_SECONDS)
+    steps = max(1, round(2 * duration / STRIDE_SECONDS))
     for k in range(steps + 1):
         t = k * duration / steps
         x = -2.0 + 4.0 * t / duration
@@ -211,6 +214,24 @@ albedo = [0.95, 0.8, 0.65]
 {''.join(limbs)}"""
 
 
+def _fit_part(job) -> str | None:
+    """`spheres fit` then `spheres tree` for one part (in a worker process)."""
+    import io
+    from contextlib import redirect_stdout
+
+    out, name, n, method = job
+    try:
+        with redirect_stdout(io.StringIO()):
+            extra = ["--iterations", FIT_ITERATIONS] if method == "variational" else []
+            _run("spheres", "fit", out / "meshes" / f"{name}.obj", "-n", n, "--method", method,
+                 *extra, "-o", out / "spheres" / f"{name}.h5")
+            _run("spheres", "tree", out / "spheres" / f"{name}.h5",
+                 "-o", out / "spheres" / f"{name}_tree.h5")
+    except SystemExit as exc:
+        return str(exc)
+    return None
+
+
 def _run(*args: str) -> None:
     from shtools.cli.main import main
 
@@ -248,11 +269,16 @@ def run_demo(outdir: str | Path, *, frames: int = FRAMES, quiet: bool = False,
         write_hdr(out / "sky.hdr", sky_image())
 
     def spheres():
-        for name, n in SPHERES.items():
-            _run("spheres", "fit", out / "meshes" / f"{name}.obj", "-n", n,
-                 "--method", fit_method or FIT_METHOD, "-o", out / "spheres" / f"{name}.h5")
-            _run("spheres", "tree", out / "spheres" / f"{name}.h5",
-                 "-o", out / "spheres" / f"{name}_tree.h5")
+        # one fit -> tree chain per part, two at a time (like `make -j2`)
+        from concurrent.futures import ProcessPoolExecutor
+
+        jobs = [(out, name, n, fit_method or FIT_METHOD) for name, n in SPHERES.items()]
+        # biggest fits first so the two workers finish together
+        jobs.sort(key=lambda job: -job[2])
+        with ProcessPoolExecutor(max_workers=2) as pool:
+            for failure in pool.map(_fit_part, jobs):
+                if failure:
+                    raise SystemExit(failure)
 
     def tables():
         from shtools.runtime.settings import ShadowSettings
@@ -268,7 +294,7 @@ def run_demo(outdir: str | Path, *, frames: int = FRAMES, quiet: bool = False,
         _run("bake", out / "scene.toml", "-o", out / "baked.h5", "--json")
 
     def export():
-        mid = frames // 2
+        mid = frames * 5 // 8  # mid-stride for the default 48 frames
         _run("export", out / "baked.h5", "--frame", mid, "-o", out / "demo.glb")
         _run("export", out / "baked.h5", "--frame", mid, "-o", out / "frame.png")
         step = max(frames // 12, 1)
@@ -317,6 +343,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--frames must be at least 2")
     out = Path(args.outdir)
     timings = run_demo(out, frames=args.frames, fit_method=args.fit_method)
+    stages = ", ".join(f"{k} {v:.1f} s" for k, v in timings.items() if k != "total")
+    print(f"[demo] stages: {stages}")
     print(f"[demo] done in {timings['total']:.1f} s:")
     for name in ("baked.h5", "demo.glb", "frame.png", "sheet.png", "demo.gif", "scene.toml"):
         print(f"  {out / name}")

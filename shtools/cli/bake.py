@@ -38,7 +38,8 @@ def bake(scene, output, frames_text, method, store_visibility, as_json):
                                on_frame=lambda _r: bar.update(1))
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
-        f"({summary['method']}) in {summary['seconds']:.2f} s, "
+        f"({summary['method']}) in {summary['seconds']:.2f} s "
+        f"({summary['setup_seconds']:.2f} s setup), "
         f"{summary['vertex_frames_per_second']:,.0f} vertex-frames/s -> {output}"
     )
     report(summary, as_json, human)

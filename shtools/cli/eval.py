@@ -100,7 +100,7 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
     rows = [{"method": r.method, "rmse_vs_mesh": r.rmse_mesh, "rmse_vs_spheres": r.rmse_spheres,
              "seconds": r.seconds} for r in out["results"]]
     summary = {
-        "scene": data["name"], "vertices": int(len(data["vertices"])),
+        "scene": data["name"], "vertices": len(data["vertices"]),
         "spheres": int(sum(b.n_spheres for b in data["blockers"])),
         "order": settings.order, "acc_order_default": settings.resolved_acc_order(),
         "window": settings.resolved_window(), "hierarchy": settings.hierarchy,

@@ -72,9 +72,14 @@ def tree(spheres_path, output, branching, seed, as_json):
               help="Grow each radius so the sphere keeps covering its rest vertices at "
                    "every checked frame of every animation in RIGGED (the paper keeps the "
                    "rest radii); the fitted radii are kept as 'fit_radii'.")
+@click.option("--space", type=click.Choice(["auto", "bind", "scene"]), default="auto",
+              show_default=True,
+              help="Space of the sphere set: 'bind' (the rig's POSITION data), 'scene' (the "
+                   "glTF as placed in its scene, what 'shtools spheres fit RIG.glb' sees), "
+                   "or 'auto' (whichever the spheres cover).  Output is in bind space.")
 @json_option
 def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_animations,
-         as_json):
+         space, as_json):
     """Bind the spheres of SPHERES to the skin of the glTF rig RIGGED (.glb/.gltf).
 
     Mean value coordinates of each centre on the rest (bind-space) mesh,
@@ -83,11 +88,20 @@ def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_a
     space (fit them to the rig's rest mesh).
     """
     from shtools.data_formats.bound import write_bound
-    from shtools.geometry.binding import bind_spheres, covering_radii, posed_coverage
+    from shtools.geometry.binding import (
+        bind_spheres,
+        covering_radii,
+        posed_coverage,
+        spheres_to_bind_space,
+    )
     from shtools.geometry.skin import load_skinned_gltf
 
     centers, radii = _read_sphere_set(spheres_path)
     model = load_skinned_gltf(rig_path)
+    try:
+        centers, radii, space = spheres_to_bind_space(centers, radii, model, space)
+    except InputError as exc:
+        raise InputError(exc.message, spheres_path) from None
     if cover_animations and not model.animations:
         raise InputError("--cover-animations needs an animation but the rig has none; "
                          "drop the flag or export a clip", rig_path)
@@ -108,7 +122,7 @@ def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_a
         binding,
         fit_radii=fit_radii if cover_animations else None,
         inputs={"spheres": spheres_path, "rig": rig_path},
-        parameters={"bones_per_sphere": bones_per_sphere,
+        parameters={"bones_per_sphere": bones_per_sphere, "sphere_space": space,
                     "cover_animations": bool(cover_animations),
                     "check_frames": check_frames},
     )
@@ -117,6 +131,7 @@ def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_a
         "spheres": int(centers.shape[0]),
         "joints": int(model.inverse_bind.shape[0]),
         "bones_per_sphere": int(bones_per_sphere),
+        "sphere_space": space,
         "mesh_closed": bool(binding.mesh_closed),
         "mvc_fallback_spheres": int(binding.fallback.sum()),
         "max_dropped_weight": float(binding.dropped_weight.max(initial=0.0)),

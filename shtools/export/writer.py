@@ -97,7 +97,9 @@ def export_bake(
         detail = f"frame {int(bake.frame_index[positions[0]])}, {w}x{h}"
     else:
         w, h = size or TILE_SIZE
-        images = render_frames(bake, positions, replace(view, width=w, height=h))
+        # GIF frames are palette-quantised anyway: skip the supersampling (4x faster)
+        ss = 1 if suffix == ".gif" else view.supersample
+        images = render_frames(bake, positions, replace(view, width=w, height=h, supersample=ss))
         if suffix == ".png":
             labels = [f"frame {int(bake.frame_index[t])}" for t in positions]
             save_png(contact_sheet(images, labels, columns), output)

@@ -44,7 +44,7 @@ from shtools.geometry.mvc import is_closed_surface, mean_value_coordinates
 from shtools.runtime.spheres import pose_bound_spheres
 
 __all__ = ["SphereBinding", "animation_poses", "bind_spheres", "covering_radii",
-           "posed_coverage", "truncation_error"]
+           "posed_coverage", "spheres_to_bind_space", "truncation_error"]
 
 #: raw MVC weight sums below this fraction of the summed magnitudes mean the
 #: coordinates are numerically meaningless (open meshes only)
@@ -86,6 +86,72 @@ class SphereBinding:
     def pose(self, joint_matrices) -> np.ndarray:
         """Posed centres for skinning matrices ``(..., J, 4, 4)`` -> ``(..., N, 3)``."""
         return pose_bound_spheres(self.bone_index, self.bone_vectors, joint_matrices)
+
+
+def _covered(points, centers, radii, tol) -> float:
+    """Fraction of points inside at least one sphere."""
+    rows = max(1, COVER_CHUNK // max(len(radii), 1))
+    inside = [
+        ((np.linalg.norm(points[s:s + rows, None] - centers[None], axis=2) - radii).min(1)
+         <= tol)
+        for s in range(0, points.shape[0], rows)
+    ]
+    return float(np.concatenate(inside).mean())
+
+
+def spheres_to_bind_space(centers, radii, model, space: str = "auto"):
+    """Express a sphere set in the rig's bind space (where binding happens).
+
+    A sphere set fitted to the glTF as a scene (``shtools spheres fit RIG.glb``,
+    i.e. ``trimesh.load``) lives in scene space, ``model.mesh_transform @ bind``;
+    one fitted to ``model.rest_vertices`` lives in bind space.  For CesiumMan the
+    two differ by a Z-up to Y-up rotation.
+
+    Parameters
+    ----------
+    centers : array_like, shape (N, 3)
+    radii : array_like, shape (N,)
+    model : SkinnedModel
+    space : {"auto", "bind", "scene"}
+        ``"auto"`` picks the space in which the spheres cover more rest vertices.
+
+    Returns
+    -------
+    centers : ndarray, shape (N, 3)
+    radii : ndarray, shape (N,)
+        Scaled by the transform's mean scale when it has one.
+    space : str
+        The space the input was taken to be in.
+
+    Raises
+    ------
+    InputError
+        For an unknown ``space``, or when ``"auto"`` finds the spheres cover
+        fewer than half of the rest vertices in either space.
+    """
+    from shtools.errors import InputError
+
+    if space not in ("auto", "bind", "scene"):
+        raise InputError(f"unknown sphere space '{space}'; use auto, bind or scene")
+    centers = np.asarray(centers, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    transform = np.asarray(getattr(model, "mesh_transform", np.eye(4)), dtype=np.float64)
+    inverse = np.linalg.inv(transform)
+    scale = abs(np.linalg.det(inverse[:3, :3])) ** (1.0 / 3.0)
+    to_bind = (centers @ inverse[:3, :3].T + inverse[:3, 3], radii * scale)
+    if space == "bind" or (space == "auto" and np.allclose(transform, np.eye(4))):
+        return centers, radii, "bind"
+    if space == "scene":
+        return (*to_bind, "scene")
+    rest = np.asarray(model.rest_vertices, dtype=np.float64)
+    tol = 1e-6 * (float(np.linalg.norm(np.ptp(rest, axis=0))) or 1.0)
+    in_bind = _covered(rest, centers, radii, tol)
+    in_scene = _covered(rest, *to_bind, tol)
+    if max(in_bind, in_scene) < 0.5:
+        raise InputError(
+            f"the spheres cover only {max(in_bind, in_scene):.0%} of the rig's rest vertices "
+            "(bind or scene space); fit them to this rig's mesh", getattr(model, "path", None))
+    return (centers, radii, "bind") if in_bind >= in_scene else (*to_bind, "scene")
 
 
 def _bone_weight_matrix(model) -> sp.csr_matrix:

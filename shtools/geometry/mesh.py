@@ -111,7 +111,8 @@ def validate_mesh(mesh: trimesh.Trimesh, path: str | os.PathLike | None = None) 
     diag = float(np.linalg.norm(np.ptp(tri.reshape(-1, 3), axis=0)))
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     keep = (area > DEGENERATE_AREA_FRACTION * max(diag, 1e-300) ** 2)
-    keep &= (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    keep &= (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+    keep &= faces[:, 0] != faces[:, 2]
     faces = faces[keep]
     if len(faces) == 0:
         raise InputError("every triangle is degenerate (zero area); the mesh is empty", path)

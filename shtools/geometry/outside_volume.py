@@ -40,6 +40,11 @@ FOUR_PI = 4.0 * np.pi
 CROSSING_SPLIT = 4
 CROSSING_LEVELS = 2
 
+#: Offset (fraction of r, along a generic direction) of the point where the
+#: winding number and the near triangles' solid angles are evaluated.
+PROBE_OFFSET = 1e-6
+_PROBE_DIRECTION = np.array([0.5377, 0.2769, 0.7962]) / np.linalg.norm([0.5377, 0.2769, 0.7962])
+
 #: Triangles per chunk in vectorised loops (bounds memory to ~100 MB).
 CHUNK = 200_000
 
@@ -200,7 +205,11 @@ class OutsideVolume:
         """
         centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
         radii = np.asarray(radii, dtype=np.float64).reshape(-1)
-        wind = self.winding_number(centers)
+        # The far field Σ_far Ω is continuous at c, but w(c) and the near
+        # triangles' Ω are not when c lies on the surface (a sample point).
+        # Evaluating both at the same point nudged off c keeps them consistent.
+        probe = centers + PROBE_OFFSET * radii[:, None] * _PROBE_DIRECTION
+        wind = self.winding_number(probe)
         result = FOUR_PI * wind * radii**3 / 3.0
         lists = self._tree.query_ball_point(centers, radii + self.max_tri_radius)
         owner = np.concatenate([np.full(len(ix), i) for i, ix in enumerate(lists)]).astype(np.int64)
@@ -218,7 +227,8 @@ class OutsideVolume:
             closest = trimesh.triangles.closest_point(rel, np.zeros((len(rel), 3)))
             near = inside | (np.linalg.norm(closest, axis=1) < r)
             o, rel, r, inside = o[near], rel[near], r[near], inside[near]
-            omega = solid_angle(rel[:, 0], rel[:, 1], rel[:, 2])
+            shifted = rel - (probe[o] - centers[o])[:, None, :]
+            omega = solid_angle(shifted[:, 0], shifted[:, 1], shifted[:, 2])
             flux = np.empty(len(rel))
             flux[inside] = triple_product(rel[inside, 0], rel[inside, 1], rel[inside, 2]) / 6.0
             cross = ~inside
@@ -338,7 +348,7 @@ class FluxSamples:
         if len(f) < max_samples:
             for _ in range(6):
                 edges = np.linalg.norm(v[f] - v[np.roll(f, 1, axis=1)], axis=-1).max()
-                if edges <= max_edge or 4 * len(f) > max_samples:
+                if edges <= max_edge or len(f) >= max_samples:
                     break
                 v, f = trimesh.remesh.subdivide(v, f)
         tri = v[f]
@@ -349,14 +359,15 @@ class FluxSamples:
             area = 0.5 * np.linalg.norm(cross, axis=1)
             lo = pts.min(axis=0)
             extent = np.ptp(pts, axis=0).max()
-            cell = extent / 8.0
-            for _ in range(30):
+            # finest grid whose occupied cells fit the budget (a surface fills
+            # about (extent / cell)² cells, so start at 0.5 extent / sqrt(budget))
+            cell = 0.5 * extent / np.sqrt(max_samples)
+            for _ in range(60):
                 keys = np.floor((pts - lo) / cell).astype(np.int64)
                 _, inverse = np.unique(keys, axis=0, return_inverse=True)
                 if inverse.max() + 1 <= max_samples:
                     break
-                cell *= 0.8
-            # refine while still under budget so that cells are as small as allowed
+                cell *= 1.1
             inverse = inverse.reshape(-1)
             n = inverse.max() + 1
             w = np.bincount(inverse, weights=area, minlength=n)

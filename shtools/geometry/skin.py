@@ -169,6 +169,10 @@ class SkinnedModel:
     joint_nodes : ndarray of int, shape (J,)
         glTF node index of each joint.
     joint_names : list of str
+    mesh_transform : ndarray, shape (4, 4)
+        Rest global transform of the skinned mesh node: where viewers and
+        ``trimesh.load`` put the unskinned mesh ("scene space" =
+        ``mesh_transform @ bind space``).  Skinning ignores it (glTF spec).
     path : str
     """
 
@@ -181,6 +185,7 @@ class SkinnedModel:
     normals: np.ndarray | None = None
     joint_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     joint_names: list[str] = field(default_factory=list)
+    mesh_transform: np.ndarray = field(default_factory=lambda: np.eye(4))
     path: str = ""
     _node_parent: np.ndarray = field(default=None, repr=False)
     _node_order: np.ndarray = field(default=None, repr=False)
@@ -559,7 +564,7 @@ def load_skinned_gltf(path: str | os.PathLike) -> SkinnedModel:
             chans.append(_Channel(ch.target.node, ch.target.path, times, values, interp))
         channels.append(chans)
 
-    return SkinnedModel(
+    model = SkinnedModel(
         rest_vertices=rest,
         faces=np.concatenate(faces).astype(np.int64),
         joints=joints.astype(np.int64),
@@ -576,3 +581,5 @@ def load_skinned_gltf(path: str | os.PathLike) -> SkinnedModel:
         _rest_trs=rest_trs,
         _channels=channels,
     )
+    model.mesh_transform = model.node_transforms(None)[skinned_nodes[0]]
+    return model

@@ -35,11 +35,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
-from scipy.spatial import ConvexHull, QhullError, cKDTree
+from scipy.spatial import cKDTree
 
 from shtools.errors import InputError
 from shtools.geometry.outside_volume import FOUR_PI, FluxSamples, OutsideVolume
-from shtools.geometry.sphere_set import SphereSet, minimal_bounding_sphere
+from shtools.geometry.sphere_set import SphereSet, hull_vertices, minimal_bounding_sphere
 
 METHODS = ("variational", "octree", "kmeans")
 
@@ -63,9 +63,11 @@ PROFILE_BINS = 512
 ZERO_VOLUME_FRACTION = 1e-7
 
 #: Quadrature for the inner loop: triangles split until edges <= diag / this,
-#: or merged per cell when more than MAX_FLUX_SAMPLES.
-FLUX_EDGE_DIVISOR = 150
-MAX_FLUX_SAMPLES = 30_000
+#: or merged per cell beyond a budget of samples per sphere (clipped).
+FLUX_EDGE_DIVISOR = 120
+FLUX_SAMPLES_PER_SPHERE = 500
+MIN_FLUX_SAMPLES = 4_000
+MAX_FLUX_SAMPLES = 25_000
 
 #: Largest centre move per update, as a fraction of the cluster radius (bounds
 #: the samples the objective must visit; the next round continues the walk).
@@ -115,7 +117,8 @@ class Solid:
     diag: float
 
 
-def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, path=None) -> Solid:
+def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | None = None,
+               path=None) -> Solid:
     """Sample a mesh's surface and interior for fitting ``n`` spheres.
 
     Parameters
@@ -124,6 +127,9 @@ def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, path=None) -> So
     n : int
         Number of spheres (sets the sample density).
     seed : int
+    samples : int, optional
+        Surface samples and (about) interior grid points, each; default
+        ``POINTS_PER_SPHERE * n`` clipped to [MIN_POINTS, MAX_POINTS].
     path : path-like, optional
         Named in error messages.
 
@@ -150,7 +156,8 @@ def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, path=None) -> So
         raise InputError(flat_msg, path)
     if volume < 0:
         raise InputError("the mesh is inside out (negative volume); flip its faces", path)
-    target = int(np.clip(POINTS_PER_SPHERE * n, MIN_POINTS, MAX_POINTS))
+    target = int(samples) if samples else int(np.clip(POINTS_PER_SPHERE * n, MIN_POINTS,
+                                                         MAX_POINTS))
     # interior: grid corners inside T, spacing for ~target points
     h = max((volume / target) ** (1.0 / 3.0), diag / 400.0)
     counts = np.maximum(np.ceil((hi - lo) / h).astype(int), 1)
@@ -170,8 +177,9 @@ def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, path=None) -> So
     points = np.vstack([surface, interior])
     k = min(NEIGHBOURS + 1, len(points))
     _, nb = cKDTree(points).query(points, k=k)
-    flux = FluxSamples.from_mesh(mesh, max_edge=diag / FLUX_EDGE_DIVISOR,
-                                 max_samples=MAX_FLUX_SAMPLES)
+    # spheres shrink as N grows, so the quadrature they need refines with N
+    budget = int(np.clip(FLUX_SAMPLES_PER_SPHERE * n, MIN_FLUX_SAMPLES, MAX_FLUX_SAMPLES))
+    flux = FluxSamples.from_mesh(mesh, max_edge=diag / FLUX_EDGE_DIVISOR, max_samples=budget)
     cover = np.vstack([points, v])
     return Solid(mesh, evaluator, flux, surface, points, np.asarray(nb)[:, 1:], cover,
                  float(volume), diag)
@@ -186,6 +194,7 @@ def fit_spheres(
     thickness: float | None = None,
     max_iterations: int = 40,
     max_teleport_failures: int = 4,
+    samples: int | None = None,
     path=None,
     progress=None,
 ) -> SphereSet:
@@ -208,6 +217,8 @@ def fit_spheres(
         Cap on clustering + centre-update rounds (variational).
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
+    samples : int, optional
+        Surface and interior sample counts (see :func:`discretize`).
     path : path-like, optional
         Mesh file, named in error messages.
     progress : callable, optional
@@ -234,7 +245,7 @@ def fit_spheres(
         from shtools.geometry.mesh import thicken
 
         mesh = thicken(mesh, float(thickness))
-    solid = discretize(mesh, n, seed=seed, path=path)
+    solid = discretize(mesh, n, seed=seed, samples=samples, path=path)
     if n > len(solid.points):
         raise InputError(
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
@@ -243,14 +254,14 @@ def fit_spheres(
     info: dict = {"points": len(solid.points), "surface_points": len(solid.surface),
                   "flux_samples": len(solid.flux.points)}
     if method == "variational":
-        centers, radii, labels, extra = _variational(
+        centers, radii, _, extra = _variational(
             solid, n, rng, max_iterations=max_iterations,
             max_teleport_failures=max_teleport_failures, progress=progress)
         info.update(extra)
     elif method == "octree":
-        centers, radii, labels = _octree(solid, n)
+        centers, radii, _ = _octree(solid, n)
     else:
-        centers, radii, labels = _kmeans(solid, n, rng)
+        centers, radii, _ = _kmeans(solid, n, rng)
     radii = _cover(solid, centers, radii)
     covered = _covered_fraction(centers, radii, np.vstack([solid.surface, solid.mesh.vertices]))
     outside = solid.evaluator.outside_volume(centers, radii)
@@ -278,16 +289,6 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
         j = np.argmin(d - radii[None, :], axis=1)
         np.maximum.at(radii, j, d[np.arange(len(rest)), j])
     return radii * (1.0 + 1e-12) + COVER_SLACK * solid.diag
-
-
-def _hull_points(points: np.ndarray) -> np.ndarray:
-    """Convex-hull vertices of points (all points when the hull is degenerate)."""
-    if len(points) < 5:
-        return points
-    try:
-        return points[ConvexHull(points).vertices]
-    except (QhullError, ValueError):
-        return points
 
 
 # --------------------------------------------------------------------------- variational
@@ -408,7 +409,7 @@ def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
         members = solid.points[order[bounds_idx[i]:bounds_idx[i + 1]]]
         if len(members) == 0:
             continue
-        hull = _hull_points(members)
+        hull = hull_vertices(members)
         p0 = centers[i]
         r0 = float(np.sqrt(np.max(np.sum((hull - p0) ** 2, axis=1))))
         delta = CENTER_STEP * r0 + 1e-3 * solid.diag
@@ -418,7 +419,7 @@ def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
         if f0 > zero:
             res = minimize(f, p0, method="Powell",
                            bounds=list(zip(p0 - delta, p0 + delta, strict=True)),
-                           options={"xtol": 1e-2, "ftol": 1e-3, "maxiter": 3, "maxfev": 100})
+                           options={"xtol": 1e-2, "ftol": 1e-3, "maxiter": 2, "maxfev": 80})
             if res.fun < f0:
                 best_p, best_f = np.asarray(res.x, dtype=np.float64), float(res.fun)
         new_c[i] = best_p
@@ -442,7 +443,7 @@ def _lloyd_step(solid: Solid, centers: np.ndarray) -> _State:
     table = solid.flux.outside_profiles(centers, r_grid)
     labels, _ = _flood_fill(solid, centers, table, r_grid[1])
     c, r, _ = _update_centers(solid, centers, labels)
-    c, r = _shrink(solid, c, r, rounds=1)
+    c, r = _shrink(solid, c, r, rounds=1, recenter=False)
     out = np.array([max(FOUR_PI / 3 * ri**3 - solid.flux.intersection_volume(ci, ri), 0.0)
                     for ci, ri in zip(c, r, strict=True)])
     return _State(c, r, labels, out, float(out.sum() / solid.volume))
@@ -543,14 +544,18 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
     return centers, radii, best.labels, info
 
 
-def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int):
+def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
+            recenter: bool = True):
     """Shrink spheres to the points no other sphere covers, then re-centre them.
 
     E sums each sphere's outside volume, so a point already inside another
     sphere need not hold a radius up.  Largest spheres shrink first; each
     sphere keeps bounding the points only it covers, so the union still covers
-    every point.  Powell then moves each centre for its own points.
+    every point.  With ``recenter``, Powell then moves each centre for its own
+    points.
     """
+    from scipy.optimize import minimize
+
     pts = solid.cover
     centers = centers.copy()
     radii = radii.copy()
@@ -569,17 +574,17 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int):
             inside[lost, i] = False
             radii[i] = new_r
             own_sets[i] = own
+        if not recenter:
+            break
         for i, own in own_sets.items():
-            hull = _hull_points(pts[own])
+            hull = hull_vertices(pts[own])
             p0 = centers[i]
             delta = CENTER_STEP * radii[i] + 1e-3 * solid.diag
             f = _sphere_objective(solid, hull, p0, delta)
             f0 = f(p0)
-            from scipy.optimize import minimize
-
             res = minimize(f, p0, method="Powell",
                            bounds=list(zip(p0 - delta, p0 + delta, strict=True)),
-                           options={"xtol": 1e-2, "ftol": 1e-3, "maxiter": 3, "maxfev": 100})
+                           options={"xtol": 1e-2, "ftol": 1e-3, "maxiter": 2, "maxfev": 80})
             if res.fun < f0:
                 centers[i] = res.x
                 radii[i] = float(np.sqrt(np.max(np.sum((hull - res.x) ** 2, axis=1))))
@@ -607,8 +612,8 @@ def _octree(solid: Solid, n: int):
             key = octant[:, 0] * 4 + octant[:, 1] * 2 + octant[:, 2]
             children = [(corner + offsets[o] * half, half, members[key == o])
                         for o in range(8) if np.any(key == o)]
-            if len(cells) - 1 + len(children) <= n and len(children) > 1 or (
-                    len(children) == 1 and len(cells) < n and s > 1e-6 * size):
+            # a single occupied child only shrinks the cell: always worth it
+            if len(cells) - 1 + len(children) <= n and (len(children) > 1 or s > 1e-6 * size):
                 cells = cells[:c] + cells[c + 1:] + children
                 split = True
                 break

@@ -136,11 +136,17 @@ def minimal_bounding_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
     radius : float
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(points) >= 5:
-        from scipy.spatial import ConvexHull, QhullError
+    hull = hull_vertices(points)
+    return bounding_sphere_of_spheres(hull, np.zeros(len(hull)))
 
-        try:
-            points = points[ConvexHull(points).vertices]
-        except (QhullError, ValueError):
-            pass  # coplanar or collinear: use every point
-    return bounding_sphere_of_spheres(points, np.zeros(len(points)))
+
+def hull_vertices(points: np.ndarray) -> np.ndarray:
+    """Convex-hull vertices of ``points (P, 3)``; all points when the hull is degenerate."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(points) < 5:
+        return points
+    try:
+        return points[ConvexHull(points).vertices]
+    except (QhullError, ValueError):  # coplanar or collinear points
+        return points

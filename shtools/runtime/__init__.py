@@ -28,6 +28,23 @@ Pipeline per frame (SHEXP sections 6–7):
 4. shade white Lambertian receivers with environment lighting and spherical
    lights, windowed (:mod:`~shtools.runtime.shading`).
 
+Defaults and costs (``benchmarks/bench_runtime.py``, issue 4): the log is
+accumulated at ``n_acc = min(n + 2, 6)`` and exponentiated there with PS*-2
+(HYB when ``n_acc <= 4``), then truncated to ``n``.  Accumulating at 6 for
+shading at 4 roughly halves the truncation error of the visibility (paper
+Fig. 7e) — it is what meets the 3 % radiance target against ray tracing of the
+sphere set — at about twice the frame time of ``acc_order=4``, the fast
+setting.  Tables passed in must have exactly the accumulation order (the cap
+log depends on the order it is computed at).
+
+Performance notes: accumulation runs on float32 blocks of (tiles of 32
+receivers of one cluster) x (the cluster's cut, padded with radius-0
+spheres), so per-cluster work is batched without per-pair gathers; the exp
+uses exact quadrature SH products on BLAS (:mod:`~shtools.runtime.fast_exp`);
+``H(N)`` is kept for receivers whose normal did not change.  Set
+``OPENBLAS_NUM_THREADS=1`` on a loaded machine: threaded OpenBLAS spins on
+the small matrix products.
+
 Public API
 ----------
 ``ShadowSettings(order=4, acc_order=None, exp_method="auto", window="cosine",
@@ -42,8 +59,10 @@ vertices_per_cluster=400, ...)``
     ``.visibility(vertices, normals, blockers, clusters=None) -> (V, n*n)``;
     ``.log_visibility(...) -> (V, n_acc^2)``; ``.exponentiate(f)``;
     ``.shade(visibility, vertices, normals, env_sh=None, sphere_lights=(),
-    local_visibility=None, form="tabulated") -> (V, 3)``; ``.last_stats``.
+    local_visibility=None, form="tabulated") -> (V, 3)``; ``.last_stats``
+    (pairs, spheres per vertex, clusters, CPU seconds per stage).
 ``ReceiverClusters``, ``lloyd_clusters(vertices, vertices_per_cluster, groups=None)``
+``fast_exp(f, method, tables)`` — HYB / PS*-p / OL / Volterra for many vectors
 ``accumulate_log(points, normals, centers, radii, table, weights=None, ...)``
 ``apply_self_shadow_rules(dx, dy, dz, radius, nx, ny, nz)``
 ``CapLogTable(tables, order)``
@@ -53,6 +72,7 @@ from shtools.runtime.accumulate import accumulate_log
 from shtools.runtime.blockers import SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
+from shtools.runtime.fast_exp import fast_exp
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.self_shadow import apply_self_shadow_rules
 from shtools.runtime.settings import ShadowSettings
@@ -68,6 +88,7 @@ __all__ = [
     "accumulate_log",
     "apply_self_shadow_rules",
     "cosine_transfer",
+    "fast_exp",
     "lloyd_clusters",
     "shade",
     "sphere_light_sh",

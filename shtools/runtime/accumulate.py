@@ -31,10 +31,13 @@ import math
 import numpy as np
 
 from shtools.runtime.log_table import CapLogTable
-from shtools.runtime.self_shadow import apply_self_shadow_rules
+from shtools.runtime.self_shadow import apply_self_shadow_rules, apply_self_shadow_rules_inplace
 
 #: d^2 floor (scene units^2): guards 1/d for a zero-radius sphere at the receiver.
 MIN_DIST2 = 1e-20
+#: Above this fraction of straddling pairs in a block the self-shadow rules run
+#: over the whole block instead of gathering the straddling subset.
+FULL_BLOCK_RULES_FRACTION = 0.1
 
 
 def _normalisation(order: int) -> np.ndarray:
@@ -154,6 +157,8 @@ class BlockKernel:
         self.norm = _normalisation(self.order).astype(np.float32)
         self._scratch = np.empty((_N_SCRATCH + self.order, 0), np.float32)
         self._idx = np.empty(0, np.int32)
+        self._masks = np.empty((2, 0), np.bool_)
+        self._pairs = np.empty(0, np.complex64)
 
     def _buffers(self, shape):
         size = int(np.prod(shape))
@@ -163,44 +168,63 @@ class BlockKernel:
         views = [self._scratch[i, :size].reshape(shape) for i in range(self._scratch.shape[0])]
         return views, self._idx[:size].reshape(shape)
 
+    def _pair_buffer(self, shape):
+        size = int(np.prod(shape))
+        if self._pairs.shape[0] < size:
+            self._pairs = np.empty(size, np.complex64)
+        return self._pairs[:size].reshape(shape)
+
+    def _bools(self, shape):
+        size = int(np.prod(shape))
+        if self._masks.shape[1] < size:
+            self._masks = np.empty((2, size), np.bool_)
+        return [self._masks[i, :size].reshape(shape) for i in range(2)]
+
     def run(self, pts, nrm, cen, rad, w, self_shadow):
+        # Layout (S, K, T): spheres outermost, so the final reduction over the
+        # spheres runs along contiguous rows of receivers (several times faster
+        # in NumPy than reducing short rows of S).
         n_k, n_t, _ = pts.shape
         n_s = cen.shape[1]
-        shape = (n_k, n_t, n_s)
+        shape = (n_s, n_k, n_t)
         views, idx = self._buffers(shape)
         dx, dy, dz, r, t0, t1, t2, t3 = views[:8]
         extra = views[8:_N_SCRATCH]
         bands = views[_N_SCRATCH:]
-        np.subtract(cen[:, None, :, 0], pts[:, :, 0:1], out=dx)
-        np.subtract(cen[:, None, :, 1], pts[:, :, 1:2], out=dy)
-        np.subtract(cen[:, None, :, 2], pts[:, :, 2:3], out=dz)
-        r[...] = rad[:, None, :]
+        cen_t = cen.transpose(1, 0, 2)[:, :, None, :]  # (S, K, 1, 3)
+        np.subtract(cen_t[..., 0], pts[None, :, :, 0], out=dx)
+        np.subtract(cen_t[..., 1], pts[None, :, :, 1], out=dy)
+        np.subtract(cen_t[..., 2], pts[None, :, :, 2], out=dz)
+        r[...] = rad.T[:, :, None]
         if self_shadow:
-            nx, ny, nz = nrm[:, :, 0:1], nrm[:, :, 1:2], nrm[:, :, 2:3]
+            nx, ny, nz = nrm[None, :, :, 0], nrm[None, :, :, 1], nrm[None, :, :, 2]
             # h = (P - p) . N
             np.multiply(dx, nx, out=t0)
             np.multiply(dy, ny, out=t1)
             t0 += t1
             np.multiply(dz, nz, out=t1)
             t0 += t1
-            np.negative(r, out=t1)
-            behind = np.less_equal(t0, t1, out=idx.view(np.bool_)[..., : n_s])
-            np.copyto(r, 0.0, where=behind)  # entirely behind the plane: dropped
+            bools = self._bools(shape)
             np.abs(t0, out=t1)
-            straddle = np.less(t1, r, out=behind)
-            sel = np.flatnonzero(straddle)  # straddling the plane (includes p inside)
-            if sel.size:
-                rows = sel // n_s
-                nflat = nrm.reshape(-1, 3)
-                ndx, ndy, ndz, nr = apply_self_shadow_rules(
-                    dx.ravel()[sel].astype(np.float64), dy.ravel()[sel].astype(np.float64),
-                    dz.ravel()[sel].astype(np.float64), r.ravel()[sel].astype(np.float64),
-                    nflat[rows, 0].astype(np.float64), nflat[rows, 1].astype(np.float64),
-                    nflat[rows, 2].astype(np.float64))
-                dx.ravel()[sel] = ndx
-                dy.ravel()[sel] = ndy
-                dz.ravel()[sel] = ndz
-                r.ravel()[sel] = nr
+            straddle = np.less(t1, r, out=bools[1])  # straddling the plane (or p inside)
+            count = int(np.count_nonzero(straddle))
+            if count > FULL_BLOCK_RULES_FRACTION * r.size:
+                apply_self_shadow_rules_inplace(dx, dy, dz, r, t0, nx, ny, nz,
+                                                (t1, t2, t3, *extra[:2]), (bools[0], bools[1]))
+            else:
+                np.negative(r, out=t1)
+                np.copyto(r, 0.0, where=np.less_equal(t0, t1, out=bools[0]))  # behind
+                if count:
+                    sel = np.flatnonzero(straddle)
+                    rows = sel % (n_k * n_t)
+                    nflat = nrm.reshape(-1, 3)
+                    ndx, ndy, ndz, nr = apply_self_shadow_rules(
+                        dx.ravel()[sel], dy.ravel()[sel], dz.ravel()[sel], r.ravel()[sel],
+                        nflat[rows, 0], nflat[rows, 1], nflat[rows, 2])
+                    dx.ravel()[sel] = ndx
+                    dy.ravel()[sel] = ndy
+                    dz.ravel()[sel] = ndz
+                    r.ravel()[sel] = nr
         # inverse distance and unit direction (x, y, z overwrite dx, dy, dz)
         d2, inv = t0, t1
         np.multiply(dx, dx, out=d2)
@@ -226,8 +250,8 @@ class BlockKernel:
         self._lookup(u, bands, t0, t1, idx)
         if w is not None:
             for l in range(self.order):
-                bands[l] *= w[:, None, :, l]
-        flat = (n_k * n_t, n_s)
+                bands[l] *= w[:, :, l].T[:, :, None]
+        flat = (n_s, n_k * n_t)
         out = np.empty((n_k * n_t, self.order * self.order), np.float32)
         self._accumulate([b.reshape(flat) for b in bands], x.reshape(flat), y.reshape(flat),
                          z.reshape(flat), [a.reshape(flat) for a in (t0, t1, t2, t3, *extra)],
@@ -240,11 +264,11 @@ class BlockKernel:
         np.minimum(frac, tbl.scale, out=frac)
         np.copyto(idx, frac, casting="unsafe")  # truncation == floor since >= 0
         np.subtract(frac, idx, out=frac, casting="unsafe")
+        pair = self._pair_buffer(idx.shape)
         for l in range(self.order):
-            np.take(tbl.values[l], idx, out=bands[l])
-            np.take(tbl.slopes[l], idx, out=tmp)
-            tmp *= frac
-            bands[l] += tmp
+            np.take(tbl.packed[l], idx, out=pair)  # value + 1j * slope
+            np.multiply(pair.imag, frac, out=tmp)
+            np.add(pair.real, tmp, out=bands[l])
 
     def _accumulate(self, bands, x, y, z, scratch, out):
         """out[:, lm] = K_lm * sum_s bands[l] * Q_lm(z) * Re/Im (x + i y)^m."""
@@ -293,10 +317,11 @@ class BlockKernel:
                     np.multiply(bands[l], q, out=prod)
                     term, scale = prod, 1.0
                 base = l * l + l
+                # reductions over the spheres (axis 0)
                 if m == 0:
-                    out[:, base] = np.einsum("ij->i", term) * (scale * k[l, 0])
+                    out[:, base] = np.einsum("sr->r", term) * (scale * k[l, 0])
                 else:
-                    out[:, base + m] = np.einsum("ij,ij->i", term, c_m) * (scale * k[l, m])
-                    out[:, base - m] = np.einsum("ij,ij->i", term, s_m) * (scale * k[l, m])
+                    out[:, base + m] = np.einsum("sr,sr->r", term, c_m) * (scale * k[l, m])
+                    out[:, base - m] = np.einsum("sr,sr->r", term, s_m) * (scale * k[l, m])
                 if l > m:
                     q_prev2, q_prev1 = q_prev1, q

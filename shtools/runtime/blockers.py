@@ -63,7 +63,8 @@ class SphereBlocker:
                     "rebuild it with `shtools spheres tree`"
                 )
             if ((parent < -1) | (parent >= parent.shape[0])).any() or (parent == -1).sum() != 1:
-                raise InputError("blocker tree parent array must name one root (-1) and valid nodes")
+                raise InputError(
+                    "blocker tree parent array must name one root (-1) and valid nodes")
             self.parent, self.leaf = parent, leaf
 
     @property

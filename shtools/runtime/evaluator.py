@@ -9,13 +9,14 @@ import numpy as np
 from shtools.errors import InputError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import SphereBlocker, SphereLight
-from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
+from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.settings import ShadowSettings
-from shtools.runtime.tiling import accumulate_clusters
+from shtools.runtime.shading import cosine_transfer
 from shtools.runtime.shading import shade as _shade
+from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
 
 
@@ -38,7 +39,8 @@ class ShadowRuntime:
     last_stats : dict
         Counters and timings of the last :meth:`visibility` call: ``pairs``
         (sphere-vertex pairs accumulated), ``spheres_per_vertex``,
-        ``clusters``, ``seconds`` per stage (``cuts``, ``accumulate``, ``exp``).
+        ``clusters``, ``seconds`` per stage (``cuts``, ``accumulate``, ``exp``;
+        process CPU time, robust to other jobs on the machine).
     """
 
     def __init__(self, settings: ShadowSettings | None = None, tables: dict | None = None):
@@ -60,8 +62,9 @@ class ShadowRuntime:
             )
         self.tables = tables
         self.table = CapLogTable(tables, self.acc_order)
-        self._kernel = BlockKernel(self.table)
+        self._kernels = [BlockKernel(self.table) for _ in range(self.settings.threads)]
         self._auto_clusters: ReceiverClusters | None = None
+        self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
         self.last_stats: dict = {}
 
     # -- clusters --------------------------------------------------------------
@@ -94,15 +97,15 @@ class ShadowRuntime:
         stats = {"pairs": 0, "clusters": 0, "seconds": {}}
         n_acc2 = self.acc_order * self.acc_order
         f = np.zeros((pts.shape[0], n_acc2), dtype=np.float32)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         if not s.hierarchy:
             centers, radii = leaf_spheres(blockers)
-            stats["seconds"]["cuts"] = time.perf_counter() - t0
-            t1 = time.perf_counter()
+            stats["seconds"]["cuts"] = time.process_time() - t0
+            t1 = time.process_time()
             accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
                            chunk_pairs=s.chunk_pairs, out=f)
             stats["pairs"] = pts.shape[0] * centers.shape[0]
-            stats["seconds"]["accumulate"] = time.perf_counter() - t1
+            stats["seconds"]["accumulate"] = time.process_time() - t1
         else:
             if clusters is None:
                 clusters = self._clusters_for(pts)
@@ -115,8 +118,8 @@ class ShadowRuntime:
             cl_centers, cl_radii = clusters.bounds(pts)
             cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
             weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
-            stats["seconds"]["cuts"] = time.perf_counter() - t0
-            t1 = time.perf_counter()
+            stats["seconds"]["cuts"] = time.process_time() - t0
+            t1 = time.process_time()
             sizes = cuts.in_cut.sum(axis=1)
             s_max = max(1, int(sizes.max(initial=0)))
             # each cluster's cut nodes first (stable), padded with radius 0
@@ -129,11 +132,12 @@ class ShadowRuntime:
                      if any_inner else None)
             f = accumulate_clusters(pts, nrm, clusters.order, clusters.offsets, sph_c, sph_r,
                                     sph_w, sizes, self.table, self_shadow=s.self_shadow,
-                                    chunk_pairs=s.chunk_pairs, kernel=self._kernel)
+                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
+                                    kernels=self._kernels)
             pairs = int((np.diff(clusters.offsets) * sizes).sum())
             stats["pairs"] = pairs
             stats["clusters"] = clusters.n_clusters
-            stats["seconds"]["accumulate"] = time.perf_counter() - t1
+            stats["seconds"]["accumulate"] = time.process_time() - t1
         stats["spheres_per_vertex"] = stats["pairs"] / max(1, pts.shape[0])
         self.last_stats = stats
         return f
@@ -161,9 +165,9 @@ class ShadowRuntime:
             Visibility vectors ``g`` (eq. 8) at the shading order.
         """
         f = self.log_visibility(vertices, normals, blockers, clusters)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         g = self.exponentiate(f)
-        self.last_stats["seconds"]["exp"] = time.perf_counter() - t0
+        self.last_stats["seconds"]["exp"] = time.process_time() - t0
         return g
 
     def exponentiate(self, log_vis) -> np.ndarray:
@@ -174,7 +178,7 @@ class ShadowRuntime:
         if self.settings.exp_degree is not None and self.exp_method in ("ps", "ps*"):
             kwargs["degree"] = self.settings.exp_degree
         if self.exp_method in FAST_METHODS:
-            g = fast_exp(log_vis, self.exp_method, **kwargs)
+            g = fast_exp(log_vis, self.exp_method, threads=self.settings.threads, **kwargs)
         else:
             g = sh_exp(log_vis, self.exp_method, **kwargs)
         n2 = self.order * self.order
@@ -203,7 +207,26 @@ class ShadowRuntime:
         pts, nrm = _check_receivers(vertices, normals)
         return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                       window_kind=s.resolved_window(), window_h=s.window_h,
-                      local_visibility=local_visibility, form=form)
+                      local_visibility=local_visibility, form=form,
+                      transfer=self._cosine_transfer(nrm))
+
+    def _cosine_transfer(self, normals: np.ndarray) -> np.ndarray:
+        """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
+
+        Static receivers (most of a scene) keep their tabulated transfer across
+        frames, as the paper keeps L_H per normal.
+        """
+        cached = self._transfer_cache
+        if cached is None or cached[0].shape != normals.shape:
+            transfer = cosine_transfer(normals, self.order)
+            self._transfer_cache = (normals.copy(), transfer)
+            return transfer
+        old_n, transfer = cached
+        changed = np.flatnonzero(np.any(old_n != normals, axis=1))
+        if changed.size:
+            transfer[changed] = cosine_transfer(normals[changed], self.order)
+            old_n[changed] = normals[changed]
+        return transfer
 
     def _clusters_for(self, pts: np.ndarray) -> ReceiverClusters:
         if self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -72,7 +73,7 @@ class QuadratureProducts:
 
 
 def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None = None,
-             chunk: int = 16384) -> np.ndarray:
+             chunk: int = 8192, threads: int = 1) -> np.ndarray:
     """SH exponential of many vectors (``"hyb"``, ``"ps*"`` or ``"ol"``).
 
     Parameters
@@ -86,6 +87,8 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
         PS*-p series degree (default 2).
     chunk : int
         Vectors per block (bounds memory).
+    threads : int
+        Blocks evaluated concurrently (NumPy/BLAS release the GIL).
 
     Returns
     -------
@@ -103,6 +106,14 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
     p = DEFAULT_PS_STAR_DEGREE if degree is None else int(degree)
     ops = QuadratureProducts(order, dtype)
     out = np.empty_like(f)
+    starts = range(0, f.shape[0], chunk)
+    if method != "volterra" and threads > 1 and len(starts) > 1:
+        def work(s):
+            out[s : s + chunk] = _exp_block(f[s : s + chunk], method, tables, p, ops)
+
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            list(pool.map(work, starts))
+        return out
     if method == "volterra":
         dirs, w = sphere_quadrature(VOLTERRA_DEGREE[0] * order + VOLTERRA_DEGREE[1])
         y = basis(dirs, order)

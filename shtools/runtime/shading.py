@@ -49,7 +49,11 @@ def band_window(order: int, kind: str | None, h: float | None) -> np.ndarray:
 
 
 def zonal_to_sh32(zh, axis) -> np.ndarray:
-    """float32 :func:`shtools.sh.zonal_to_sh`: ``(..., n)`` zonal x ``(..., 3)`` axes -> ``(..., n*n)``."""
+    """float32 :func:`shtools.sh.zonal_to_sh`.
+
+    ``zh (..., n)`` zonal coefficients about ``+z`` and ``axis (..., 3)`` give
+    ``(..., n*n)``.
+    """
     zh = np.asarray(zh, dtype=np.float64)
     order = zh.shape[-1]
     scale = np.sqrt(4.0 * np.pi / (2.0 * np.arange(order) + 1.0))
@@ -69,7 +73,9 @@ def light_matrices(env_sh) -> np.ndarray:
 
 
 def tabulated_radiance(transfer, env_matrices, visibility) -> np.ndarray:
-    """:math:`\\mathbf L_H(N)\\cdot\\mathbf g` with :math:`\\mathbf L_H = \\mathbf L * \\mathbf H(N)`.
+    """Tabulated form: :math:`\\mathbf L_H(N)\\cdot\\mathbf g`.
+
+    :math:`\\mathbf L_H = \\mathbf L * \\mathbf H(N)` is cosine-weighted incident radiance.
 
     Parameters
     ----------
@@ -84,20 +90,20 @@ def tabulated_radiance(transfer, env_matrices, visibility) -> np.ndarray:
     -------
     ndarray, shape (V, 3)
     """
-    out = np.empty((transfer.shape[0], env_matrices.shape[0]))
-    for c, m in enumerate(env_matrices):
-        l_h = transfer @ m  # (L * H)^T, M_L symmetric
-        out[:, c] = np.einsum("vi,vi->v", visibility, l_h, dtype=np.float64)
-    return out
+    n_c, size = env_matrices.shape[0], env_matrices.shape[1]
+    # L_H for all colours with one matrix product: (V, n*n) @ (n*n, 3*n*n); M_L symmetric
+    l_h = transfer @ np.concatenate(list(env_matrices), axis=1)
+    return np.einsum("vcs,vs->vc", l_h.reshape(-1, n_c, size), visibility).astype(np.float64)
 
 
 def on_the_fly_radiance(transfer, env_matrices, visibility) -> np.ndarray:
-    """:math:`(\\mathbf M_L\\mathbf g)\\cdot\\mathbf H(N)`; same shapes as :func:`tabulated_radiance`."""
-    out = np.empty((transfer.shape[0], env_matrices.shape[0]))
-    for c, m in enumerate(env_matrices):
-        lit = visibility @ m  # (M_L g)^T
-        out[:, c] = np.einsum("vi,vi->v", transfer, lit, dtype=np.float64)
-    return out
+    """On-the-fly form :math:`(\\mathbf M_L\\mathbf g)\\cdot\\mathbf H(N)`.
+
+    Same shapes as :func:`tabulated_radiance`.
+    """
+    n_c, size = env_matrices.shape[0], env_matrices.shape[1]
+    lit = (visibility @ np.concatenate(list(env_matrices), axis=1)).reshape(-1, n_c, size)
+    return np.einsum("vcs,vs->vc", lit, transfer).astype(np.float64)  # (M_L g) . H(N)
 
 
 def sphere_light_sh(light: SphereLight, points, order: int) -> np.ndarray:
@@ -119,7 +125,7 @@ def sphere_light_sh(light: SphereLight, points, order: int) -> np.ndarray:
 
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,
           window_kind: str | None = "cosine", window_h: float | None = None,
-          local_visibility=None, form: str = "tabulated") -> np.ndarray:
+          local_visibility=None, form: str = "tabulated", transfer=None) -> np.ndarray:
     """Outgoing radiance of white Lambertian receivers, shape ``(V, 3)``.
 
     Parameters
@@ -139,6 +145,8 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         Baked static visibility ``g_p``; shading uses ``H(N) * g_p``.
     form : {"tabulated", "on_the_fly"}
         Evaluation of the environment term (identical results).
+    transfer : ndarray, shape (V, n*n), optional
+        Precomputed :func:`cosine_transfer` of ``normals`` (a cache).
 
     Returns
     -------
@@ -148,7 +156,8 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
     g = np.asarray(visibility, dtype=np.float32)[:, :size]
     win = band_window(order, window_kind, window_h)
     g_w = g * win.astype(np.float32)
-    transfer = cosine_transfer(normals, order)
+    if transfer is None:
+        transfer = cosine_transfer(normals, order)
     if local_visibility is not None:
         local = np.asarray(local_visibility, dtype=np.float32)[:, :size]
         transfer = QuadratureProducts(order, np.float32).product(transfer, local)
@@ -166,6 +175,6 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         shadowed = QuadratureProducts(order, np.float32).product(transfer, g_w)
         for light in sphere_lights:
             l_sh = sphere_light_sh(light, points, order) * win.astype(np.float32)
-            out += np.einsum("vi,vi->v", shadowed, l_sh, dtype=np.float64)[:, None] \
-                * light.color[None, :]
+            lit = np.einsum("vi,vi->v", shadowed, l_sh).astype(np.float64)
+            out += lit[:, None] * light.color[None, :]
     return out

@@ -12,6 +12,8 @@ same value and are written back harmlessly.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from shtools.runtime.accumulate import BlockKernel, accumulate_blocks
@@ -25,7 +27,8 @@ TILE_ROWS = 32
 def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_centers,
                         sphere_radii, sphere_weights, cut_sizes, table: CapLogTable, *,
                         self_shadow: bool = True, chunk_pairs: int = 1 << 16,
-                        kernel: BlockKernel | None = None) -> np.ndarray:
+                        threads: int = 1, kernels: list[BlockKernel] | None = None
+                        ) -> np.ndarray:
     """Eq. 38 log sums for receivers grouped in clusters with per-cluster sphere lists.
 
     Parameters
@@ -47,8 +50,10 @@ def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_
     self_shadow : bool
     chunk_pairs : int
         Target pairs per block.
-    kernel : BlockKernel, optional
-        Reused kernel (keeps scratch buffers between frames).
+    threads : int
+        Worker threads (NumPy releases the GIL in its loops).
+    kernels : list of BlockKernel, optional
+        Reused kernels, one per thread (keep scratch buffers between frames).
 
     Returns
     -------
@@ -75,8 +80,7 @@ def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_
     cen = np.asarray(sphere_centers, dtype=np.float32)
     rad = np.asarray(sphere_radii, dtype=np.float32)
     wts = None if sphere_weights is None else np.asarray(sphere_weights, dtype=np.float32)
-    if kernel is None or kernel.table is not table:
-        kernel = BlockKernel(table)
+    blocks = []
     start = 0
     while start < by_size.size:
         s_max = max(1, int(sizes[by_size[start]]))
@@ -88,13 +92,30 @@ def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_
                 break
             s_max = s_next
             stop += 1
-        tiles = by_size[start:stop]
-        cl = tile_cluster[tiles]
-        r = rows[tiles]
-        block = accumulate_blocks(
-            pts[r], nrm[r], cen[cl, :s_max], rad[cl, :s_max], table,
-            weights=None if wts is None else wts[cl, :s_max], self_shadow=self_shadow,
-            kernel=kernel)
-        out[r.ravel()] = block.reshape(-1, n * n)
+        blocks.append((by_size[start:stop], s_max))
         start = stop
+
+    def run(block_list, kern):
+        for tiles, s_max in block_list:
+            cl = tile_cluster[tiles]
+            r = rows[tiles]
+            res = accumulate_blocks(
+                pts[r], nrm[r], cen[cl, :s_max], rad[cl, :s_max], table,
+                weights=None if wts is None else wts[cl, :s_max], self_shadow=self_shadow,
+                kernel=kern)
+            # padded rows repeat a vertex of the same cluster: identical values
+            out[r.ravel()] = res.reshape(-1, n * n)
+
+    kernels = list(kernels) if kernels else []
+    while len(kernels) < max(1, threads):
+        kernels.append(BlockKernel(table))
+    if threads <= 1 or len(blocks) < 2:
+        run(blocks, kernels[0])
+        return out
+    # NumPy releases the GIL inside its array loops, so threads share the cores;
+    # blocks are dealt round-robin (they are sorted by size, so loads balance)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = [pool.submit(run, blocks[k::threads], kernels[k]) for k in range(threads)]
+        for f in futures:
+            f.result()
     return out

@@ -12,40 +12,33 @@ from __future__ import annotations
 
 import numpy as np
 
+from shtools.geometry.skin import quaternion_matrix, slerp, trs_matrix
 from shtools.scene.scene import Keyframe, LightKey, ObjectSpec, Pose, SphereLightSpec
+
+__all__ = [
+    "SkinnedMotion",
+    "interpolate_pose",
+    "light_at",
+    "local_matrix",
+    "pose_matrix",
+    "quaternion_to_matrix",
+    "slerp",
+    "transform_normals",
+    "transform_points",
+    "transform_spheres",
+    "vertex_normals",
+    "world_matrices",
+]
 
 
 # --------------------------------------------------------------------------- quaternions
-def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, u: float) -> np.ndarray:
-    """Spherical linear interpolation of unit quaternions along the shortest arc."""
-    q0 = np.asarray(q0, dtype=float)
-    q1 = np.asarray(q1, dtype=float)
-    dot = float(np.dot(q0, q1))
-    if dot < 0.0:  # q and -q are the same rotation; take the short way round
-        q1, dot = -q1, -dot
-    if dot > 0.9995:  # nearly parallel: lerp is exact to rounding and avoids 0/0
-        q = q0 + u * (q1 - q0)
-        return q / np.linalg.norm(q)
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    return (np.sin((1 - u) * theta) * q0 + np.sin(u * theta) * q1) / np.sin(theta)
+# glTF's quaternion (x, y, z, w) helpers are shared with the skin loader.
+quaternion_to_matrix = quaternion_matrix
 
 
 def pose_matrix(pose: Pose) -> np.ndarray:
     """Homogeneous matrix (4, 4) of ``T * R * S``."""
-    m = np.eye(4)
-    m[:3, :3] = quaternion_to_matrix(pose.quaternion) * pose.scale[None, :]
-    m[:3, 3] = pose.translate
-    return m
+    return trs_matrix(pose.translate, pose.quaternion, pose.scale)
 
 
 # --------------------------------------------------------------------------- keyframes
@@ -164,20 +157,11 @@ class SkinnedMotion:
     """
 
     def __init__(self, model, animation=0, speed=1.0, offset=0.0):
-        from shtools.errors import InputError
-
         self.model = model
-        if isinstance(animation, str):
-            if animation not in model.animations:
-                raise InputError(
-                    f"no animation named '{animation}' (has: {', '.join(model.animations)})")
-            animation = model.animations.index(animation)
-        if not 0 <= animation < len(model.animations):
-            raise InputError(f"animation index {animation} out of range (the model has "
-                             f"{len(model.animations)})")
-        self.animation = int(animation)
+        self.animation = animation
         self.speed, self.offset = float(speed), float(offset)
-        self.duration = float(model.duration(self.animation))
+        # raises InputError naming the file when the clip does not exist
+        self.duration = float(model.duration(animation))
 
     def clip_time(self, t: float) -> float:
         ct = self.offset + self.speed * t

@@ -71,36 +71,44 @@ def _dc_isolate(f: np.ndarray):
     return np.exp(f[:, 0].astype(np.float64) / SQRT_4PI), f_hat, norm
 
 
-def _repeated_squaring(g: np.ndarray, q: np.ndarray, order: int) -> np.ndarray:
-    """Square row ``b`` of ``g`` ``q[b]`` times (eq. 21)."""
+def _repeated_squaring(g: np.ndarray, q: np.ndarray, order: int,
+                       in_order: int | None = None) -> np.ndarray:
+    """Square row ``b`` of ``g`` ``q[b]`` times (eq. 21), in ``max(q)`` batched passes.
+
+    ``g`` has ``order**2`` columns; if only its first ``in_order**2`` can be
+    nonzero, the first pass squares just those (cheaper, same result).
+    """
     qmax = int(q.max(initial=0))
+    if qmax == 0:
+        return g
+    perm = np.argsort(-q, kind="stable")  # rows needing more squarings first
+    q_sorted = q[perm]
+    work = g[perm]
     for step in range(qmax):
-        rows = np.nonzero(q > step)[0]
-        if rows.size == g.shape[0]:
-            g = square(g, order)
-        else:
-            g[rows] = square(g[rows], order)
-    return g
+        count = int(np.count_nonzero(q_sorted > step))  # a prefix of the sorted rows
+        cols = order * order if step or in_order is None else in_order * in_order
+        work[:count] = square(work[:count, :cols], order)
+    out = np.empty_like(work)
+    out[perm] = work
+    return out
 
 
 def _factored_series(f: np.ndarray, degree: int, order: int) -> np.ndarray:
-    """Eq. 22 for ``h = exp``: even part plus ``f * odd part``."""
+    """Eq. 22 for ``h = exp`` (``degree >= 1``): even part plus ``f * odd part``."""
     b, size = f.shape
     coef = [1.0 / math.factorial(k) for k in range(degree + 1)]
-    even = _one(b, size, f.dtype) * coef[0]
-    odd = _one(b, size, f.dtype) * coef[1] if degree >= 1 else None
+    even = _one(b, size, f.dtype)  # h_0 = 1
+    odd = _one(b, size, f.dtype)  # h_1 = 1
     f2 = square(f, order) if degree >= 2 else None
-    power = f2  # f^{2k*}
+    power = f2  # f^{2k*}, built as f^{(2k-2)*} * f^{2*}
     for k in range(1, degree // 2 + 1):
         if k > 1:
             power = product(power, f2, order)
         even += coef[2 * k] * power
         if 2 * k + 1 <= degree:
             odd += coef[2 * k + 1] * power
-    if odd is None:
-        return even
-    if degree <= 2:  # odd part is h_1 * 1, and f * 1 = f exactly
-        return even + coef[1] * f
+    if degree <= 2:  # the odd part is just 1, and f * 1 = f exactly
+        return even + f
     return even + product(f, odd, order)
 
 
@@ -185,7 +193,9 @@ def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | N
         from shtools.sh.tables import default_tables
 
         tables = default_tables(n)
-    per_item = {"exact": 3 * n**4 * 8, "ol": 8 * n * n * 8}.get(method, 64 * work**4 * 4)
+    # bytes of working memory per vector: product matrices for "exact", nodes of the
+    # quadrature for "volterra", a dozen SH vectors (and product nodes) otherwise
+    per_item = 3 * n**4 * 8 if method == "exact" else 16 * (work + 1) ** 2 * 8
     if method == "volterra":
         qd = 6 * n + 18 if quad_degree is None else int(quad_degree)
         dirs, w = sphere_quadrature(qd)
@@ -210,10 +220,11 @@ def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | N
                 scale = np.ldexp(1.0, -q)
                 scaled = f_hat * scale[:, None].astype(dtype)
                 if method == "hyb":
-                    g = _pad(_ol(scaled, norm * scale, tables), work)
+                    g = _repeated_squaring(_pad(_ol(scaled, norm * scale, tables), work), q,
+                                           work, in_order=n)
                 else:
-                    g = _factored_series(_pad(scaled, work), int(degree), work)
-                g = _repeated_squaring(g, q, work)
+                    g = _repeated_squaring(_factored_series(_pad(scaled, work), int(degree), work),
+                                           q, work)
             g *= dc[:, None].astype(dtype)
         out[s : s + step] = g[:, : n * n]
     return out.reshape(*lead, n * n)

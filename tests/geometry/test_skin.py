@@ -259,6 +259,22 @@ def test_cli_bind_and_bad_rigs(tmp_path, run_cli):
     posed = pose_bound_spheres(bound.bone_index, bound.bone_vectors, np.tile(np.eye(4), (3, 1, 1)))
     np.testing.assert_allclose(posed, centers, atol=1e-9)
     assert '"mesh_closed": true' in stdout
+    assert bound.fit_radii is None
+
+    grown = tmp_path / "grown.h5"
+    code, _, stderr = run_cli("spheres", "bind", spheres, rig_path, "-o", grown,
+                              "--cover-animations")
+    assert code == 0, stderr
+    bound = read_bound(grown)
+    np.testing.assert_array_equal(bound.fit_radii, np.full(3, 0.4))
+    assert np.all(bound.radii >= bound.fit_radii) and np.any(bound.radii > 0.4)
+
+    still = tmp_path / "still.glb"
+    build_rig(still, animated=False)
+    target = tmp_path / "never.h5"
+    code, _, stderr = run_cli("spheres", "bind", spheres, still, "-o", target,
+                              "--cover-animations")
+    assert code == 1 and "needs an animation" in stderr and not target.exists()
 
     static = tmp_path / "static.glb"
     build_rig(static, skinned=False)
@@ -297,3 +313,22 @@ def test_covering_radii_keep_vertices_covered_over_the_animation(rig):
         # with the rest radii the bent, stretched bar is not covered at the end
         if t == 1.0:
             assert np.any((dist - radii).min(axis=1) > 0.05)
+
+
+def test_spheres_fitted_in_scene_space_are_moved_to_bind_space(rig):
+    from shtools.geometry.binding import spheres_to_bind_space
+
+    path, _ = rig
+    model = load_skinned_gltf(path)
+    # the mesh node is translated by (5, 5, 5): scene = bind + 5 (trimesh.load's view)
+    np.testing.assert_allclose(model.mesh_transform[:3, 3], [5, 5, 5])
+    centers = np.array([[0.5, 0, 0], [1.5, 0, 0]])
+    radii = np.full(2, 0.8)
+    c, r, space = spheres_to_bind_space(centers + 5.0, radii, model)
+    assert space == "scene"
+    np.testing.assert_allclose(c, centers, atol=1e-12)
+    np.testing.assert_allclose(r, radii)
+    c, r, space = spheres_to_bind_space(centers, radii, model)
+    assert space == "bind" and np.array_equal(c, centers)
+    with pytest.raises(InputError, match="cover only"):
+        spheres_to_bind_space(centers + 50.0, radii, model)

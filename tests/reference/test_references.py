@@ -84,7 +84,7 @@ def test_product_space_single_sphere_is_its_cap():
 
 def test_product_space_is_sequential_truncated_products():
     rng = np.random.default_rng(2)
-    centers = rng.normal(size=(4, 3)) + [0, 3, 0]
+    centers = rng.normal(size=(4, 3)) + np.array([0.0, 3.0, 0.0])
     radii = rng.uniform(0.2, 0.5, 4)
     p = np.zeros((1, 3))
     got = product_space_visibility(p, [UP], (centers, radii), 3, acc_order=5)

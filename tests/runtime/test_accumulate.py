@@ -46,7 +46,7 @@ def test_accumulation_matches_float64_sum(order):
 
 
 def test_single_sphere_log_exponentiates_to_the_cap_visibility():
-    """One sphere: exp of its log vector is the cap visibility vector (eigen log inverts exactly)."""
+    """One sphere: exp of its log vector is the cap visibility vector (the log inverts)."""
     from shtools.sh import exp
 
     order = 4
@@ -108,3 +108,26 @@ def test_clustered_tiles_equal_per_cluster_accumulation():
         want = accumulate_log(pts[rows], nrm[rows], cen[c, :cuts[c]], rad[c, :cuts[c]], table,
                               weights=wts[c, :cuts[c]])
         np.testing.assert_allclose(got[rows], want, rtol=1e-5, atol=1e-5)
+
+
+def test_threaded_accumulation_and_exp_equal_single_thread():
+    """Two worker threads produce exactly the single-thread result."""
+    from shtools.reference.scenes import capsule_scene
+    from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker
+
+    sc = capsule_scene(grid=20)
+    blockers = [SphereBlocker(sc.centers, sc.radii)]
+    results = []
+    for threads in (1, 2):
+        rt = ShadowRuntime(ShadowSettings(order=4, threads=threads, chunk_pairs=1024,
+                                          vertices_per_cluster=50))
+        results.append(rt.visibility(sc.vertices, sc.normals, blockers))
+    np.testing.assert_array_equal(results[0], results[1])
+    from shtools.runtime.fast_exp import fast_exp
+    from shtools.sh.tables import default_tables
+
+    f = np.random.default_rng(1).normal(size=(300, 16)).astype(np.float32)
+    for method in ("hyb", "ps*"):
+        one = fast_exp(f, method, default_tables(4), chunk=64, threads=1)
+        two = fast_exp(f, method, default_tables(4), chunk=64, threads=2)
+        np.testing.assert_array_equal(one, two)

@@ -133,3 +133,27 @@ def test_continuity_across_the_plane_through_the_centre(radius):
                   for h in hs]).astype(np.float64)
     jumps = np.linalg.norm(np.diff(f, axis=0), axis=1)
     assert jumps[99] <= 3.0 * np.delete(jumps, 99).max() + 1e-6
+
+
+def test_in_place_block_rules_match_the_reference_rules():
+    """The runtime's whole-block float32 path against the float64 reference function."""
+    from shtools.runtime.self_shadow import apply_self_shadow_rules_inplace
+
+    rng = np.random.default_rng(8)
+    shape = (7, 9, 11)
+    d = rng.normal(size=(*shape, 3))
+    r = rng.uniform(0.05, 1.5, shape)
+    nrm = rng.normal(size=(shape[0], shape[1], 1, 3))
+    nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+    want = apply_self_shadow_rules(d[..., 0], d[..., 1], d[..., 2], r,
+                                   nrm[..., 0], nrm[..., 1], nrm[..., 2])
+    f32 = [np.ascontiguousarray(a, dtype=np.float32) for a in (d[..., 0], d[..., 1], d[..., 2], r)]
+    n32 = nrm.astype(np.float32)
+    h = f32[0] * n32[..., 0] + f32[1] * n32[..., 1] + f32[2] * n32[..., 2]
+    scratch = [np.empty(shape, np.float32) for _ in range(5)]
+    masks = [np.empty(shape, bool) for _ in range(2)]
+    count = apply_self_shadow_rules_inplace(*f32, h, n32[..., 0], n32[..., 1], n32[..., 2],
+                                            scratch, masks)
+    assert count == int((np.abs((d * nrm).sum(-1)) < r).sum())
+    for got, exp_ in zip(f32, want, strict=True):
+        np.testing.assert_allclose(got, exp_, atol=2e-5)  # float32 arithmetic

@@ -138,3 +138,17 @@ def test_cap_visibility_dims_a_sky():
     # unshadowed 1 minus the blocked cosine-weighted part sin^2(theta); order-4 truncation
     # of the cap and H leaves a few percent
     assert got[0, 0] == pytest.approx(1 - math.sin(theta) ** 2, rel=0.05)
+
+
+def test_cached_transfer_follows_changed_normals():
+    """The runtime keeps H(N) of static receivers; moved normals must be re-evaluated."""
+    order = 4
+    g, env, nrm = _random(order, seed=4)
+    rt = ShadowRuntime(ShadowSettings(order=order, acc_order=order))
+    pts = np.zeros_like(nrm)
+    rt.shade(g, pts, nrm, env)
+    moved = nrm.copy()
+    moved[::3] = moved[::3, [2, 0, 1]]  # some receivers turn
+    got = rt.shade(g, pts, moved, env)
+    fresh = ShadowRuntime(ShadowSettings(order=order, acc_order=order)).shade(g, pts, moved, env)
+    np.testing.assert_allclose(got, fresh, rtol=1e-12, atol=1e-12)

@@ -7,7 +7,7 @@ import pytest
 import scipy.linalg
 import scipy.special
 
-from shtools.sh import EXP_METHODS, cap, exp, log, product, product_matrix
+from shtools.sh import EXP_METHODS, cap, exp, log, product, product_matrix, squarings
 
 SQRT_4PI = math.sqrt(4 * math.pi)
 
@@ -39,14 +39,16 @@ def scenes():
     return random_cap_scenes(np.random.default_rng(2024), 300, 4)
 
 
-def test_exact_equals_matrix_exponential_of_product_matrix():
+@pytest.mark.parametrize("order", [1, 4, 8])
+def test_exact_equals_matrix_exponential_of_product_matrix(order):
     # eq. 26: exp*(f) = sum_k M_f^k 1 / k! = expm(M_f) 1; scipy's Padé expm is independent
     # of the eigen-decomposition of eq. 28.  Relative 1e-10: both are backward-stable
-    # float64 evaluations of a 16x16 exponential with ||M_f|| < 10.
-    rng = np.random.default_rng(0)
-    f = rng.normal(size=(6, 16))
+    # float64 evaluations of an exponential with ||M_f|| < 10.
+    rng = np.random.default_rng(order)
+    size = order * order
+    f = rng.normal(size=(6, size)) / order
     f[:, 0] -= 4.0
-    one = np.eye(16)[0] * SQRT_4PI
+    one = np.eye(size)[0] * SQRT_4PI
     ref = np.stack([scipy.linalg.expm(m) @ one for m in product_matrix(f)])
     np.testing.assert_allclose(exp(f, "exact"), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
@@ -92,6 +94,17 @@ def test_every_method_exact_on_constants(method):
     ref[:, 0] = np.exp(c) * SQRT_4PI
     tol = 1e-5 if method == "ps" else 1e-12
     np.testing.assert_allclose(exp(f, method), ref, atol=tol)
+
+
+@pytest.mark.parametrize("order", [2, 6, 8])
+def test_fast_methods_track_exact_at_other_orders(order):
+    # Scenes of 3–8 caps at orders 2, 6, 8, median relative L2 against exp*.  Measured:
+    # PS*-2 6e-5, 0.2 %, 0.6 %; HYB 7e-7, 2.1 %, 2.3 % (HYB's error is OL's missing
+    # non-DC second-order term, amplified by the squarings).  Bounds: ~2x margin.
+    log_sum, _ = random_cap_scenes(np.random.default_rng(order), 40, order, max_caps=8)
+    exact = exp(log_sum, "exact")
+    assert np.median(rel_l2(exp(log_sum, "ps*"), exact)) < 0.015
+    assert np.median(rel_l2(exp(log_sum, "hyb"), exact)) < 0.05
 
 
 @pytest.mark.parametrize("method", ["ps*", "hyb", "ps"])
@@ -183,3 +196,51 @@ def test_log_of_constant_and_bad_method():
         log(g, "taylor")
     with pytest.raises(ValueError, match="exp method"):
         exp(g, "pade")
+
+
+def test_squaring_rule_and_hyb_without_squarings_is_ol():
+    # Sec. 4.1: p = max(0, floor(log2 ||f_hat||) + 3)
+    np.testing.assert_array_equal(squarings([0.0, 0.1, 0.2499, 0.25, 1.0, 4.8, 9.0]),
+                                  [0, 0, 0, 1, 3, 5, 6])
+    rng = np.random.default_rng(3)
+    f = rng.normal(size=(10, 16))
+    f[:, 1:] *= 0.2 / np.linalg.norm(f[:, 1:], axis=1, keepdims=True)  # ||f_hat|| < 1/4
+    np.testing.assert_allclose(exp(f, "hyb"), exp(f, "ol"), rtol=1e-14)
+    # PS*-2 without squarings is 1 + f + f*f/2 times the DC factor, i.e. PS-2 on f_hat.
+    f_hat = f.copy()
+    f_hat[:, 0] = 0
+    dc = np.exp(f[:, :1] / SQRT_4PI)
+    np.testing.assert_allclose(exp(f, "ps*", degree=2), dc * exp(f_hat, "ps", degree=2),
+                               rtol=1e-13)
+
+
+@pytest.mark.parametrize("method", EXP_METHODS)
+def test_exp_chunking_batching_and_float32(method, monkeypatch):
+    rng = np.random.default_rng(4)
+    f = rng.normal(size=(3, 70, 9)) * 0.7
+    f[..., 0] -= 3.0
+    whole = exp(f, method)
+    assert whole.shape == (3, 70, 9)
+    monkeypatch.setattr("shtools.sh.exponential.CHUNK_BYTES", 1)  # one vector per chunk
+    # Same arithmetic, but BLAS may block sums differently for other batch sizes:
+    # round-off relative to the largest coefficient.
+    tol = 1e-13 * np.abs(whole).max()
+    np.testing.assert_allclose(exp(f, method), whole, rtol=1e-13, atol=tol)
+    np.testing.assert_allclose(exp(f[1, 5], method), whole[1, 5], rtol=1e-13, atol=tol)
+    single = exp(f.astype(np.float32), method)
+    assert single.dtype == np.float32
+    # float32 keeps ~1e-6 relative accuracy through a handful of products/squarings
+    np.testing.assert_allclose(single, whole, rtol=1e-4, atol=1e-5 * np.abs(whole).max())
+
+
+def test_ps_star_factored_series_converges_with_degree():
+    # Without squarings (||f_hat|| = 0.2), PS*-p differs from exp* by the series remainder
+    # (~0.2^(p+1)/(p+1)!: 1e-3, 7e-5, 3e-6 for p = 2, 3, 4 before normalisation) plus a
+    # floor from regrouping truncated products (measured 2.6e-7).
+    rng = np.random.default_rng(3)
+    f = rng.normal(size=(50, 16))
+    f[:, 1:] *= 0.2 / np.linalg.norm(f[:, 1:], axis=1, keepdims=True)
+    exact = exp(f, "exact")
+    errors = [rel_l2(exp(f, "ps*", degree=p), exact).max() for p in (2, 3, 4, 8)]
+    assert errors[0] < 2e-4 and errors[1] < 1e-5 and errors[2] < 1e-6 and errors[3] < 1e-6
+    assert errors[0] > errors[1] > errors[2]

@@ -1,0 +1,132 @@
+"""``shtools spheres``: fit bounding sphere sets, import/export ``.sph``, trees, binding.
+
+``fit``, ``import`` and ``export`` live here; ``tree`` and ``bind`` come from
+:mod:`shtools.cli.spheres_tree`.  Commands are thin: parse, call
+:mod:`shtools.geometry`, write one asset, report.
+"""
+
+from __future__ import annotations
+
+import click
+
+from shtools.cli._common import json_option, output_option, progress, report
+
+
+@click.group()
+def spheres():
+    """Sphere-set blockers: fit spheres to a mesh, build trees, bind to skins."""
+
+
+@spheres.command("fit")
+@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
+@click.option("-n", "--count", "count", type=int, required=True,
+              help="Number of spheres N (>= 1).")
+@output_option
+@click.option("--method", type=click.Choice(["variational", "octree", "kmeans"]),
+              default="variational", show_default=True,
+              help="variational (Wang et al. 2006, minimal outside volume) or a baseline.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of sampling and initialisation (same seed -> identical asset).")
+@click.option("--thickness", type=float, default=None,
+              help="Fit a shell of this thickness around the surface (for flat/open sheets).")
+@click.option("--iterations", type=click.IntRange(min=1), default=40, show_default=True,
+              help="Maximum clustering rounds of the variational fit.")
+@json_option
+def fit(mesh_path, count, output, method, seed, thickness, iterations, as_json):
+    """Fit N spheres bounding the solid of MESH with minimal outside volume.
+
+    Writes a 'spheres' asset with centers, radii and outside_volume_ratio
+    E = sum_i V(S_i - T) / V(T).
+    """
+    from shtools.data_formats.spheres import write_spheres
+    from shtools.errors import InputError
+    from shtools.geometry.mesh import load_mesh
+    from shtools.geometry.sphere_fit import fit_spheres
+
+    if count < 1:
+        raise InputError(f"-n must be >= 1 (got {count})")
+    if thickness is not None and not thickness > 0:
+        raise InputError(f"--thickness must be > 0 (got {thickness})")
+    mesh = load_mesh(mesh_path)
+    bar = progress(total=iterations, desc="fit")
+
+    def tick(iteration, energy):
+        bar.n = min(iteration, iterations)
+        bar.set_postfix(E=f"{energy:.3f}")
+        bar.refresh()
+
+    try:
+        result = fit_spheres(mesh, count, method=method, seed=seed, thickness=thickness,
+                             max_iterations=iterations, path=mesh_path, progress=tick)
+    finally:
+        bar.close()
+    parameters = {"n": count, "method": method, "seed": seed, "thickness": thickness,
+                  "iterations": iterations}
+    write_spheres(output, result, inputs={"mesh": mesh_path}, parameters=parameters)
+    summary = {
+        "output": output,
+        "spheres": len(result),
+        "method": method,
+        "outside_volume_ratio": result.outside_volume_ratio,
+        "coverage": result.coverage,
+        "seconds": round(result.info.get("seconds", 0.0), 3),
+        "volume": result.info.get("volume"),
+        **{k: v for k, v in result.info.items()
+           if k in ("iterations", "teleports_tried", "teleports_accepted", "points")},
+    }
+    report(summary, as_json,
+           f"wrote {output}: {len(result)} spheres ({method}), "
+           f"E = {result.outside_volume_ratio:.4f}, coverage {result.coverage:.3f}")
+
+
+@spheres.command("import")
+@click.argument("sph_path", metavar="FILE.sph", type=click.Path(dir_okay=False))
+@output_option
+@click.option("--level", type=int, default=None,
+              help="Tree level to import (0 = root); default the deepest non-empty level.")
+@click.option("--mesh", "mesh_path", type=click.Path(dir_okay=False), default=None,
+              help="Mesh the spheres bound: used to compute outside_volume_ratio.")
+@json_option
+def import_cmd(sph_path, output, level, mesh_path, as_json):
+    """Convert a spheretree .sph file into a 'spheres' asset."""
+    from shtools.data_formats.spheres import write_spheres
+    from shtools.geometry.sph_format import read_sph
+
+    result = read_sph(sph_path, level=level)
+    inputs = {"sph": sph_path}
+    if mesh_path is not None:
+        from shtools.geometry.mesh import load_mesh
+        from shtools.geometry.outside_volume import OutsideVolume
+
+        mesh = load_mesh(mesh_path)
+        result.outside_volume_ratio = OutsideVolume(mesh).outside_volume_ratio(
+            result.centers, result.radii)
+        inputs["mesh"] = mesh_path
+    write_spheres(output, result, inputs=inputs,
+                  parameters={"level": result.info.get("level"), "source": "sph"})
+    summary = {"output": output, "spheres": len(result), "level": result.info.get("level"),
+               "outside_volume_ratio": result.outside_volume_ratio}
+    report(summary, as_json, f"wrote {output}: {len(result)} spheres from level "
+                             f"{result.info.get('level')} of {sph_path}")
+
+
+@spheres.command("export")
+@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@output_option
+@json_option
+def export_cmd(spheres_path, output, as_json):
+    """Write a 'spheres' asset as a two-level spheretree .sph file."""
+    from shtools.data_formats.spheres import read_spheres
+    from shtools.geometry.sph_format import write_sph
+
+    result = read_spheres(spheres_path)
+    write_sph(output, result)
+    report({"output": output, "spheres": len(result)}, as_json,
+           f"wrote {output}: {len(result)} spheres")
+
+
+# the tree engineer's commands (shtools/cli/spheres_tree.py)
+from shtools.cli.spheres_tree import bind, tree  # noqa: E402
+
+spheres.add_command(tree)
+spheres.add_command(bind)

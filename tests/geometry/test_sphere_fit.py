@@ -1,0 +1,114 @@
+"""Sphere fitting: bounding property, E against Monte Carlo, E falls with N,
+determinism, baselines, bad input.  Small meshes and N keep this fast."""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+import pytest
+import trimesh
+
+from shtools.errors import InputError
+from shtools.geometry.sphere_fit import fit_spheres
+
+#: Rounds of the variational fit in tests (the default is 40; fewer suffice on
+#: these small meshes and keep the suite fast).
+ITERATIONS = 10
+
+#: Surface and interior sample counts in tests (default 2000+ each).
+SAMPLES = 600
+
+
+def _inside_any(points, spheres, tolerance=0.0):
+    d = np.linalg.norm(points[:, None, :] - spheres.centers[None, :, :], axis=-1)
+    return np.any(d <= spheres.radii[None, :] + tolerance, axis=1)
+
+
+@pytest.fixture(scope="module")
+def torus_fits():
+    """Variational fits of the 32x16 torus for N = 4, 8, 16 (shared by tests)."""
+    mesh = trimesh.creation.torus(1.0, 0.35, major_sections=32, minor_sections=16)
+    return mesh, {n: fit_spheres(mesh, n, seed=1, max_iterations=ITERATIONS, samples=SAMPLES)
+                  for n in (4, 8, 16)}
+
+
+@pytest.mark.parametrize("which", ["capsule_union_mesh", "character_mesh", "open_mesh"])
+def test_bounding_property(request, which):
+    mesh = request.getfixturevalue(which)
+    result = fit_spheres(mesh, 8, seed=0, max_iterations=6, samples=SAMPLES)
+    assert len(result) == 8
+    assert result.coverage == 1.0
+    # every vertex exactly (they are part of the covered set) ...
+    assert np.all(_inside_any(np.asarray(mesh.vertices), result))
+    # ... and fresh surface samples the fit never saw, up to the spacing of the
+    # covered samples (spheres bound sample points; between them the surface
+    # can bulge out by at most about that spacing): 1% of the diagonal
+    fresh, _ = trimesh.sample.sample_surface(mesh, 20_000, seed=99)
+    diag = np.linalg.norm(np.ptp(mesh.vertices, axis=0))
+    assert np.all(_inside_any(np.asarray(fresh), result, tolerance=0.01 * diag))
+
+
+def test_outside_volume_ratio_matches_monte_carlo(torus_fits):
+    mesh, fits = torus_fits
+    result = fits[8]
+    rng = np.random.default_rng(7)
+    # independent estimate: uniform points in the box around spheres and mesh;
+    # inside T iff winding number >= 1/2; count sphere membership per sphere
+    lo = np.minimum(mesh.bounds[0], (result.centers - result.radii[:, None]).min(axis=0))
+    hi = np.maximum(mesh.bounds[1], (result.centers + result.radii[:, None]).max(axis=0))
+    n = 500_000
+    pts = lo + rng.random((n, 3)) * (hi - lo)
+    inside_t = igl.fast_winding_number(np.asarray(mesh.vertices, float),
+                                       np.asarray(mesh.faces, np.int64), pts) >= 0.5
+    d2 = np.sum((pts[:, None, :] - result.centers[None]) ** 2, axis=-1)
+    count_out = np.sum((d2 <= result.radii**2) & ~inside_t[:, None])
+    e_mc = count_out / inside_t.sum()
+    # relative MC noise ~ 1/sqrt(count) (~1% here) x 4, plus 1% for the
+    # approximate fast winding number and the flux quadrature
+    assert result.outside_volume_ratio == pytest.approx(e_mc, rel=4 / np.sqrt(count_out) + 0.01)
+
+
+def test_outside_volume_decreases_with_more_spheres(torus_fits):
+    _, fits = torus_fits
+    energies = [fits[n].outside_volume_ratio for n in (4, 8, 16)]
+    assert energies[0] > energies[1] > energies[2]
+
+
+def test_variational_beats_baselines(torus_fits):
+    mesh, fits = torus_fits
+    variational = fits[16].outside_volume_ratio
+    for method in ("octree", "kmeans"):
+        baseline = fit_spheres(mesh, 16, method=method, seed=1, samples=SAMPLES)
+        assert baseline.coverage == 1.0
+        assert len(baseline) <= 16
+        assert variational < baseline.outside_volume_ratio
+
+
+def test_same_seed_same_spheres(capsule_union_mesh):
+    a = fit_spheres(capsule_union_mesh, 6, seed=3, max_iterations=4, samples=SAMPLES)
+    b = fit_spheres(capsule_union_mesh, 6, seed=3, max_iterations=4, samples=SAMPLES)
+    np.testing.assert_array_equal(a.centers, b.centers)
+    np.testing.assert_array_equal(a.radii, b.radii)
+
+
+def test_flat_sheet_needs_thickness(flat_sheet_mesh):
+    with pytest.raises(InputError, match="--thickness"):
+        fit_spheres(flat_sheet_mesh, 4)
+    shell = fit_spheres(flat_sheet_mesh, 4, thickness=0.1, max_iterations=4,
+                        samples=SAMPLES)
+    assert shell.coverage == 1.0
+    # the vertices of the sheet are inside the spheres of its shell
+    assert np.all(_inside_any(np.asarray(flat_sheet_mesh.vertices), shell))
+
+
+@pytest.mark.parametrize("n", [0, -3, 10**7])
+def test_bad_sphere_counts(torus_fits, n):
+    mesh, _ = torus_fits
+    with pytest.raises(InputError, match="spheres"):
+        fit_spheres(mesh, n, samples=SAMPLES)
+
+
+def test_unknown_method(torus_fits):
+    mesh, _ = torus_fits
+    with pytest.raises(InputError, match="unknown method"):
+        fit_spheres(mesh, 4, method="medial")
