@@ -10,7 +10,7 @@ OUT    ?= out
 QUICK  ?=
 
 .DEFAULT_GOAL := help
-.PHONY: help demo test bench lint clean
+.PHONY: help demo test bench lint clean golden examples
 
 help: ## Show this help
 	@echo "shtools make targets (a fresh clone needs only $(PYTHON) >= 3.11 and make):"
@@ -29,10 +29,16 @@ demo: $(STAMP) ## Set up and bake the bundled demo scene into out/ (baked.h5, GL
 	$(PY) -m shtools.demo $(OUT)
 
 test: $(STAMP) ## Set up and run the whole test suite (2 workers)
-	$(PY) -m pytest -n 2 -q
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
 
 bench: $(STAMP) ## Run every benchmarks/bench_*.py and print their tables (QUICK=1: short)
 	$(PY) -m benchmarks $(if $(QUICK),--quick)
+
+golden: $(STAMP) ## Regenerate tests/golden/golden.h5 on purpose (review with shtools diff)
+	$(PY) tests/golden/regenerate.py
+
+examples: $(STAMP) ## Build the example asset pipeline in examples/ (make -j2 works)
+	$(MAKE) -C examples
 
 lint: $(STAMP) ## ruff check
 	$(VENV)/bin/ruff check shtools tests benchmarks

@@ -241,7 +241,8 @@ def table_log_vs_product(quick: bool) -> list[dict]:
     v, nrm = ground_grid(grid, (0.0, 0.0), 3.0)
     rows = []
     for order in (4, 6):
-        s = ShadowSettings(order=order, acc_order=order, hierarchy=False)
+        # one thread: the product-space reference runs on one thread too
+        s = ShadowSettings(order=order, acc_order=order, hierarchy=False, threads=1)
         rt = ShadowRuntime(s)
         blk = [SphereBlocker(centers, radii)]
         rt.visibility(v, nrm, blk)

@@ -135,7 +135,15 @@ def main(argv=None) -> None:
     parser.add_argument("--counts", type=int, nargs="*", default=None)
     parser.add_argument("--meshes", nargs="*", default=None,
                         help="subset of: torus capsules character bunny spot armadillo dragon")
+    parser.add_argument("--spheretree-only", action="store_true",
+                        help="only the comparison with the spheretree figures")
+    parser.add_argument("--no-spheretree", action="store_true",
+                        help="skip the comparison with the spheretree figures")
     args = parser.parse_args(argv)
+    if args.spheretree_only:
+        print("## Against spheretree (medial axis) at its sphere counts (target <= 0.5x)\n")
+        print(spheretree_table())
+        return
     counts = args.counts or ([8, 16] if args.quick else [16, 32, 64, 128])
     meshes = _procedural()
     if not args.quick:
@@ -147,7 +155,7 @@ def main(argv=None) -> None:
     print(table(rows))
     print("\n## Variational E / baseline E (Monte-Carlo E; target <= 0.5 at N = 64)\n")
     print(ratio_table(rows))
-    if not args.quick:
+    if not args.quick and not args.no_spheretree:
         print("\n## Against spheretree (medial axis) at its sphere counts (target <= 0.5x)\n")
         print(spheretree_table())
 

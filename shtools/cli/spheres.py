@@ -29,7 +29,7 @@ def spheres():
               help="Seed of sampling and initialisation (same seed -> identical asset).")
 @click.option("--thickness", type=float, default=None,
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
-@click.option("--iterations", type=click.IntRange(min=1), default=40, show_default=True,
+@click.option("--iterations", type=click.IntRange(min=1), default=60, show_default=True,
               help="Maximum clustering rounds of the variational fit.")
 @json_option
 def fit(mesh_path, count, output, method, seed, thickness, iterations, as_json):

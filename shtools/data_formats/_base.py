@@ -185,6 +185,10 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
         raise AssetError("output folder does not exist; create it first", target)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     os.close(fd)
+    # mkstemp makes the file 0600; give outputs the usual umask-governed mode
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
     tmp_path = Path(tmp)
     try:
         yield tmp_path

@@ -134,7 +134,9 @@ def save_gif(images: list[np.ndarray], path: str | os.PathLike, fps: float) -> N
 
     if not images:
         raise InputError("no frames to write", path)
-    frames = [Image.fromarray(img).quantize(colors=255, method=Image.Quantize.MEDIANCUT)
+    # Floyd–Steinberg dithering hides the banding of smooth shading in a 255-colour palette
+    frames = [Image.fromarray(img).quantize(colors=255, method=Image.Quantize.MEDIANCUT,
+                                            dither=Image.Dither.FLOYDSTEINBERG)
               for img in images]
     with atomic_path(path) as tmp:
         frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:],

@@ -156,6 +156,16 @@ def rasterize(
     keep = (bw > 0) & (bh > 0) & (np.abs(area) > 1e-12)
     tri = np.flatnonzero(keep)
     counts = (bw * bh)[tri]
+    # barycentrics as affine functions of the pixel centre: l_k = a_k x + b_k y + c_k
+    with np.errstate(divide="ignore"):
+        inv_area = np.where(np.abs(area) > 1e-12, 1.0 / area, 0.0)
+    x0, y0 = x3[:, 0], y3[:, 0]
+    ex2, ey2 = x3[:, 2] - x0, y3[:, 2] - y0
+    ex1, ey1 = x3[:, 1] - x0, y3[:, 1] - y0
+    coef = np.stack([
+        ey2 * inv_area, -ex2 * inv_area, (ex2 * y0 - ey2 * x0) * inv_area,
+        -ey1 * inv_area, ex1 * inv_area, (ey1 * x0 - ex1 * y0) * inv_area,
+    ], axis=1)
 
     zbuf = np.full(W * H, np.inf)
     win_tri = np.full(W * H, -1, dtype=np.int64)
@@ -174,18 +184,15 @@ def rasterize(
         cnt = counts[start:stop]
         start = stop
         frag_tri = np.repeat(t, cnt)
-        offsets = np.repeat(np.cumsum(cnt) - cnt, cnt)
-        local = np.arange(frag_tri.size) - offsets
-        w_t = bw[frag_tri]
-        px = xmin[frag_tri] + local % w_t
-        py = ymin[frag_tri] + local // w_t
+        local = np.arange(frag_tri.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        w_t = np.repeat(bw[t], cnt)
+        py, px = np.divmod(local, w_t)
+        px += np.repeat(xmin[t], cnt)
+        py += np.repeat(ymin[t], cnt)
         cx, cy = px + 0.5, py + 0.5
-        xa, ya = x3[frag_tri], y3[frag_tri]
-        inv_area = 1.0 / area[frag_tri]
-        l1 = ((cx - xa[:, 0]) * (ya[:, 2] - ya[:, 0]) - (xa[:, 2] - xa[:, 0]) * (cy - ya[:, 0]))
-        l2 = ((xa[:, 1] - xa[:, 0]) * (cy - ya[:, 0]) - (cx - xa[:, 0]) * (ya[:, 1] - ya[:, 0]))
-        l1 *= inv_area
-        l2 *= inv_area
+        c = np.repeat(coef[t], cnt, axis=0)
+        l1 = c[:, 0] * cx + c[:, 1] * cy + c[:, 2]
+        l2 = c[:, 3] * cx + c[:, 4] * cy + c[:, 5]
         l0 = 1.0 - l1 - l2
         inside = (l0 >= -EDGE_EPS) & (l1 >= -EDGE_EPS) & (l2 >= -EDGE_EPS)
         if not inside.any():

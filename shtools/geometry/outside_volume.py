@@ -14,7 +14,7 @@ flux through one triangle is ∫ min(ρ³, r³)/3 dω, so a triangle
 
 Only triangles closer to c than r are visited (a k-d tree query); the rest add
 up to r³/3 · (4π w(c) - Σ_near Ω), with w(c) the generalized winding number at
-the centre (libigl), so the cost is proportional to the triangles near the
+the centre, so the cost is proportional to the triangles near the
 sphere.  :class:`OutsideVolume` is that exact evaluator (error: the quadrature on
 crossing triangles only, < 3e-5 of V(S) on a torus).
 
@@ -170,11 +170,8 @@ class OutsideVolume:
     """
 
     def __init__(self, mesh: trimesh.Trimesh):
-        import igl
-
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
-        self._igl = igl
         self.triangles = self.vertices[self.faces]  # (F, 3, 3)
         self.centroids = self.triangles.mean(axis=1)
         self.tri_radius = np.max(
@@ -187,9 +184,18 @@ class OutsideVolume:
         self.volume = float(np.sum(triple_product(rel[:, 0], rel[:, 1], rel[:, 2])) / 6.0)
 
     def winding_number(self, points: np.ndarray) -> np.ndarray:
-        """Exact generalized winding numbers, shape (P, 3) -> (P,)."""
+        """Exact generalized winding numbers, shape (P, 3) -> (P,).
+
+        Σ of the triangles' solid angles / 4π, summed in a fixed order so that
+        the result is bit-for-bit reproducible (libigl's parallel
+        ``winding_number`` is not, which would break byte-identical assets).
+        """
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        return np.asarray(self._igl.winding_number(self.vertices, self.faces, points))
+        out = np.empty(len(points))
+        for i, p in enumerate(points):
+            rel = self.triangles - p
+            out[i] = np.sum(solid_angle(rel[:, 0], rel[:, 1], rel[:, 2])) / FOUR_PI
+        return out
 
     def intersection_volume(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
         """V(S_i ∩ T) for each sphere.

@@ -13,7 +13,12 @@ SHEXP (Ren et al. 2006, section 6.2):
    Fronts are processed as vectorised batches (breadth first) instead of one
    point per stack pop.
 3. Centre update: per cluster, Powell's method moves the centre to minimise
-   V(S - T) with the radius bounding the cluster's points.
+   V(S - T) with the radius bounding the cluster's points.  Then each sphere
+   shrinks to the points no other sphere covers (E sums the spheres' outside
+   volumes, so a point inside another sphere need not hold a radius up) and
+   Powell re-centres it for those points; the union still covers every point.
+   V(S - T) in this inner loop comes from :class:`FluxSamples` (centroid rule
+   of the flux on small triangles, radial profiles for the flood fill).
 4. Cluster teleportation: when an iteration no longer lowers E, split the
    cluster of largest outside volume at its farthest-apart points and delete
    the cluster most overlapped by the others; keep it only if E drops.
@@ -192,8 +197,8 @@ def fit_spheres(
     method: str = "variational",
     seed: int = 0,
     thickness: float | None = None,
-    max_iterations: int = 40,
-    max_teleport_failures: int = 4,
+    max_iterations: int = 60,
+    max_teleport_failures: int = 6,
     samples: int | None = None,
     path=None,
     progress=None,
@@ -438,12 +443,17 @@ class _State:
 
 
 def _lloyd_step(solid: Solid, centers: np.ndarray) -> _State:
-    """One round: flood-fill clustering, Powell centre update, shrink to own points."""
+    """One round: flood-fill clustering, Powell centre update, shrink and re-centre.
+
+    After the per-cluster update, each sphere shrinks to the points no other
+    sphere covers (E sums spheres separately, so covered points need not hold a
+    radius up) and Powell re-centres it for those points.
+    """
     r_grid = np.linspace(0.0, solid.diag, PROFILE_BINS)
     table = solid.flux.outside_profiles(centers, r_grid)
     labels, _ = _flood_fill(solid, centers, table, r_grid[1])
     c, r, _ = _update_centers(solid, centers, labels)
-    c, r = _shrink(solid, c, r, rounds=1, recenter=False)
+    c, r = _shrink(solid, c, r, rounds=1)
     out = np.array([max(FOUR_PI / 3 * ri**3 - solid.flux.intersection_volume(ci, ri), 0.0)
                     for ci, ri in zip(c, r, strict=True)])
     return _State(c, r, labels, out, float(out.sum() / solid.volume))
@@ -559,24 +569,27 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     pts = solid.cover
     centers = centers.copy()
     radii = radii.copy()
+    order = np.argsort(-radii, kind="stable")
     for _ in range(rounds):
         dist = np.linalg.norm(pts[:, None, :] - centers[None, :, :], axis=-1)  # (P, N)
         inside = dist <= radii[None, :] * (1 + 1e-12)
         count = inside.sum(axis=1)
-        own_sets = {}
-        for i in np.argsort(-radii, kind="stable"):
+        for i in order:
             own = inside[:, i] & (count == 1)
             if not np.any(own):
                 continue
-            new_r = float(dist[own, i].max())
-            lost = inside[:, i] & (dist[:, i] > new_r)
+            radii[i] = float(dist[own, i].max())
+            lost = inside[:, i] & (dist[:, i] > radii[i])
             count[lost] -= 1
             inside[lost, i] = False
-            radii[i] = new_r
-            own_sets[i] = own
         if not recenter:
             break
-        for i, own in own_sets.items():
+        # sequentially, so that a point two spheres share is dropped by at
+        # most one of them
+        for i in order:
+            own = inside[:, i] & (count == 1)
+            if not np.any(own):
+                continue
             hull = hull_vertices(pts[own])
             p0 = centers[i]
             delta = CENTER_STEP * radii[i] + 1e-3 * solid.diag
@@ -585,9 +598,14 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
             res = minimize(f, p0, method="Powell",
                            bounds=list(zip(p0 - delta, p0 + delta, strict=True)),
                            options={"xtol": 1e-2, "ftol": 1e-3, "maxiter": 2, "maxfev": 80})
-            if res.fun < f0:
-                centers[i] = res.x
-                radii[i] = float(np.sqrt(np.max(np.sum((hull - res.x) ** 2, axis=1))))
+            if not res.fun < f0:
+                continue
+            centers[i] = res.x
+            radii[i] = float(np.sqrt(np.max(np.sum((hull - res.x) ** 2, axis=1))))
+            dist[:, i] = np.linalg.norm(pts - centers[i], axis=1)
+            now = dist[:, i] <= radii[i] * (1 + 1e-12)
+            count += now.astype(np.int64) - inside[:, i]
+            inside[:, i] = now
     return centers, radii
 
 

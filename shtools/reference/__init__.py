@@ -4,7 +4,8 @@
 * :func:`raytrace_visibility` — ray tracing of the actual meshes (Embree);
 * :func:`sphere_union_visibility` — exact ray tracing of the sphere union;
 * :func:`relative_rmse` — the error measure of ``shtools eval``;
-* :mod:`shtools.reference.scenes` — procedural evaluation scenes.
+* :mod:`shtools.reference.scenes` — procedural evaluation scenes;
+* :mod:`shtools.reference.evaluation` — the method comparison behind ``shtools eval``.
 
 Unlike :mod:`shtools.runtime`, this package may import the geometry stack.
 """

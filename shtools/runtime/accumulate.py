@@ -10,18 +10,19 @@ For every receiver ``p`` and every sphere ``(P, r)`` of its list, with
 
 where ``W`` holds per-band ratio weights (eq. 38; ones for leaf spheres).
 
-The kernel works on blocks ``(v, S)`` of vertices x spheres in float32, one
-array pass per operation with preallocated buffers:
+The kernel works in float32 on blocks laid out ``(S, K, T)`` — spheres x
+tiles x receivers per tile (each tile has its own sphere list) — one array pass
+per operation, in place, with scratch buffers kept between calls:
 
 * no arcsin: the table is indexed by :math:`1 - \cos\theta = 1 - \sqrt{1 - r^2/d^2}`
-  (:mod:`shtools.runtime.log_table`);
-* the self-shadow rules (:mod:`shtools.runtime.self_shadow`) run only on the
-  pairs whose sphere straddles the tangent plane (a small subset), the others
-  are kept or dropped with one comparison;
+  and one gather fetches value and slope (:mod:`shtools.runtime.log_table`);
+* the self-shadow rules (:mod:`shtools.runtime.self_shadow`) run on the
+  gathered subset of pairs whose sphere straddles the tangent plane, or over
+  the whole block when that subset is large (receivers on the blocker itself);
 * the SH basis is built by the Legendre/complex-power recurrence of
   :mod:`shtools.sh.basis`, and each coefficient is reduced over the spheres at
-  once (``einsum("ij,ij->i")``), so the ``(v, S, n*n)`` array of per-pair
-  vectors is never formed; the basis normalisation is applied once per vertex.
+  once (``einsum("sr,sr->r")`` along contiguous receivers), so the per-pair
+  ``n*n`` vectors are never formed; the normalisation is applied per vertex.
 """
 
 from __future__ import annotations
@@ -59,7 +60,8 @@ def _double_factorial(n: int) -> int:
 
 def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weights=None,
                    self_shadow: bool = True, chunk_pairs: int = 1 << 16,
-                   out: np.ndarray | None = None) -> np.ndarray:
+                   out: np.ndarray | None = None, kernel: BlockKernel | None = None
+                   ) -> np.ndarray:
     """Sum of sphere log-visibility vectors at each receiver (float32), one sphere list.
 
     Parameters
@@ -82,6 +84,8 @@ def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weigh
         Pairs per block (memory ~ ``(20 + n) * 4 * chunk_pairs`` bytes).
     out : ndarray, shape (V, n*n), optional
         float32 destination; the sums are *added* to it when given.
+    kernel : BlockKernel, optional
+        Reused kernel (keeps scratch buffers between calls).
 
     Returns
     -------
@@ -99,7 +103,8 @@ def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weigh
         return out
     w = None if weights is None else np.asarray(weights, dtype=np.float32)[None]
     step = max(1, chunk_pairs // n_s)
-    kernel = BlockKernel(table)
+    if kernel is None or kernel.table is not table:
+        kernel = BlockKernel(table)
     for start in range(0, n_v, step):
         stop = min(n_v, start + step)
         out[start:stop] += accumulate_blocks(

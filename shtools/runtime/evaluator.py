@@ -103,7 +103,7 @@ class ShadowRuntime:
             stats["seconds"]["cuts"] = time.process_time() - t0
             t1 = time.process_time()
             accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
-                           chunk_pairs=s.chunk_pairs, out=f)
+                           chunk_pairs=s.chunk_pairs, out=f, kernel=self._kernels[0])
             stats["pairs"] = pts.shape[0] * centers.shape[0]
             stats["seconds"]["accumulate"] = time.process_time() - t1
         else:
@@ -243,6 +243,11 @@ def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
         )
     if not (np.isfinite(pts).all() and np.isfinite(nrm).all()):
         raise InputError("receiver vertices or normals contain NaN or infinite values")
+    # mesh normals are often only nearly unit; a zero normal (unreferenced vertex)
+    # stays zero and shades black
+    length = np.linalg.norm(nrm, axis=1, keepdims=True)
+    if not np.allclose(length, 1.0, atol=1e-6):
+        nrm = nrm / np.where(length > 0, length, 1.0)
     return pts, nrm
 
 

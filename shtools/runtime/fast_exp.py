@@ -166,17 +166,21 @@ def _exp_block(f, method, tables, degree, ops: QuadratureProducts) -> np.ndarray
         g = _ol(f_hat, norm, tables)
     else:
         q = squarings(norm)
-        scale = np.ldexp(1.0, -q)
-        scaled = f_hat * scale[:, None].astype(f.dtype)
+        # vectors sorted by squaring count (descending): those still needing a
+        # square at each step are a prefix, squared in place without gathers
+        by_q = np.argsort(-q, kind="stable")
+        q_sorted = q[by_q]
+        scale = np.ldexp(1.0, -q_sorted)
+        scaled = f_hat[by_q] * scale[:, None].astype(f.dtype)
         if method == "hyb":
-            g = _ol(scaled, norm * scale, tables)
+            g = _ol(scaled, norm[by_q] * scale, tables)
         else:
             g = _factored_series(scaled, degree, ops)
         for step in range(int(q.max(initial=0))):
-            rows = np.flatnonzero(q > step)
-            if rows.size == g.shape[0]:
-                g = ops.square(g)
-            else:
-                g[rows] = ops.square(g[rows])
+            count = int(np.count_nonzero(q_sorted > step))
+            g[:count] = ops.square(g[:count])
+        unsorted = np.empty_like(g)
+        unsorted[by_q] = g
+        g = unsorted
     g *= dc[:, None].astype(g.dtype)
     return g

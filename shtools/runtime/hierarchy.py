@@ -228,10 +228,10 @@ def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTabl
 def _log_vectors(points, centers, radii, table: CapLogTable):
     """Eq. 34 in float64 for matched rows: ``(P, n*n)``, zonal ``(P, n)``, basis ``(P, n*n)``."""
     delta = centers - points
-    d = np.linalg.norm(delta, axis=1)
+    d = np.sqrt(np.einsum("ij,ij->i", delta, delta))
     d = np.maximum(d, 1e-300)
     s = delta / d[:, None]
-    theta = np.arcsin(np.clip(radii / d, 0.0, 1.0))
-    zh = table.lookup64(theta)
+    sin2 = np.minimum((radii / d) ** 2, 1.0)
+    zh = table.lookup64_x(1.0 - np.sqrt(1.0 - sin2))  # indexed by 1 - cos(theta)
     y = basis(s, table.order)
     return zh[:, band_of(table.order)] * y, zh, y

@@ -97,7 +97,11 @@ class CapLogTable:
 
     def lookup64(self, theta) -> np.ndarray:
         """float64 :math:`f^*_l(\\theta)`, shape ``(..., n)`` (for per-cluster work)."""
-        x = 1.0 - np.cos(np.asarray(theta, dtype=np.float64))
+        return self.lookup64_x(1.0 - np.cos(np.asarray(theta, dtype=np.float64)))
+
+    def lookup64_x(self, one_minus_cos) -> np.ndarray:
+        """float64 :math:`f^*_l` at ``1 - cos(theta)``, shape ``(..., n)``."""
+        x = np.asarray(one_minus_cos, dtype=np.float64)
         t = np.clip(x * (self.samples - 1), 0.0, self.samples - 1)
         idx = np.minimum(t.astype(np.intp), self.samples - 2)
         frac = (t - idx)[..., None]

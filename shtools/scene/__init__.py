@@ -1,0 +1,14 @@
+"""Scenes: TOML files parsed into dataclasses, animation, and the baker.
+
+- :mod:`shtools.scene.scene` — ``load_scene(path) -> Scene`` (validation, errors);
+- :mod:`shtools.scene.primitives` — procedural meshes (plane, sphere, box, capsule, cylinder);
+- :mod:`shtools.scene.animation` — keyframes (lerp/slerp), parent chains, skinning;
+- :mod:`shtools.scene.bake` — ``prepare_scene``, ``pose_frame``, ``bake_scene`` (a
+  generator of per-frame results that streams the ``bake`` asset), ``bake_to_file``.
+
+See ``docs/scenes.md``.
+"""
+
+from shtools.scene.scene import Scene, load_scene, parse_scene
+
+__all__ = ["Scene", "load_scene", "parse_scene"]

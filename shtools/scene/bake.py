@@ -509,6 +509,10 @@ def _raytrace(state: FrameState, order: int, n_dirs: int | None):
 
     from shtools.reference import raytrace_visibility
 
+    if not state.blocker_meshes:  # nothing to hit: visibility is the constant 1
+        vis = np.zeros((len(state.vertices), order * order))
+        vis[:, 0] = math.sqrt(4 * math.pi)
+        return vis
     meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
     kwargs = {} if n_dirs is None else {"n_dirs": n_dirs}
     return raytrace_visibility(state.vertices, state.normals, meshes, order, **kwargs)
@@ -530,11 +534,15 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
     if not moving:
         state = pose_frame(prepared, float(times[0]))
         static_v, static_n = state.vertices, state.normals
+    resolved = runtime_settings(scene, method)
     parameters = {
         "method": method,
         "order": st.order,
-        "acc_order": st.acc_order,
-        "exp_method": st.exp_method if method not in EXP_NAMES else method,
+        # what the runtime actually used (the scene may leave these to it)
+        "acc_order": (resolved.resolved_acc_order() if method not in ("product", "raytrace")
+                      else st.acc_order or st.order),
+        "exp_method": (resolved.resolved_exp_method() if method not in ("product", "raytrace")
+                       else None),
         "window": st.window,
         "window_h": st.window_h,
         "theta_max": st.theta_max,
@@ -583,6 +591,9 @@ def bake_to_file(
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
     ``output``.
     """
+    parent = Path(output).parent
+    if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
+        raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
     prepared = prepare_scene(scene)
     n = 0

@@ -9,7 +9,7 @@ from shtools.runtime import CapLogTable, accumulate_log
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import band_of, basis, log
 from shtools.sh import cap as sh_cap
-from shtools.sh.tables import build_log_tables
+from shtools.sh.tables import build_log_tables, default_tables
 
 #: float32 accumulation of ~40 terms of size <= ~10 plus the table interpolation
 #: (the runtime interpolates in 1 - cos(theta), the reference in theta).
@@ -32,7 +32,7 @@ def reference_log_sum(points, centers, radii, tables, order, weights=None):
 @pytest.mark.parametrize("order", [2, 4, 6])
 def test_accumulation_matches_float64_sum(order):
     rng = np.random.default_rng(order)
-    tables = build_log_tables(order, samples=1024)
+    tables = default_tables(order)
     table = CapLogTable(tables, order)
     pts = rng.normal(size=(150, 3))
     centers = rng.normal(size=(23, 3)) * 3 + [0, 6, 0]
@@ -119,8 +119,8 @@ def test_threaded_accumulation_and_exp_equal_single_thread():
     blockers = [SphereBlocker(sc.centers, sc.radii)]
     results = []
     for threads in (1, 2):
-        rt = ShadowRuntime(ShadowSettings(order=4, threads=threads, chunk_pairs=1024,
-                                          vertices_per_cluster=50))
+        rt = ShadowRuntime(ShadowSettings(order=4, acc_order=4, threads=threads,
+                                          chunk_pairs=1024, vertices_per_cluster=50))
         results.append(rt.visibility(sc.vertices, sc.normals, blockers))
     np.testing.assert_array_equal(results[0], results[1])
     from shtools.runtime.fast_exp import fast_exp

@@ -94,3 +94,15 @@ def test_visibility_api_shapes_and_errors():
         ShadowRuntime(ShadowSettings(order=4, acc_order=6), tables=default_tables(4))
     with pytest.raises(InputError):
         SphereBlocker([[0.0, 0.0, 0.0], [1.0, 0, 0]], [1.0, 1.0], tree=([-1, 0], [0, -1]))
+
+
+def test_receiver_normals_are_normalised():
+    sc = capsule_scene(grid=6)
+    rt = ShadowRuntime(ShadowSettings(order=4, acc_order=4))
+    blockers = [SphereBlocker(sc.centers, sc.radii)]
+    g1 = rt.visibility(sc.vertices, sc.normals, blockers)
+    g2 = rt.visibility(sc.vertices, 3.0 * sc.normals, blockers)
+    np.testing.assert_allclose(g1, g2, rtol=1e-6, atol=1e-6)
+    r1 = rt.shade(g1, sc.vertices, sc.normals, sc.env_sh)
+    r2 = rt.shade(g1, sc.vertices, 3.0 * sc.normals, sc.env_sh)
+    np.testing.assert_allclose(r1, r2, rtol=1e-6, atol=1e-6)

@@ -273,3 +273,39 @@ def test_bad_environment_image_and_tables(tmp_path, run_cli):
     code, _, stderr = run_cli("bake", tmp_path / "scene.toml", "-o", out)
     assert code == 1 and "t2.h5" in stderr and "tables log --order" in stderr
     assert not out.exists()
+
+
+def test_bound_asset_poses_like_on_the_fly_binding(tmp_path, run_cli):
+    """`blocker = { bound = ... }` (from `shtools spheres bind`) and `{ spheres = ... }`
+    bound at bake time pose the same spheres for a skinned object."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from rig import write_bending_tube
+
+    from shtools.data_formats.spheres import write_spheres
+    from shtools.geometry.sphere_set import SphereSet
+    from shtools.scene.bake import pose_frame
+
+    write_bending_tube(tmp_path / "rig.glb")
+    centers = np.array([[0, 0.25, 0], [0, 0.75, 0], [0, 1.25, 0], [0, 1.75, 0]], float)
+    write_spheres(tmp_path / "tube.h5", SphereSet(centers, np.full(4, 0.33)))
+    code, _, stderr = run_cli("spheres", "bind", tmp_path / "tube.h5", tmp_path / "rig.glb",
+                              "-o", tmp_path / "tube_bound.h5")
+    assert code == 0, stderr
+    posed = {}
+    for kind, name in (("bound", "tube_bound.h5"), ("spheres", "tube.h5")):
+        text = scene_text(frames=3) + f"""
+[[objects]]
+name = "tube"
+mesh = "rig.glb"
+role = "blocker"
+translate = [1.5, 0.0, 1.5]
+blocker = {{ {kind} = "{name}" }}
+skin = {{ animation = "bend" }}
+"""
+        scene = parse_scene(text, tmp_path / "scene.toml")
+        posed[kind] = pose_frame(prepare_scene(scene), 1.0).blockers[1].centers
+    np.testing.assert_allclose(posed["bound"], posed["spheres"], atol=1e-9)
+    # and they followed the bend: the top sphere moved from x = 1.5 towards x = 0.75
+    assert posed["bound"][3, 0] < 1.0
