@@ -49,9 +49,41 @@ def srgb_encode(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
+def clip_negative(radiance: np.ndarray) -> np.ndarray:
+    """Bring negative channels to 0 while keeping each colour's luminance.
+
+    Truncated SH visibility rings, so deep contact shadows can come out slightly
+    negative in some channels (e.g. ``(-0.1, -0.06, 0.06)``).  Clamping per
+    channel would keep the positive one and paint such shadows saturated blue;
+    instead each colour is desaturated toward its luminance ``Y`` just enough
+    that its smallest channel is 0, and colours with ``Y <= 0`` become black.
+
+    Parameters
+    ----------
+    radiance : ndarray, shape (..., 3)
+        Linear RGB.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Non-negative linear RGB, equal to the input where it had no negative channel.
+    """
+    rgb = np.asarray(radiance, dtype=float)
+    lum = rgb @ LUMINANCE
+    low = rgb.min(axis=-1)
+    # c' = Y + s (c - Y) with s = Y / (Y - min c) puts the smallest channel at 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(low < 0.0, np.clip(lum / (lum - low), 0.0, 1.0), 1.0)
+    out = lum[..., None] + s[..., None] * (rgb - lum[..., None])
+    return np.where(lum[..., None] > 0.0, np.maximum(out, 0.0), 0.0)
+
+
 def tonemap(radiance: np.ndarray, scale: float, curve: str = "aces") -> np.ndarray:
-    """Linear radiance (..., 3) to sRGB-encoded floats in [0, 1], same shape."""
-    return srgb_encode(CURVES[curve](np.asarray(radiance, dtype=float) * scale))
+    """Linear radiance (..., 3) to sRGB-encoded floats in [0, 1], same shape.
+
+    Negative channels (SH ringing) are first removed by :func:`clip_negative`.
+    """
+    return srgb_encode(CURVES[curve](clip_negative(radiance) * scale))
 
 
 def to_uint8(colors: np.ndarray) -> np.ndarray:

@@ -279,9 +279,13 @@ def _tables(scene: Scene, inputs: dict) -> dict | None:
         return None
     from shtools.data_formats.tables import read_tables
 
+    from shtools.runtime import ShadowSettings
+
     tables = read_tables(st.tables)
-    want = st.acc_order or st.order
-    if int(tables["order"]) < want:
+    # cap logs are order-specific (an order-8 log truncated is not the order-6 log),
+    # so the tables must be built at exactly the order the runtime accumulates at
+    want = ShadowSettings(order=st.order, acc_order=st.acc_order).resolved_acc_order()
+    if int(tables["order"]) != want:
         raise AssetError(f"tables are SH order {tables['order']} but the scene accumulates at "
                          f"order {want}; rebuild them with 'shtools tables log --order {want}'",
                          st.tables)

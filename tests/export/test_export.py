@@ -116,3 +116,17 @@ def test_rasterizer_covers_a_square_exactly_and_interpolates():
                         np.concatenate([colors, np.full((3, 1), 7.0)]), cam, 64, 64,
                         supersample=1)
     assert img2[32, 32, 0] == pytest.approx(7.0)
+
+
+def test_clip_negative_keeps_luminance_and_never_tints():
+    from shtools.export.tonemap import LUMINANCE, clip_negative
+
+    rgb = np.array([[-0.1, -0.06, 0.06],   # luminance < 0: a ringing shadow -> black
+                    [0.5, -0.1, 0.2],      # luminance > 0, one negative channel
+                    [0.2, 0.3, 0.4]])      # untouched
+    out = clip_negative(rgb)
+    np.testing.assert_array_equal(out[0], 0.0)
+    assert out[1].min() >= 0.0 and np.isclose(out[1].min(), 0.0, atol=1e-12)
+    # luminance preserved (exactly, up to rounding) where it was positive
+    np.testing.assert_allclose(out[1:] @ LUMINANCE, rgb[1:] @ LUMINANCE, rtol=1e-12)
+    np.testing.assert_array_equal(out[2], rgb[2])
