@@ -78,6 +78,9 @@ MAX_FLUX_SAMPLES = 25_000
 #: the samples the objective must visit; the next round continues the walk).
 CENTER_STEP = 0.25
 
+#: Powell's line-search tolerance, in units of the largest centre move.
+POWELL_XTOL = 1e-2
+
 #: Rounds of shrink-to-own-points and re-centring after the Lloyd iterations.
 SHRINK_ROUNDS = 3
 
@@ -391,6 +394,22 @@ def _sphere_objective(solid: Solid, hull: np.ndarray, p0: np.ndarray, delta: flo
     return outside
 
 
+def _powell(f, p0: np.ndarray, delta: float) -> tuple[np.ndarray, float]:
+    """Powell's method on the centre within ``p0 ± delta``, in units of ``delta``.
+
+    scipy's bounded Powell line search has an absolute tolerance, so the
+    variables are scaled to make the fit independent of the mesh's units.
+    """
+    from scipy.optimize import minimize
+
+    def scaled(u):
+        return f(p0 + delta * u)
+
+    res = minimize(scaled, np.zeros(3), method="Powell", bounds=[(-1.0, 1.0)] * 3,
+                   options={"xtol": POWELL_XTOL, "ftol": 1e-3, "maxiter": 2, "maxfev": 80})
+    return p0 + delta * np.asarray(res.x, dtype=np.float64), float(res.fun)
+
+
 def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
     """Powell per cluster: minimise V(S_i - T) subject to bounding the cluster.
 
@@ -401,8 +420,6 @@ def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
     outside : ndarray, shape (N,)
         Inner-loop estimate of V(S_i - T).
     """
-    from scipy.optimize import minimize
-
     n = len(centers)
     new_c = centers.copy()
     radii = np.zeros(n)
@@ -422,11 +439,9 @@ def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
         f0 = f(p0)
         best_p, best_f = p0, f0
         if f0 > zero:
-            res = minimize(f, p0, method="Powell",
-                           bounds=list(zip(p0 - delta, p0 + delta, strict=True)),
-                           options={"xtol": 1e-2, "ftol": 1e-3, "maxiter": 2, "maxfev": 80})
-            if res.fun < f0:
-                best_p, best_f = np.asarray(res.x, dtype=np.float64), float(res.fun)
+            p, fp = _powell(f, p0, delta)
+            if fp < f0:
+                best_p, best_f = p, fp
         new_c[i] = best_p
         radii[i] = float(np.sqrt(np.max(np.sum((hull - best_p) ** 2, axis=1))))
         outside[i] = max(best_f, 0.0)
@@ -564,8 +579,6 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     every point.  With ``recenter``, Powell then moves each centre for its own
     points.
     """
-    from scipy.optimize import minimize
-
     pts = solid.cover
     centers = centers.copy()
     radii = radii.copy()
@@ -595,13 +608,11 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
             delta = CENTER_STEP * radii[i] + 1e-3 * solid.diag
             f = _sphere_objective(solid, hull, p0, delta)
             f0 = f(p0)
-            res = minimize(f, p0, method="Powell",
-                           bounds=list(zip(p0 - delta, p0 + delta, strict=True)),
-                           options={"xtol": 1e-2, "ftol": 1e-3, "maxiter": 2, "maxfev": 80})
-            if not res.fun < f0:
+            p, fp = _powell(f, p0, delta)
+            if not fp < f0:
                 continue
-            centers[i] = res.x
-            radii[i] = float(np.sqrt(np.max(np.sum((hull - res.x) ** 2, axis=1))))
+            centers[i] = p
+            radii[i] = float(np.sqrt(np.max(np.sum((hull - p) ** 2, axis=1))))
             dist[:, i] = np.linalg.norm(pts - centers[i], axis=1)
             now = dist[:, i] <= radii[i] * (1 + 1e-12)
             count += now.astype(np.int64) - inside[:, i]

@@ -33,17 +33,23 @@ accumulated at ``n_acc = min(n + 2, 6)`` and exponentiated there with PS*-2
 (HYB when ``n_acc <= 4``), then truncated to ``n``.  Accumulating at 6 for
 shading at 4 roughly halves the truncation error of the visibility (paper
 Fig. 7e) — it is what meets the 3 % radiance target against ray tracing of the
-sphere set — at about twice the frame time of ``acc_order=4``, the fast
+sphere set — at about 1.5x the frame CPU time of ``acc_order=4``, the fast
 setting.  Tables passed in must have exactly the accumulation order (the cap
 log depends on the order it is computed at).
 
 Performance notes: accumulation runs on float32 blocks of (tiles of 32
-receivers of one cluster) x (the cluster's cut, padded with radius-0
-spheres), so per-cluster work is batched without per-pair gathers; the exp
-uses exact quadrature SH products on BLAS (:mod:`~shtools.runtime.fast_exp`);
-``H(N)`` is kept for receivers whose normal did not change.  Set
-``OPENBLAS_NUM_THREADS=1`` on a loaded machine: threaded OpenBLAS spins on
-the small matrix products.
+receivers of one cluster) x (the tile's sphere list, padded with radius-0
+spheres), so per-cluster work is batched without per-pair gathers; a tile's
+list is its cluster's cut minus the spheres behind the tangent plane of all
+its receivers (exactly zero contributions, ~18 % of the pairs of a battle
+scene), ordered so the self-shadow rules run on a prefix of rows only.  The
+exp uses exact quadrature SH products on BLAS, split by the z and azimuthal
+parity of the coefficients (4x fewer flops at order >= 5), with reused scratch
+and the last squaring projected onto the shading order only
+(:mod:`~shtools.runtime.fast_exp`); ratio vectors use the addition theorem
+(no per-pair ``n*n`` basis); ``H(N)`` is kept for receivers whose normal did
+not change.  Set ``OPENBLAS_NUM_THREADS=1`` on a loaded machine: threaded
+OpenBLAS spins on the small matrix products.
 
 Public API
 ----------

@@ -17,12 +17,15 @@ per operation, in place, with scratch buffers kept between calls:
 * no arcsin: the table is indexed by :math:`1 - \cos\theta = 1 - \sqrt{1 - r^2/d^2}`
   and one gather fetches value and slope (:mod:`shtools.runtime.log_table`);
 * the self-shadow rules (:mod:`shtools.runtime.self_shadow`) run on the
-  gathered subset of pairs whose sphere straddles the tangent plane, or over
-  the whole block when that subset is large (receivers on the blocker itself);
+  leading ``rule_rows`` spheres only when the caller knows the others are in
+  front of every receiver (:mod:`shtools.runtime.tiling`), on the gathered
+  subset of pairs whose sphere straddles the tangent plane, or over those
+  rows when that subset is large (receivers on the blocker itself);
 * the SH basis is built by the Legendre/complex-power recurrence of
   :mod:`shtools.sh.basis`, and each coefficient is reduced over the spheres at
-  once (``einsum("sr,sr->r")`` along contiguous receivers), so the per-pair
-  ``n*n`` vectors are never formed; the normalisation is applied per vertex.
+  once (``einsum("sr,sr->r")`` along contiguous receivers; zonal terms
+  without forming the product), so the per-pair ``n*n`` vectors are never
+  formed; the normalisation is applied per vertex.
 """
 
 from __future__ import annotations
@@ -107,15 +110,43 @@ def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weigh
         kernel = BlockKernel(table)
     for start in range(0, n_v, step):
         stop = min(n_v, start + step)
+        sel, rule_rows = _chunk_spheres(pts[start:stop], nrm[start:stop], cen, rad, self_shadow)
+        if sel.size == 0:
+            continue
         out[start:stop] += accumulate_blocks(
-            pts[None, start:stop], nrm[None, start:stop], cen[None], rad[None], table,
-            weights=w, self_shadow=self_shadow, kernel=kernel)[0]
+            pts[None, start:stop], nrm[None, start:stop], cen[None, sel], rad[None, sel], table,
+            weights=None if w is None else w[:, sel], self_shadow=self_shadow, kernel=kernel,
+            rule_rows=rule_rows)[0]
     return out
 
 
+def _chunk_spheres(pts, nrm, cen, rad, self_shadow: bool) -> tuple[np.ndarray, int]:
+    """Spheres a chunk of receivers needs, those needing the self-shadow rules first.
+
+    Spheres behind the tangent plane of every receiver are dropped (rule 1 of
+    Sec. 6.2 removes them); those in front of every plane need no rules.
+
+    Returns
+    -------
+    sel : ndarray of int
+        Sphere indices (rules first, then in front).
+    rule_rows : int
+        Leading entries of ``sel`` that may straddle or be behind a plane.
+    """
+    if not self_shadow:
+        return np.arange(cen.shape[0]), 0
+    h = nrm @ cen.T  # (V, S): N . P - N . p
+    h -= np.einsum("vi,vi->v", pts, nrm)[:, None]
+    behind = h.max(axis=0) <= -rad
+    front = h.min(axis=0) >= rad
+    key = np.where(behind, 2, np.where(front, 1, 0))
+    sel = np.argsort(key, kind="stable")[: int(np.count_nonzero(~behind))]
+    return sel, int(np.count_nonzero(key == 0))
+
+
 def accumulate_blocks(points, normals, centers, radii, table: CapLogTable, *, weights=None,
-                      self_shadow: bool = True, kernel: BlockKernel | None = None
-                      ) -> np.ndarray:
+                      self_shadow: bool = True, kernel: BlockKernel | None = None,
+                      rule_rows: int | None = None) -> np.ndarray:
     """Log-visibility sums for ``K`` tiles of receivers, each with its own sphere list.
 
     Parameters
@@ -133,6 +164,11 @@ def accumulate_blocks(points, normals, centers, radii, table: CapLogTable, *, we
         Apply the Sec. 6.2 rules.
     kernel : BlockKernel, optional
         Reused kernel (keeps its scratch buffers between calls).
+    rule_rows : int, optional
+        Only the first ``rule_rows`` spheres of each list can be behind or
+        straddle a receiver's tangent plane (the others are in front of every
+        receiver of their tile); the self-shadow rules skip the rest.  Default:
+        all.
 
     Returns
     -------
@@ -142,7 +178,8 @@ def accumulate_blocks(points, normals, centers, radii, table: CapLogTable, *, we
         kernel = BlockKernel(table)
     return kernel.run(np.asarray(points, np.float32), np.asarray(normals, np.float32),
                       np.asarray(centers, np.float32), np.asarray(radii, np.float32),
-                      None if weights is None else np.asarray(weights, np.float32), self_shadow)
+                      None if weights is None else np.asarray(weights, np.float32), self_shadow,
+                      rule_rows)
 
 
 #: Scratch arrays of the kernel (each ``K*T*S`` float32); bands need ``n`` more.
@@ -161,7 +198,9 @@ class BlockKernel:
         self.table = table
         self.norm = _normalisation(self.order).astype(np.float32)
         self._scratch = np.empty((_N_SCRATCH + self.order, 0), np.float32)
-        self._idx = np.empty(0, np.int32)
+        # intp indices: np.take of 8-byte items with int32 indices spread over
+        # the table takes a slow path (~8x slower, measured with NumPy 2)
+        self._idx = np.empty(0, np.intp)
         self._masks = np.empty((2, 0), np.bool_)
         self._pairs = np.empty(0, np.complex64)
 
@@ -169,7 +208,7 @@ class BlockKernel:
         size = int(np.prod(shape))
         if self._scratch.shape[1] < size:
             self._scratch = np.empty((_N_SCRATCH + self.order, size), np.float32)
-            self._idx = np.empty(size, np.int32)
+            self._idx = np.empty(size, np.intp)
         views = [self._scratch[i, :size].reshape(shape) for i in range(self._scratch.shape[0])]
         return views, self._idx[:size].reshape(shape)
 
@@ -185,7 +224,7 @@ class BlockKernel:
             self._masks = np.empty((2, size), np.bool_)
         return [self._masks[i, :size].reshape(shape) for i in range(2)]
 
-    def run(self, pts, nrm, cen, rad, w, self_shadow):
+    def run(self, pts, nrm, cen, rad, w, self_shadow, rule_rows=None):
         # Layout (S, K, T): spheres outermost, so the final reduction over the
         # spheres runs along contiguous rows of receivers (several times faster
         # in NumPy than reducing short rows of S).
@@ -201,35 +240,41 @@ class BlockKernel:
         np.subtract(cen_t[..., 1], pts[None, :, :, 1], out=dy)
         np.subtract(cen_t[..., 2], pts[None, :, :, 2], out=dz)
         r[...] = rad.T[:, :, None]
-        if self_shadow:
+        n_r = n_s if rule_rows is None else min(n_s, int(rule_rows))
+        if self_shadow and n_r:
+            # the rules on the sphere rows that may be behind or straddle (a
+            # contiguous prefix of the (S, K, T) layout)
+            pdx, pdy, pdz, pr = dx[:n_r], dy[:n_r], dz[:n_r], r[:n_r]
+            h, a1, a2, a3 = t0[:n_r], t1[:n_r], t2[:n_r], t3[:n_r]
             nx, ny, nz = nrm[None, :, :, 0], nrm[None, :, :, 1], nrm[None, :, :, 2]
             # h = (P - p) . N
-            np.multiply(dx, nx, out=t0)
-            np.multiply(dy, ny, out=t1)
-            t0 += t1
-            np.multiply(dz, nz, out=t1)
-            t0 += t1
-            bools = self._bools(shape)
-            np.abs(t0, out=t1)
-            straddle = np.less(t1, r, out=bools[1])  # straddling the plane (or p inside)
+            np.multiply(pdx, nx, out=h)
+            np.multiply(pdy, ny, out=a1)
+            h += a1
+            np.multiply(pdz, nz, out=a1)
+            h += a1
+            bools = [b[:n_r] for b in self._bools(shape)]
+            np.abs(h, out=a1)
+            straddle = np.less(a1, pr, out=bools[1])  # straddling the plane (or p inside)
             count = int(np.count_nonzero(straddle))
-            if count > FULL_BLOCK_RULES_FRACTION * r.size:
-                apply_self_shadow_rules_inplace(dx, dy, dz, r, t0, nx, ny, nz,
-                                                (t1, t2, t3, *extra[:2]), (bools[0], bools[1]))
+            if count > FULL_BLOCK_RULES_FRACTION * pr.size:
+                apply_self_shadow_rules_inplace(pdx, pdy, pdz, pr, h, nx, ny, nz,
+                                                (a1, a2, a3, *(e[:n_r] for e in extra[:2])),
+                                                (bools[0], bools[1]))
             else:
-                np.negative(r, out=t1)
-                np.copyto(r, 0.0, where=np.less_equal(t0, t1, out=bools[0]))  # behind
+                np.negative(pr, out=a1)
+                np.copyto(pr, 0.0, where=np.less_equal(h, a1, out=bools[0]))  # behind
                 if count:
                     sel = np.flatnonzero(straddle)
                     rows = sel % (n_k * n_t)
                     nflat = nrm.reshape(-1, 3)
                     ndx, ndy, ndz, nr = apply_self_shadow_rules(
-                        dx.ravel()[sel], dy.ravel()[sel], dz.ravel()[sel], r.ravel()[sel],
+                        pdx.ravel()[sel], pdy.ravel()[sel], pdz.ravel()[sel], pr.ravel()[sel],
                         nflat[rows, 0], nflat[rows, 1], nflat[rows, 2])
-                    dx.ravel()[sel] = ndx
-                    dy.ravel()[sel] = ndy
-                    dz.ravel()[sel] = ndz
-                    r.ravel()[sel] = nr
+                    pdx.ravel()[sel] = ndx
+                    pdy.ravel()[sel] = ndy
+                    pdz.ravel()[sel] = ndz
+                    pr.ravel()[sel] = nr
         # inverse distance and unit direction (x, y, z overwrite dx, dy, dz)
         d2, inv = t0, t1
         np.multiply(dx, dx, out=d2)
@@ -284,8 +329,7 @@ class BlockKernel:
         c_new, s_new = scratch[6], scratch[7]
         for m in range(order):
             if m == 1:
-                c_m[...] = x
-                s_m[...] = y
+                c_m, s_m = x, y  # read only: m = 2 writes into the scratch pair
             elif m > 1:
                 # (c + i s) * (x + i y)
                 np.multiply(c_m, x, out=c_new)
@@ -294,39 +338,56 @@ class BlockKernel:
                 np.multiply(c_m, y, out=s_new)
                 np.multiply(s_m, x, out=prod)
                 s_new += prod
-                c_m, c_new = c_new, c_m
-                s_m, s_new = s_new, s_m
-            q_mm = float(_double_factorial(2 * m - 1))
+                if m == 2:
+                    c_m, c_new = c_new, scratch[0]
+                    s_m, s_new = s_new, scratch[1]
+                else:
+                    c_m, c_new = c_new, c_m
+                    s_m, s_new = s_new, s_m
+            # Q_lm = sigma_l R_l with sigma_l = a_l sigma_{l-1}, so the recurrence
+            # Q_l = a_l z Q_{l-1} - c_l Q_{l-2} becomes R_l = z R_{l-1} - gamma_l
+            # R_{l-2} (one pass fewer) and sigma_l joins the per-coefficient scale
+            sigma_prev2 = sigma = float(_double_factorial(2 * m - 1))  # Q_mm
             q_prev2 = q_prev1 = None
             for l in range(m, order):
                 if l == m:
-                    q = None  # the constant q_mm, folded into the scale below
+                    q = None  # R_m = 1
                     term = bands[l]
-                    scale = q_mm
                 elif l == m + 1:
-                    q = q_buf[l % 3]
-                    np.multiply(z, (2 * m + 1) * q_mm, out=q)
-                    np.multiply(bands[l], q, out=prod)
-                    term, scale = prod, 1.0
+                    sigma_prev2, sigma = sigma, sigma * (2 * m + 1)
+                    q = z  # R_{m+1} = z (read only)
+                    term = self._term(bands[l], q, prod, m)
                 else:
-                    q = q_buf[l % 3]
                     a = (2 * l - 1) / (l - m)
                     c = (l + m - 1) / (l - m)
+                    gamma = c * sigma_prev2 / (a * sigma)
+                    sigma_prev2, sigma = sigma, sigma * a
+                    q = q_buf[l % 3]
                     np.multiply(z, q_prev1, out=q)
-                    q *= a
-                    if q_prev2 is None:  # Q_{l-2,m} is the constant q_mm
-                        q -= c * q_mm
+                    if q_prev2 is None:  # R_m = 1
+                        q -= gamma
                     else:
-                        np.multiply(q_prev2, c, out=prod)
+                        np.multiply(q_prev2, gamma, out=prod)
                         q -= prod
-                    np.multiply(bands[l], q, out=prod)
-                    term, scale = prod, 1.0
+                    term = self._term(bands[l], q, prod, m)
+                scale = sigma
                 base = l * l + l
                 # reductions over the spheres (axis 0)
                 if m == 0:
-                    out[:, base] = np.einsum("sr->r", term) * (scale * k[l, 0])
+                    # zonal: sum_s bands * Q without forming the product
+                    summed = (np.einsum("sr->r", term) if l == 0
+                              else np.einsum("sr,sr->r", *term))
+                    out[:, base] = summed * (scale * k[l, 0])
                 else:
                     out[:, base + m] = np.einsum("sr,sr->r", term, c_m) * (scale * k[l, m])
                     out[:, base - m] = np.einsum("sr,sr->r", term, s_m) * (scale * k[l, m])
                 if l > m:
                     q_prev2, q_prev1 = q_prev1, q
+
+    @staticmethod
+    def _term(band, q, prod, m):
+        """``band * q`` in ``prod`` (m > 0, reduced twice), or the pair (m = 0, once)."""
+        if m == 0:
+            return band, q
+        np.multiply(band, q, out=prod)
+        return prod

@@ -39,8 +39,10 @@ class ShadowRuntime:
     last_stats : dict
         Counters and timings of the last :meth:`visibility` call: ``pairs``
         (sphere-vertex pairs accumulated), ``spheres_per_vertex``,
-        ``clusters``, ``seconds`` per stage (``cuts``, ``accumulate``, ``exp``;
-        process CPU time, robust to other jobs on the machine).
+        ``clusters``, ``pairs_evaluated`` (pairs the kernel ran, after dropping
+        spheres behind every receiver of a tile, with padding), ``seconds`` per
+        stage (``cuts``, ``accumulate``, ``exp``; process CPU time, robust to
+        other jobs on the machine).
     """
 
     def __init__(self, settings: ShadowSettings | None = None, tables: dict | None = None):
@@ -94,7 +96,7 @@ class ShadowRuntime:
         pts, nrm = _check_receivers(vertices, normals)
         blockers = _check_blockers(blockers)
         s = self.settings
-        stats = {"pairs": 0, "clusters": 0, "seconds": {}}
+        stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {}}
         n_acc2 = self.acc_order * self.acc_order
         f = np.zeros((pts.shape[0], n_acc2), dtype=np.float32)
         t0 = time.process_time()
@@ -104,7 +106,7 @@ class ShadowRuntime:
             t1 = time.process_time()
             accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
                            chunk_pairs=s.chunk_pairs, out=f, kernel=self._kernels[0])
-            stats["pairs"] = pts.shape[0] * centers.shape[0]
+            stats["pairs"] = stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
             stats["seconds"]["accumulate"] = time.process_time() - t1
         else:
             if clusters is None:
@@ -133,7 +135,7 @@ class ShadowRuntime:
             f = accumulate_clusters(pts, nrm, clusters.order, clusters.offsets, sph_c, sph_r,
                                     sph_w, sizes, self.table, self_shadow=s.self_shadow,
                                     chunk_pairs=s.chunk_pairs, threads=s.threads,
-                                    kernels=self._kernels)
+                                    kernels=self._kernels, stats=stats)
             pairs = int((np.diff(clusters.offsets) * sizes).sum())
             stats["pairs"] = pairs
             stats["clusters"] = clusters.n_clusters
@@ -178,7 +180,9 @@ class ShadowRuntime:
         if self.settings.exp_degree is not None and self.exp_method in ("ps", "ps*"):
             kwargs["degree"] = self.settings.exp_degree
         if self.exp_method in FAST_METHODS:
-            g = fast_exp(log_vis, self.exp_method, threads=self.settings.threads, **kwargs)
+            # the last squaring projects onto the shading order only
+            g = fast_exp(log_vis, self.exp_method, threads=self.settings.threads,
+                         out_order=self.order, **kwargs)
         else:
             g = sh_exp(log_vis, self.exp_method, **kwargs)
         n2 = self.order * self.order

@@ -29,7 +29,6 @@ import numpy as np
 from shtools.runtime.blockers import SphereBlocker
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.spheres import refit_tree
-from shtools.sh.basis import band_of, basis
 
 #: |f*_l(theta)| below this (relative to the band's largest value) leaves w_l = 1:
 #: the bounding sphere has no content in that band to rescale.
@@ -198,26 +197,25 @@ def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTabl
     if c_idx.size == 0:
         return weights
     o_idx = cuts.owner[c_idx, j_idx]
-    # detailed: leaf log vectors at p*, summed per (cluster, owner)
+    # By the addition theorem, sum_m y_lm(s_b) y_lm(s_j) = (2l+1)/(4 pi) P_l(s_b . s_j),
+    # so the band-l projection of a leaf's log vector on the bounding direction is
+    # f*_l(theta_j) P_l(cos gamma_j) (2l+1)/(4 pi): no n*n basis per pair is needed.
     leaf_c = forest.centers[forest.leaf_nodes[j_idx]]
     leaf_r = forest.radii[forest.leaf_nodes[j_idx]]
-    f_leaf, _, _ = _log_vectors(pc[c_idx], leaf_c, leaf_r, table)
-    delta = leaf_c - pc[c_idx]
-    d = np.linalg.norm(delta, axis=1)
-    keep = leaf_r > np.sin(theta_min) * d
-    f_leaf[~keep] = 0.0
+    s_leaf, zh_leaf, d_leaf = _cap(pc[c_idx], leaf_c, leaf_r, table)
+    s_bound, _, _ = _cap(pc[c_idx], forest.centers[o_idx], forest.radii[o_idx], table)
+    # leaves subtending less than theta_min at p* are left out of the detailed sum
+    zh_leaf[leaf_r <= np.sin(theta_min) * d_leaf] = 0.0
+    cos_gamma = np.clip(np.einsum("ij,ij->i", s_leaf, s_bound), -1.0, 1.0)
+    contrib = zh_leaf * _legendre(cos_gamma, n)  # (P, n)
     key = c_idx * forest.n_nodes + o_idx
-    by_key = np.argsort(key, kind="stable")
-    key_sorted = key[by_key]
-    starts = np.flatnonzero(np.concatenate([[True], key_sorted[1:] != key_sorted[:-1]]))
-    f_d = np.add.reduceat(f_leaf[by_key], starts, axis=0)
-    uniq = key_sorted[starts]
+    uniq, inverse = np.unique(key, return_inverse=True)
+    num = np.zeros((uniq.size, n))
+    for l in range(n):
+        num[:, l] = np.bincount(inverse, weights=contrib[:, l], minlength=uniq.size)
     uc, uo = uniq // forest.n_nodes, uniq % forest.n_nodes
-    # bounding: w_l = sum_m y_lm(s_b) f_d,lm * 4 pi / (2l + 1) / f*_l(theta_b)
-    _, zh_b, y_b = _log_vectors(pc[uc], forest.centers[uo], forest.radii[uo], table)
-    band_sum = (band_of(n)[:, None] == np.arange(n)[None, :]).astype(np.float64)  # (n*n, n)
-    num = (y_b * f_d) @ band_sum
-    num *= 4.0 * np.pi / (2.0 * np.arange(n) + 1.0)
+    # bounding: w_l = (sum over leaves) / f*_l(theta_b)
+    _, zh_b, _ = _cap(pc[uc], forest.centers[uo], forest.radii[uo], table)
     floor = RATIO_DENOMINATOR_FLOOR * np.abs(table.values64).max(axis=1)
     ok = np.abs(zh_b) > floor[None, :]
     w = np.where(ok, num / np.where(ok, zh_b, 1.0), 1.0)
@@ -225,13 +223,22 @@ def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTabl
     return weights
 
 
-def _log_vectors(points, centers, radii, table: CapLogTable):
-    """Eq. 34 in float64 for matched rows: ``(P, n*n)``, zonal ``(P, n)``, basis ``(P, n*n)``."""
+def _legendre(x, order: int) -> np.ndarray:
+    """Legendre polynomials ``P_0 .. P_{n-1}`` at ``x``, shape ``(..., n)``."""
+    out = np.empty((*np.shape(x), order))
+    out[..., 0] = 1.0
+    if order > 1:
+        out[..., 1] = x
+    for l in range(2, order):
+        out[..., l] = ((2 * l - 1) * x * out[..., l - 1] - (l - 1) * out[..., l - 2]) / l
+    return out
+
+
+def _cap(points, centers, radii, table: CapLogTable):
+    """Direction ``(P, 3)``, zonal log ``f*_l`` ``(P, n)`` and distance ``(P,)`` of spheres."""
     delta = centers - points
     d = np.sqrt(np.einsum("ij,ij->i", delta, delta))
     d = np.maximum(d, 1e-300)
     s = delta / d[:, None]
     sin2 = np.minimum((radii / d) ** 2, 1.0)
-    zh = table.lookup64_x(1.0 - np.sqrt(1.0 - sin2))  # indexed by 1 - cos(theta)
-    y = basis(s, table.order)
-    return zh[:, band_of(table.order)] * y, zh, y
+    return s, table.lookup64_x(sin2 / (1.0 + np.sqrt(1.0 - sin2))), d  # 1 - cos(theta)

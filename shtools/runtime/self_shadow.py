@@ -110,50 +110,49 @@ def apply_self_shadow_rules_inplace(dx, dy, dz, radius, h, nx, ny, nz, scratch, 
     Same rules and blend as :func:`apply_self_shadow_rules`; one pass per
     operation over all pairs, no gathers, which is cheaper than the subset form
     once a sizeable fraction of the pairs straddles the plane (receivers on the
-    blocker itself).
+    blocker itself).  No masks: with ``hc = clip(h, -r, r)`` the blend formula
+    itself leaves spheres in front unaltered (``hc = r`` gives ``rho = r`` and
+    no shift), gives radius 0 behind (``hc = -r``; the centre is kept), and
+    ``alpha`` is 0 for ``p`` inside ``S`` (``D < d`` there), so one formula
+    covers every case.
     """
     s1, s2, s3, s4, s5 = scratch
-    inside, straddle = masks
+    not_behind, straddle = masks
     np.abs(h, out=s1)
     np.less(s1, radius, out=straddle)
+    n_straddle = int(np.count_nonzero(straddle))
     np.negative(radius, out=s1)
-    np.greater(h, s1, out=inside)  # not entirely behind the plane
-    radius *= inside  # behind: dropped (radius 0)
-    np.multiply(radius, radius, out=s1)  # r^2
-    np.multiply(dx, dx, out=s2)
-    np.multiply(dy, dy, out=s3)
-    s2 += s3
-    np.multiply(dz, dz, out=s3)
-    s2 += s3  # d^2
-    np.less(s2, s1, out=inside)
-    np.multiply(h, h, out=s3)  # h^2
-    s2 -= s3
-    np.maximum(s2, 0.0, out=s2)
-    np.sqrt(s2, out=s2)  # D: distance from p to q1 along the plane
-    np.subtract(s1, s3, out=s4)
-    np.maximum(s4, 0.0, out=s4)
-    np.sqrt(s4, out=s4)  # d: radius of S ∩ T_p
-    s2 -= s4
-    np.maximum(s4, np.finfo(s4.dtype).tiny, out=s4)
+    np.greater(h, s1, out=not_behind)
+    np.maximum(h, s1, out=s2)
+    np.minimum(s2, radius, out=s2)  # hc = clip(h, -r, r)
+    np.multiply(dx, dx, out=s3)
+    np.multiply(dy, dy, out=s4)
+    s3 += s4
+    np.multiply(dz, dz, out=s4)
+    s3 += s4  # d^2
+    np.multiply(h, h, out=s4)
+    s3 -= s4
+    np.maximum(s3, 0.0, out=s3)
+    np.sqrt(s3, out=s3)  # D: distance from p to q1 along the plane
+    np.multiply(radius, radius, out=s1)
+    np.multiply(s2, s2, out=s4)
+    s1 -= s4  # >= 0: |hc| <= r
+    np.sqrt(s1, out=s1)  # d: radius of S ∩ T_p (0 unless straddling)
+    s3 -= s1
+    np.maximum(s1, np.finfo(s1.dtype).tiny, out=s1)
     with np.errstate(over="ignore"):  # d = 0: alpha -> inf, clipped to 1 next
-        s2 /= s4
-    np.clip(s2, 0.0, 1.0, out=s2)  # alpha (d = 0 gives 1)
-    np.logical_not(inside, out=inside)
-    s2 *= inside  # p inside S: alpha = 0
-    np.maximum(h, 0.0, out=s3)  # inside-rule radius max(h, 0)
-    np.add(h, radius, out=s4)
-    s4 *= 0.5
-    s4 -= s3
-    s4 *= s2
-    s4 += s3  # rho = (1 - alpha) max(h, 0) + alpha (h + r) / 2
-    # blend only the straddling pairs: x += straddle * (new - x), no masked ops
-    np.copyto(s3, straddle)  # 0/1 as float
-    np.subtract(s4, h, out=s5)  # centre moves by (rho - h) N
+        s3 /= s1
+    np.clip(s3, 0.0, 1.0, out=s3)  # alpha
+    np.maximum(s2, 0.0, out=s4)  # inside-rule radius max(hc, 0)
+    np.add(s2, radius, out=s5)
+    s5 *= 0.5
+    s5 -= s4
     s5 *= s3
-    s4 -= radius
-    s4 *= s3
-    radius += s4
+    s5 += s4  # rho = (1 - alpha) max(hc, 0) + alpha (hc + r) / 2
+    np.subtract(s5, s2, out=s2)  # the centre moves by (rho - hc) N
+    s2 *= not_behind  # removed spheres (radius 0) keep their centre
+    radius[...] = s5
     for comp, n in ((dx, nx), (dy, ny), (dz, nz)):
-        np.multiply(s5, n, out=s1)
+        np.multiply(s2, n, out=s1)
         comp += s1
-    return int(np.count_nonzero(straddle))
+    return n_straddle

@@ -15,7 +15,7 @@ RUNTIME_EXP_METHODS = ("auto", "hyb", "ps*", "ps", "ol", "exact", "volterra")
 #: From ``benchmarks/bench_runtime.py`` (accuracy vs order on a procedural scene,
 #: shading order 4): radiance error vs ray tracing of the sphere set 4.7 % at
 #: n_acc = 4, 3.0 % at 5, 1.9 % at 6, 1.0 % at 8; battle-scale frame CPU time
-#: 1 : 1.2 : 1.6 for 4 : 5 : 6 (8 costs about 3x).  6 is the cheapest order that
+#: 1 : 1.3 : 1.5 for 4 : 5 : 6 (8 costs about 3x).  6 is the cheapest order that
 #: meets the 3 % target with margin; ``acc_order=4`` is the fast setting.
 DEFAULT_EXTRA_ACC_ORDERS = 2
 #: Above this accumulation order the default stops growing (cost ~ n_acc^2 per pair).

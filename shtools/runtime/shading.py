@@ -111,6 +111,30 @@ def sphere_light_sh(light: SphereLight, points, order: int) -> np.ndarray:
 
     A receiver inside the light sees it over the whole sphere.
     """
+    zh, axis = _sphere_light_zonal(light, points, order)
+    return zonal_to_sh32(zh, axis)
+
+
+def _sphere_light_dot(light: SphereLight, points, order: int, shadowed, win) -> np.ndarray:
+    """``sphere_light_sh(...) * win`` dotted with ``shadowed (V, n*n)`` per vertex, ``(V,)``.
+
+    Without forming the light's ``(V, n*n)`` vectors: ``y(axis) * shadowed`` is
+    summed per band and weighted by the rotated zonal coefficients.
+    """
+    zh, axis = _sphere_light_zonal(light, points, order)
+    scale = np.sqrt(4.0 * np.pi / (2.0 * np.arange(order) + 1.0))
+    per_band = (basis(np.asarray(axis, dtype=np.float32), order) * shadowed) @ _band_sum(order)
+    weights = (zh * (scale * win[np.arange(order) ** 2 + np.arange(order)])).astype(np.float32)
+    return np.einsum("vl,vl->v", per_band, weights).astype(np.float64)
+
+
+def _band_sum(order: int) -> np.ndarray:
+    """``(n*n, n)`` float32 indicator summing the coefficients of each band."""
+    return (band_of(order)[:, None] == np.arange(order)[None, :]).astype(np.float32)
+
+
+def _sphere_light_zonal(light: SphereLight, points, order: int):
+    """Zonal coefficients ``(V, n)`` of a light's radiance cap and its axis ``(V, 3)``."""
     delta = light.position[None, :] - np.asarray(points, dtype=np.float64)
     dist = np.linalg.norm(delta, axis=1)
     axis = delta / np.maximum(dist, 1e-300)[:, None]
@@ -120,7 +144,7 @@ def sphere_light_sh(light: SphereLight, points, order: int) -> np.ndarray:
     zh = -cap_zh(theta, order)
     zh[:, 0] += math.sqrt(4.0 * math.pi)
     axis[dist == 0] = (0.0, 0.0, 1.0)  # any axis: the cap is the whole sphere
-    return zonal_to_sh32(zh, axis)
+    return zh, axis
 
 
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,
@@ -174,7 +198,6 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         # (H * g) by exact quadrature, dotted with each light's radiance
         shadowed = QuadratureProducts(order, np.float32).product(transfer, g_w)
         for light in sphere_lights:
-            l_sh = sphere_light_sh(light, points, order) * win.astype(np.float32)
-            lit = np.einsum("vi,vi->v", shadowed, l_sh).astype(np.float64)
+            lit = _sphere_light_dot(light, points, order, shadowed, win)
             out += lit[:, None] * light.color[None, :]
     return out
