@@ -1,0 +1,93 @@
+"""The runtime's fast paths against the library: split products, truncated exp, culling.
+
+These paths are exact rewrites (symmetry-class quadrature products, a last squaring
+projected onto fewer coefficients, per-tile removal of spheres that the self-shadow
+rules would remove anyway), so the references are the straightforward computations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from shtools.runtime import CapLogTable, apply_self_shadow_rules
+from shtools.runtime.fast_exp import QuadratureProducts, fast_exp
+from shtools.runtime.tiling import accumulate_clusters
+from shtools.sh import band_of, basis, exp, product, square
+from shtools.sh.tables import default_tables
+
+
+@pytest.mark.parametrize("order", [4, 5, 6, 8])
+def test_quadrature_products_match_triple_tensor_products(order):
+    rng = np.random.default_rng(order)
+    f, g = rng.normal(size=(2, 40, order * order))
+    ops = QuadratureProducts(order, np.float64)
+    # both are exact truncated SH products in float64: agreement to rounding
+    np.testing.assert_allclose(ops.product(f, g), product(f, g), atol=1e-11)
+    np.testing.assert_allclose(ops.square(f), square(f), atol=1e-11)
+
+
+@pytest.mark.parametrize("method,order", [("ps*", 6), ("hyb", 6), ("ps*", 5), ("hyb", 4)])
+def test_exp_with_out_order_is_the_truncated_exp(method, order):
+    rng = np.random.default_rng(7)
+    f = rng.normal(size=(50, order * order)) * 0.5
+    f[:, 0] -= 1.5
+    tables = default_tables(order)
+    full = fast_exp(f, method, tables)
+    cut = fast_exp(f, method, tables, out_order=4)
+    # projecting only the kept coefficients in the last squaring changes nothing else
+    np.testing.assert_allclose(cut, full[:, :16], atol=1e-10 * np.abs(full).max())
+
+
+def test_exp_of_zero_log_is_the_constant_one():
+    f = np.zeros((5, 36))
+    f[2, 3] = 0.1  # one row that is not skipped
+    g = fast_exp(f, "ps*", default_tables(6))
+    one = np.zeros(36)
+    one[0] = np.sqrt(4 * np.pi)
+    np.testing.assert_array_equal(g[[0, 1, 3, 4]], np.tile(one, (4, 1)))
+    np.testing.assert_allclose(g[2], exp(f[2], "ps*"), atol=1e-12)
+
+
+def reference_with_rules(points, normals, centers, radii, tables, order):
+    """Eq. 34 sums in float64 with the Sec. 6.2 rules applied pair by pair."""
+    out = np.zeros((len(points), order * order))
+    theta_grid = np.concatenate([[0.0], tables["theta"]])
+    for v, (p, n) in enumerate(zip(points, normals, strict=True)):
+        d = centers - p
+        dx, dy, dz, r = apply_self_shadow_rules(d[:, 0], d[:, 1], d[:, 2], radii, *n)
+        delta = np.stack([dx, dy, dz], axis=-1)
+        dist = np.linalg.norm(delta, axis=-1)
+        keep = r > 0
+        theta = np.arcsin(np.clip(r[keep] / dist[keep], 0, 1))
+        zh = np.stack([np.interp(theta, theta_grid,
+                                 np.concatenate([[0.0], tables["log_zh"][:, l]]))
+                       for l in range(order)], axis=-1)
+        out[v] = np.einsum("sk,sk->k", zh[:, band_of(order)],
+                           basis(delta[keep] / dist[keep, None], order))
+    return out
+
+
+def test_tile_culling_matches_rules_applied_pair_by_pair():
+    """Spheres all around bumpy receivers: many behind, some straddling, some containing."""
+    rng = np.random.default_rng(3)
+    order = 4
+    tables = default_tables(order)
+    table = CapLogTable(tables, order)
+    n_v = 96
+    points = rng.uniform(-1, 1, size=(n_v, 3)) * [2.0, 0.2, 2.0]
+    normals = rng.normal(size=(n_v, 3)) * 0.3 + [0, 1, 0]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    centers = rng.uniform(-2.5, 2.5, size=(30, 3)) * [1.0, 0.5, 1.0]
+    radii = rng.uniform(0.1, 0.8, 30)
+    # two clusters, each with the full sphere list as its cut
+    order_idx = np.arange(n_v)
+    offsets = np.array([0, n_v // 2, n_v])
+    sc = np.broadcast_to(centers, (2, 30, 3)).copy()
+    sr = np.broadcast_to(radii, (2, 30)).copy()
+    got = accumulate_clusters(points, normals, order_idx, offsets, sc, sr, None,
+                              np.array([30, 30]), table, self_shadow=True)
+    want = reference_with_rules(points, normals, centers, radii, tables, order)
+    # float32 accumulation of ~30 terms and table interpolation in 1-cos vs theta
+    # (the same 2e-4 budget as test_accumulate.ACC_RTOL)
+    np.testing.assert_allclose(got, want, atol=2e-4 * np.abs(want).max())
