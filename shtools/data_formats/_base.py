@@ -389,7 +389,7 @@ def _check_dataset(f, spec: DatasetSpec, dims, path, load, data) -> None:
         want = " or ".join(str(tuple(s)) for s in options)
         raise AssetError(f"dataset '{spec.name}' has shape {ds.shape}, expected {want}", path)
     dims.update(matched)
-    if spec.finite and ds.dtype.kind == "f" or load:
+    if (spec.finite and ds.dtype.kind == "f") or load:
         arr = ds[()]
         if spec.finite and ds.dtype.kind == "f" and not np.all(np.isfinite(arr)):
             raise AssetError(f"dataset '{spec.name}' contains NaN or inf; rebuild it", path)

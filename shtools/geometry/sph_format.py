@@ -104,11 +104,11 @@ def write_sph(path: str | os.PathLike, spheres: SphereSet) -> None:
         ``centers (N, 3)``, ``radii (N,)``.  The root is a sphere bounding all
         of them; the error column holds each sphere's radius-free placeholder 0.
     """
-    from shtools.geometry.sphere_set import bounding_sphere_of_spheres
+    from shtools.geometry.bounding import minimal_enclosing_sphere
 
     centers = np.asarray(spheres.centers, dtype=np.float64)
     radii = np.asarray(spheres.radii, dtype=np.float64)
-    root_c, root_r = bounding_sphere_of_spheres(centers, radii)
+    root_c, root_r = minimal_enclosing_sphere(centers, radii)
     rows = [f"2 {len(radii)}", _row(root_c, root_r)]
     rows += [_row(c, r) for c, r in zip(centers, radii, strict=True)]
     with atomic_path(path) as tmp:

@@ -74,53 +74,6 @@ class SphereSet:
 
 #: Iterations of the Badoiu–Clarkson core-set walk; its radius is within a
 #: factor (1 + 1/sqrt(iterations)) of the minimum before the polish step.
-_BC_ITERATIONS = 400
-
-
-def bounding_sphere_of_spheres(
-    centers: np.ndarray, radii: np.ndarray
-) -> tuple[np.ndarray, float]:
-    """A near-minimal sphere containing every given sphere.
-
-    Badoiu–Clarkson walk toward the farthest sphere, polished by Nelder–Mead on
-    the exact objective ``max_i |c_i - c| + r_i``; the returned radius is that
-    exact maximum, so the result always bounds every sphere.
-
-    Parameters
-    ----------
-    centers : ndarray, shape (K, 3)
-    radii : ndarray, shape (K,)
-        Zero radii make this the bounding sphere of points.
-
-    Returns
-    -------
-    center : ndarray, shape (3,)
-    radius : float
-    """
-    from scipy.optimize import minimize
-
-    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
-    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
-    if len(centers) == 1:
-        return centers[0].copy(), float(radii[0])
-
-    def reach(c):
-        return np.linalg.norm(centers - c, axis=1) + radii
-
-    c = centers[np.argmax(radii)].copy()
-    for k in range(1, _BC_ITERATIONS + 1):
-        d = centers - c
-        dist = np.linalg.norm(d, axis=1)
-        j = int(np.argmax(dist + radii))
-        direction = d[j] / dist[j] if dist[j] > 0 else np.zeros(3)
-        far = centers[j] + radii[j] * direction
-        c += (far - c) / (k + 1)
-    scale = float(np.max(reach(c))) or 1.0
-    res = minimize(lambda x: float(np.max(reach(x))), c, method="Nelder-Mead",
-                   options={"xatol": 1e-9 * scale, "fatol": 1e-12 * scale, "maxiter": 400})
-    if res.fun < np.max(reach(c)):
-        c = res.x
-    return np.asarray(c, dtype=np.float64), float(np.max(reach(c)))
 
 
 def minimal_bounding_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -137,7 +90,9 @@ def minimal_bounding_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     hull = hull_vertices(points)
-    return bounding_sphere_of_spheres(hull, np.zeros(len(hull)))
+    from shtools.geometry.bounding import minimal_enclosing_sphere
+
+    return minimal_enclosing_sphere(hull, np.zeros(len(hull)))
 
 
 def hull_vertices(points: np.ndarray) -> np.ndarray:

@@ -278,7 +278,6 @@ def _tables(scene: Scene, inputs: dict) -> dict | None:
     if st.tables is None:
         return None
     from shtools.data_formats.tables import read_tables
-
     from shtools.runtime import ShadowSettings
 
     tables = read_tables(st.tables)
