@@ -30,35 +30,17 @@ per operation, in place, with scratch buffers kept between calls:
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.self_shadow import apply_self_shadow_rules, apply_self_shadow_rules_inplace
+from shtools.sh.basis import double_factorial, normalisation
 
 #: d^2 floor (scene units^2): guards 1/d for a zero-radius sphere at the receiver.
 MIN_DIST2 = 1e-20
 #: Above this fraction of straddling pairs in a block the self-shadow rules run
 #: over the whole block instead of gathering the straddling subset.
 FULL_BLOCK_RULES_FRACTION = 0.1
-
-
-def _normalisation(order: int) -> np.ndarray:
-    """K_lm (with sqrt 2 for m != 0) indexed [l, |m|]."""
-    k = np.zeros((order, order))
-    for l in range(order):
-        for m in range(l + 1):
-            k[l, m] = math.sqrt(
-                (2 * l + 1) / (4 * math.pi) * math.factorial(l - m) / math.factorial(l + m)
-            )
-            if m > 0:
-                k[l, m] *= math.sqrt(2.0)
-    return k
-
-
-def _double_factorial(n: int) -> int:
-    return 1 if n <= 0 else n * _double_factorial(n - 2)
 
 
 def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weights=None,
@@ -196,7 +178,7 @@ class BlockKernel:
     def __init__(self, table: CapLogTable):
         self.order = table.order
         self.table = table
-        self.norm = _normalisation(self.order).astype(np.float32)
+        self.norm = normalisation(self.order).astype(np.float32)
         self._scratch = np.empty((_N_SCRATCH + self.order, 0), np.float32)
         # intp indices: np.take of 8-byte items with int32 indices spread over
         # the table takes a slow path (~8x slower, measured with NumPy 2)
@@ -347,7 +329,7 @@ class BlockKernel:
             # Q_lm = sigma_l R_l with sigma_l = a_l sigma_{l-1}, so the recurrence
             # Q_l = a_l z Q_{l-1} - c_l Q_{l-2} becomes R_l = z R_{l-1} - gamma_l
             # R_{l-2} (one pass fewer) and sigma_l joins the per-coefficient scale
-            sigma_prev2 = sigma = float(_double_factorial(2 * m - 1))  # Q_mm
+            sigma_prev2 = sigma = float(double_factorial(2 * m - 1))  # Q_mm
             q_prev2 = q_prev1 = None
             for l in range(m, order):
                 if l == m:

@@ -70,8 +70,14 @@ def check_order(order: int) -> int:
     return int(order)
 
 
-def _normalisation(order: int) -> np.ndarray:
-    """K_{lm} (with the sqrt(2) for m != 0), shape ``(order, order)`` indexed [l, m>=0]."""
+def normalisation(order: int) -> np.ndarray:
+    """Normalisation ``K_{lm}`` (times sqrt(2) for m != 0) of the real basis.
+
+    Returns
+    -------
+    ndarray, shape (order, order)
+        Indexed ``[l, |m|]``; entries with ``|m| > l`` are 0.
+    """
     k = np.zeros((order, order))
     for l in range(order):
         for m in range(l + 1):
@@ -131,7 +137,7 @@ def basis(dirs, order: int, *, dtype=None) -> np.ndarray:
 def _fill_basis(out: np.ndarray, x, y, z, order: int) -> None:
     """Write y_i(x, y, z) into rows of ``out`` (shape (order**2, V))."""
     if order not in _NORM_CACHE:
-        _NORM_CACHE[order] = _normalisation(order)
+        _NORM_CACHE[order] = normalisation(order)
     k = _NORM_CACHE[order].astype(out.dtype)
     # c_m + i s_m = (x + i y)^m
     c_prev, s_prev = np.ones_like(x), np.zeros_like(x)
@@ -139,7 +145,7 @@ def _fill_basis(out: np.ndarray, x, y, z, order: int) -> None:
         if m > 0:
             c_prev, s_prev = c_prev * x - s_prev * y, c_prev * y + s_prev * x
         # Q_l^m(z) for l = m..order-1, no Condon–Shortley phase.
-        q_mm = float(_double_factorial(2 * m - 1))
+        q_mm = float(double_factorial(2 * m - 1))
         q_lm2 = None
         q_lm1 = np.full_like(z, q_mm)
         for l in range(m, order):
@@ -160,5 +166,6 @@ def _fill_basis(out: np.ndarray, x, y, z, order: int) -> None:
                 np.multiply(kq, s_prev, out=out[base - m])
 
 
-def _double_factorial(n: int) -> int:
-    return 1 if n <= 0 else n * _double_factorial(n - 2)
+def double_factorial(n: int) -> int:
+    """``n!! = n (n-2) (n-4) ...``, with ``n!! = 1`` for ``n <= 0`` (so ``Q_m^m = (2m-1)!!``)."""
+    return 1 if n <= 0 else n * double_factorial(n - 2)
