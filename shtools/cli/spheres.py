@@ -29,8 +29,9 @@ def spheres():
               help="Seed of sampling and initialisation (same seed -> identical asset).")
 @click.option("--thickness", type=float, default=None,
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
-@click.option("--iterations", type=click.IntRange(min=1), default=60, show_default=True,
-              help="Maximum clustering rounds of the variational fit.")
+@click.option("--iterations", type=click.IntRange(min=1), default=None,
+              help="Maximum clustering rounds of the variational fit "
+                   "[default: scaled to the mesh and N, 40-150].")
 @json_option
 def fit(mesh_path, count, output, method, seed, thickness, iterations, as_json):
     """Fit N spheres bounding the solid of MESH with minimal outside volume.
@@ -51,7 +52,7 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, as_json):
     bar = progress(total=iterations, desc="fit")
 
     def tick(iteration, energy):
-        bar.n = min(iteration, iterations)
+        bar.n = iteration if iterations is None else min(iteration, iterations)
         bar.set_postfix(E=f"{energy:.3f}")
         bar.refresh()
 

@@ -21,8 +21,13 @@ SHEXP (Ren et al. 2006, section 6.2):
    of the flux on small triangles, radial profiles for the flood fill).
 4. Cluster teleportation: when an iteration no longer lowers E, split the
    cluster of largest outside volume at its farthest-apart points and delete
-   the cluster most overlapped by the others; keep it only if E drops.
+   another sphere — TELEPORT_CANDIDATES choices (the most overlapped one, or
+   those covering the fewest points nobody else covers), one Lloyd step each;
+   the best is refined and kept only if E drops.  Later stalls split the
+   next-worst clusters.  Lloyd steps are memoised (they are deterministic), so
+   returning to the best state after a rejected teleport costs nothing.
 
+The shrink-and-re-centre step is iterated to a fixed point at the end.
 Finally every radius grows just enough to contain its cluster, every surface
 sample, mesh vertex and quadrature point (coverage 1), and E = Σ V(S_i - T)/V(T)
 is computed with the accurate flux evaluator of :mod:`.outside_volume`.
@@ -81,8 +86,26 @@ CENTER_STEP = 0.25
 #: Powell's line-search tolerance, in units of the largest centre move.
 POWELL_XTOL = 1e-2
 
-#: Rounds of shrink-to-own-points and re-centring after the Lloyd iterations.
-SHRINK_ROUNDS = 3
+#: Rounds of shrink-to-own-points and re-centring after the Lloyd iterations
+#: (at most; they stop at a fixed point, when no sphere moves or shrinks by more
+#: than SHRINK_TOLERANCE of the diagonal).
+SHRINK_ROUNDS = 12
+SHRINK_TOLERANCE = 1e-5
+
+#: Distance (fraction of the diagonal) within which a point counts as on a
+#: sphere during shrinking: absorbs the rounding of the mat-mul distances.
+SHRINK_SLACK = 1e-9
+
+#: Default iteration cap: rounds cost about (cover points) x N, so the cap is
+#: this work budget divided by that (a 100k-triangle mesh at N = 64 gets ~75
+#: rounds, inside two minutes), clipped to [MIN_ITERATIONS, MAX_ITERATIONS].
+ITERATION_WORK = 3.6e8
+MIN_ITERATIONS = 40
+MAX_ITERATIONS = 150
+
+#: Teleportation candidates (split cluster, deleted sphere) tried per stall;
+#: the one with the lowest E after a Lloyd step is refined and kept if E drops.
+TELEPORT_CANDIDATES = 3
 
 #: Relative decrease of E below which a Lloyd step counts as stalled.
 STALL_TOLERANCE = 5e-3
@@ -200,8 +223,8 @@ def fit_spheres(
     method: str = "variational",
     seed: int = 0,
     thickness: float | None = None,
-    max_iterations: int = 60,
-    max_teleport_failures: int = 6,
+    max_iterations: int | None = None,
+    max_teleport_failures: int = 8,
     samples: int | None = None,
     path=None,
     progress=None,
@@ -221,8 +244,10 @@ def fit_spheres(
     thickness : float, optional
         Fit a shell of this thickness around the surface instead of its
         enclosed volume (for flat or open sheets).
-    max_iterations : int
-        Cap on clustering + centre-update rounds (variational).
+    max_iterations : int, optional
+        Cap on clustering + centre-update rounds (variational); default
+        ``ITERATION_WORK / (cover points * n)`` clipped to
+        [MIN_ITERATIONS, MAX_ITERATIONS], a round costing about points x n.
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
     samples : int, optional
@@ -258,6 +283,9 @@ def fit_spheres(
         raise InputError(
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
             "use fewer spheres", path)
+    if max_iterations is None:
+        max_iterations = int(np.clip(ITERATION_WORK / (len(solid.cover) * n), MIN_ITERATIONS,
+                                     MAX_ITERATIONS))
     rng = np.random.default_rng(seed)
     info: dict = {"points": len(solid.points), "surface_points": len(solid.surface),
                   "flux_samples": len(solid.flux.points)}
@@ -494,11 +522,23 @@ def _teleport(solid: Solid, state: _State, attempt: int) -> np.ndarray | None:
     if n < 2:
         return None
     worst_order = np.argsort(-state.outside, kind="stable")
-    worst = int(worst_order[min(attempt, n - 1)])
-    own = FOUR_PI / 3 * np.maximum(state.radii, 1e-300) ** 3
-    overlap = _lens_volumes(state.centers, state.radii).sum(axis=1) / own
-    overlap[worst] = -np.inf
-    victim = int(np.argmax(overlap))
+    worst = int(worst_order[min(attempt // TELEPORT_CANDIDATES, n - 1)])
+    kind = attempt % TELEPORT_CANDIDATES
+    if kind == 0:
+        # the sphere most overlapped by the others
+        vol = FOUR_PI / 3 * np.maximum(state.radii, 1e-300) ** 3
+        score = -_lens_volumes(state.centers, state.radii).sum(axis=1) / vol
+        rank = 0
+    else:
+        # the spheres covering the fewest points no other sphere covers
+        pts = solid.points
+        d2 = (np.sum(pts * pts, axis=1)[:, None] - 2.0 * pts @ state.centers.T
+              + np.sum(state.centers**2, axis=1))
+        inside = d2 <= (state.radii**2)[None, :] * (1 + 1e-9)
+        score = (inside & (inside.sum(axis=1) == 1)[:, None]).sum(axis=0).astype(np.float64)
+        rank = kind - 1
+    score[worst] = np.inf
+    victim = int(np.argsort(score, kind="stable")[rank])
     members = solid.points[state.labels == worst]
     if len(members) < 2:
         return None
@@ -525,12 +565,23 @@ def _initial_centers(points: np.ndarray, n: int, rng: np.random.Generator) -> np
 
 def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iterations: int,
                  max_teleport_failures: int, progress=None):
-    best = _lloyd_step(solid, _initial_centers(solid.points, n, rng))
+    # Lloyd steps are deterministic: after a rejected teleport the search
+    # resumes from the best state, whose successor is often already known
+    memo: dict[bytes, _State] = {}
+
+    def lloyd(centers: np.ndarray) -> tuple[_State, int]:
+        key = centers.tobytes()
+        if key in memo:
+            return memo[key], 0
+        memo[key] = _lloyd_step(solid, centers)
+        return memo[key], 1
+
+    best, _ = lloyd(_initial_centers(solid.points, n, rng))
     iterations, teleports, accepted, failures = 1, 0, 0, 0
     current = best
     while iterations < max_iterations:
-        nxt = _lloyd_step(solid, current.centers)
-        iterations += 1
+        nxt, cost = lloyd(current.centers)
+        iterations += cost
         if progress is not None:
             progress(iterations, nxt.energy)
         improved = nxt.energy < best.energy * (1.0 - STALL_TOLERANCE)
@@ -542,17 +593,29 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
         # Lloyd has stalled: teleport
         if failures >= max_teleport_failures:
             break
-        trial_centers = _teleport(solid, best, failures)
-        if trial_centers is None:
+        # several split candidates, one Lloyd step each; the best goes on
+        trials = []
+        # (attempt // TELEPORT_CANDIDATES picks the split cluster, the rest
+        # the deleted sphere)
+        for attempt in range(TELEPORT_CANDIDATES * failures,
+                             TELEPORT_CANDIDATES * (failures + 1)):
+            if iterations >= max_iterations:
+                break
+            trial_centers = _teleport(solid, best, attempt)
+            if trial_centers is None:
+                continue
+            teleports += 1
+            trial, cost = lloyd(trial_centers)
+            iterations += cost
+            trials.append(trial)
+        if not trials:
             break
-        teleports += 1
-        trial = _lloyd_step(solid, trial_centers)
-        iterations += 1
+        trial = min(trials, key=lambda t: t.energy)
         for _ in range(2):
             if iterations >= max_iterations:
                 break
-            again = _lloyd_step(solid, trial.centers)
-            iterations += 1
+            again, cost = lloyd(trial.centers)
+            iterations += cost
             if again.energy >= trial.energy:
                 break
             trial = again
@@ -580,19 +643,32 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     points.
     """
     pts = solid.cover
+    # distances through |p|² - 2 p·c + |c|² (one mat-mul instead of a (P, N, 3)
+    # temporary), about the points' mean to keep the cancellation small; the
+    # final cover step re-checks containment exactly
+    origin = pts.mean(axis=0)
+    pts = pts - origin
+    pp = np.einsum("ij,ij->i", pts, pts)
+    slack = SHRINK_SLACK * solid.diag
+
+    def distances(c: np.ndarray) -> np.ndarray:
+        c = c - origin
+        return np.sqrt(np.maximum(pp[:, None] - 2.0 * (pts @ c.T) + np.sum(c * c, axis=-1), 0.0))
+
     centers = centers.copy()
     radii = radii.copy()
     order = np.argsort(-radii, kind="stable")
     for _ in range(rounds):
-        dist = np.linalg.norm(pts[:, None, :] - centers[None, :, :], axis=-1)  # (P, N)
-        inside = dist <= radii[None, :] * (1 + 1e-12)
+        before = (centers.copy(), radii.copy())
+        dist = distances(centers)  # (P, N)
+        inside = dist <= radii[None, :] + slack
         count = inside.sum(axis=1)
         for i in order:
             own = inside[:, i] & (count == 1)
             if not np.any(own):
                 continue
             radii[i] = float(dist[own, i].max())
-            lost = inside[:, i] & (dist[:, i] > radii[i])
+            lost = inside[:, i] & (dist[:, i] > radii[i] + slack)
             count[lost] -= 1
             inside[lost, i] = False
         if not recenter:
@@ -603,7 +679,7 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
             own = inside[:, i] & (count == 1)
             if not np.any(own):
                 continue
-            hull = hull_vertices(pts[own])
+            hull = hull_vertices(pts[own]) + origin
             p0 = centers[i]
             delta = CENTER_STEP * radii[i] + 1e-3 * solid.diag
             f = _sphere_objective(solid, hull, p0, delta)
@@ -613,10 +689,14 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
                 continue
             centers[i] = p
             radii[i] = float(np.sqrt(np.max(np.sum((hull - p) ** 2, axis=1))))
-            dist[:, i] = np.linalg.norm(pts - centers[i], axis=1)
-            now = dist[:, i] <= radii[i] * (1 + 1e-12)
+            dist[:, i] = distances(centers[i:i + 1])[:, 0]
+            now = dist[:, i] <= radii[i] + slack
             count += now.astype(np.int64) - inside[:, i]
             inside[:, i] = now
+        # a fixed point: no sphere moved or shrank noticeably this round
+        moved = np.max(np.linalg.norm(centers - before[0], axis=1) + before[1] - radii)
+        if moved <= SHRINK_TOLERANCE * solid.diag:
+            break
     return centers, radii
 
 
