@@ -41,6 +41,7 @@ def test_ply_roundtrip_keeps_colours(bake_file, tmp_path, run_cli):
     mesh = trimesh.load(out, process=False)
     bake = read_bake(bake_file)
     assert len(mesh.vertices) == bake.n_vertices
+    # PLY stores float32 positions of unit-sized scenes: rounding ~1e-7
     np.testing.assert_allclose(mesh.vertices, bake.vertices, atol=1e-6)
     colors = mesh.visual.vertex_colors[:, :3].astype(float) / 255
     expected = srgb_encode(aces(bake.radiance[1]))
@@ -54,6 +55,7 @@ def test_glb_roundtrip_keeps_colours_and_radiance(bake_file, tmp_path, run_cli):
     assert code == 0, stderr
     mesh = trimesh.load(out, force="mesh", process=False, skip_materials=True)
     bake = read_bake(bake_file)
+    # _RADIANCE is the bake's own float32 data written verbatim
     np.testing.assert_allclose(mesh.vertex_attributes["_RADIANCE"], bake.radiance[0], atol=1e-7)
     colors = mesh.visual.vertex_colors[:, :3].astype(float) / 255
     # glTF vertex colours are linear: the tone-mapped value before sRGB encoding

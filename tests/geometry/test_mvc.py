@@ -75,6 +75,9 @@ def test_points_just_off_the_surface_stay_precise():
     for offset in (1e-4, 1e-7, -1e-7, -1e-4):
         x = centers + offset * normals
         lam = mean_value_coordinates(x, vertices, faces)
+        # measured: 1e-12 at offset 1e-4; at 1e-7 the point is treated as on the face,
+        # so the error equals the offset (~1e-7) -- the bound checks that snapping moves
+        # a point by no more than its distance to the surface
         np.testing.assert_allclose(lam @ vertices, x, atol=1e-7)
 
 

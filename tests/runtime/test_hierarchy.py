@@ -119,6 +119,8 @@ def test_moving_blocker_refits_tree_every_frame(blob_scene):
         blockers = [SphereBlocker(moved, radii, tree=tree)]
         hier = _radiance(rt, v, nrm, blockers, clusters)
         flat = _radiance(flat_rt, v, nrm, blockers)
+        # eq. 38 ratio vectors approximate the leaves by a rotated/scaled bound;
+        # measured 0.2 %, the paper's claim is "greatly reduced" artifacts: 2 % bound
         assert relative_rmse(hier, flat) < 0.02
 
 

@@ -71,6 +71,7 @@ def test_unshadowed_uniform_white_sky_gives_radiance_one():
     g[:, 0] = math.sqrt(4 * math.pi)
     env = np.zeros((16, 3))
     env[0] = math.sqrt(4 * math.pi)
+    # the runtime shades in float32 (relative rounding ~1e-7 over 16 terms)
     np.testing.assert_allclose(rt.shade(g, np.zeros((2, 3)), nrm, env), 1.0, rtol=1e-6)
 
 
@@ -82,6 +83,7 @@ def test_baked_local_visibility_uses_h_times_gp():
                 local_visibility=gp)
     hp = product(cosine_transfer(nrm, order).astype(np.float64), gp)
     want = np.stack([triple(hp, np.broadcast_to(env[:, c], g.shape), g) for c in range(3)], 1)
+    # float32 shading path vs the float64 triple product
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-4)
 
 
@@ -102,6 +104,7 @@ def test_sphere_light_matches_quadrature_projection_of_the_light_cap():
         l_sh = project(inside.astype(float), dirs, w, order)
         h = cosine_transfer(nrm[k:k + 1], order)[0].astype(np.float64)
         want = triple(h, l_sh, g[k]) * light.color
+        # the reference projects a discontinuous cap by quadrature (error ~1e-3, above)
         np.testing.assert_allclose(got[k], want, rtol=2e-3, atol=2e-4)
 
 
