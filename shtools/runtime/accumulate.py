@@ -14,8 +14,9 @@ The kernel works in float32 on blocks laid out ``(S, K, T)`` — spheres x
 tiles x receivers per tile (each tile has its own sphere list) — one array pass
 per operation, in place, with scratch buffers kept between calls:
 
-* no arcsin: the table is indexed by :math:`1 - \cos\theta = 1 - \sqrt{1 - r^2/d^2}`
-  and one gather fetches value and slope (:mod:`shtools.runtime.log_table`);
+* no arcsin: the table is indexed by :math:`x = 1 - \cos\theta = 1 - \sqrt{1 - r^2/d^2}`,
+  and each band is one gather of the ratio :math:`F_l(x)/x` times ``x``
+  (:mod:`shtools.runtime.log_table`);
 * the self-shadow rules (:mod:`shtools.runtime.self_shadow`) run on the
   leading ``rule_rows`` spheres only when the caller knows the others are in
   front of every receiver (:mod:`shtools.runtime.tiling`), on the gathered
@@ -184,7 +185,6 @@ class BlockKernel:
         # the table takes a slow path (~8x slower, measured with NumPy 2)
         self._idx = np.empty(0, np.intp)
         self._masks = np.empty((2, 0), np.bool_)
-        self._pairs = np.empty(0, np.complex64)
 
     def _buffers(self, shape):
         size = int(np.prod(shape))
@@ -193,12 +193,6 @@ class BlockKernel:
             self._idx = np.empty(size, np.intp)
         views = [self._scratch[i, :size].reshape(shape) for i in range(self._scratch.shape[0])]
         return views, self._idx[:size].reshape(shape)
-
-    def _pair_buffer(self, shape):
-        size = int(np.prod(shape))
-        if self._pairs.shape[0] < size:
-            self._pairs = np.empty(size, np.complex64)
-        return self._pairs[:size].reshape(shape)
 
     def _bools(self, shape):
         size = int(np.prod(shape))
@@ -279,7 +273,7 @@ class BlockKernel:
         np.maximum(u, 0.0, out=u)
         np.sqrt(u, out=u)
         np.subtract(1.0, u, out=u)
-        self._lookup(u, bands, t0, t1, idx)
+        self._lookup(u, bands, t0, idx)
         if w is not None:
             for l in range(self.order):
                 bands[l] *= w[:, :, l].T[:, :, None]
@@ -290,17 +284,15 @@ class BlockKernel:
                          out)
         return out.reshape(n_k, n_t, -1)
 
-    def _lookup(self, u, bands, frac, tmp, idx):
+    def _lookup(self, u, bands, cell, idx):
+        """``bands[l] = u * G_l(cell of u)`` (the ratio table; no interpolation)."""
         tbl = self.table
-        np.multiply(u, tbl.scale, out=frac)
-        np.minimum(frac, tbl.scale, out=frac)
-        np.copyto(idx, frac, casting="unsafe")  # truncation == floor since >= 0
-        np.subtract(frac, idx, out=frac, casting="unsafe")
-        pair = self._pair_buffer(idx.shape)
+        np.multiply(u, tbl.ratio_cells, out=cell)
+        np.minimum(cell, tbl.ratio_cells - 1, out=cell)
+        np.copyto(idx, cell, casting="unsafe")  # truncation == floor since >= 0
         for l in range(self.order):
-            np.take(tbl.packed[l], idx, out=pair)  # value + 1j * slope
-            np.multiply(pair.imag, frac, out=tmp)
-            np.add(pair.real, tmp, out=bands[l])
+            np.take(tbl.ratios[l], idx, out=bands[l])
+            bands[l] *= u
 
     def _accumulate(self, bands, x, y, z, scratch, out):
         """out[:, lm] = K_lm * sum_s bands[l] * Q_lm(z) * Re/Im (x + i y)^m."""

@@ -14,7 +14,7 @@ from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.settings import ShadowSettings
-from shtools.runtime.shading import cosine_transfer
+from shtools.runtime.shading import cosine_transfer, environment_matrices, lit_transfer
 from shtools.runtime.shading import shade as _shade
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
@@ -67,6 +67,8 @@ class ShadowRuntime:
         self._kernels = [BlockKernel(self.table) for _ in range(self.settings.threads)]
         self._auto_clusters: ReceiverClusters | None = None
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         self.last_stats: dict = {}
 
     # -- clusters --------------------------------------------------------------
@@ -182,7 +184,7 @@ class ShadowRuntime:
         if self.exp_method in FAST_METHODS:
             # the last squaring projects onto the shading order only
             g = fast_exp(log_vis, self.exp_method, threads=self.settings.threads,
-                         out_order=self.order, **kwargs)
+                         out_order=self.order, workspaces=self._exp_workspaces, **kwargs)
         else:
             g = sh_exp(log_vis, self.exp_method, **kwargs)
         n2 = self.order * self.order
@@ -209,28 +211,58 @@ class ShadowRuntime:
         """
         s = self.settings
         pts, nrm = _check_receivers(vertices, normals)
+        transfer, changed = self._cosine_transfer(nrm)
+        env_transfer = None
+        if env_sh is not None and local_visibility is None and form == "tabulated":
+            env_transfer = self._lit_transfer(env_sh, transfer, changed)
         return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                       window_kind=s.resolved_window(), window_h=s.window_h,
-                      local_visibility=local_visibility, form=form,
-                      transfer=self._cosine_transfer(nrm))
+                      local_visibility=local_visibility, form=form, transfer=transfer,
+                      env_transfer=env_transfer)
 
-    def _cosine_transfer(self, normals: np.ndarray) -> np.ndarray:
+    def _cosine_transfer(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
 
         Static receivers (most of a scene) keep their tabulated transfer across
         frames, as the paper keeps L_H per normal.
+
+        Returns
+        -------
+        transfer : ndarray, shape (V, n*n) float32
+        changed : ndarray of int or None
+            Rows recomputed by this call (None: all of them).
         """
         cached = self._transfer_cache
         if cached is None or cached[0].shape != normals.shape:
             transfer = cosine_transfer(normals, self.order)
             self._transfer_cache = (normals.copy(), transfer)
-            return transfer
+            return transfer, None
         old_n, transfer = cached
         changed = np.flatnonzero(np.any(old_n != normals, axis=1))
         if changed.size:
             transfer[changed] = cosine_transfer(normals[changed], self.order)
             old_n[changed] = normals[changed]
-        return transfer
+        return transfer, changed
+
+    def _lit_transfer(self, env_sh, transfer: np.ndarray, changed: np.ndarray | None
+                      ) -> np.ndarray:
+        """L_H = L * H(N) per vertex (V, 3, n*n), kept while the light is unchanged.
+
+        Rows are refreshed where the normal changed (``changed``), all of them
+        when the light, the window or the receivers changed.
+        """
+        s = self.settings
+        env = np.array(env_sh, dtype=np.float64)
+        cached = self._lit_cache
+        if (cached is None or changed is None or cached[1].shape[0] != transfer.shape[0]
+                or cached[0].shape != env.shape or not np.array_equal(cached[0], env)):
+            mats = environment_matrices(env, self.order, s.resolved_window(), s.window_h)
+            self._lit_cache = (env, lit_transfer(transfer, mats), mats)
+            return self._lit_cache[1]
+        _, l_h, mats = cached
+        if changed.size:
+            l_h[changed] = lit_transfer(transfer[changed], mats)
+        return l_h
 
     def _clusters_for(self, pts: np.ndarray) -> ReceiverClusters:
         if self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]:

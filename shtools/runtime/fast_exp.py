@@ -242,7 +242,8 @@ class QuadratureProducts:
 
 
 def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None = None,
-             chunk: int = 4096, threads: int = 1, out_order: int | None = None) -> np.ndarray:
+             chunk: int = 4096, threads: int = 1, out_order: int | None = None,
+             workspaces: list | None = None) -> np.ndarray:
     """SH exponential of many vectors (``"hyb"``, ``"ps*"``, ``"ol"`` or ``"volterra"``).
 
     Parameters
@@ -263,6 +264,10 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
         Return only the first ``out_order^2`` coefficients (default ``n``); the
         exp is still computed at order ``n``, but the last squaring projects
         onto the kept coefficients only.
+    workspaces : list, optional
+        Scratch kept by the caller between calls (one entry per thread, filled
+        on first use).  Fresh multi-100-KB scratch is page-faulted on every
+        call, which costs a third of the exp of a few thousand vectors.
 
     Returns
     -------
@@ -296,7 +301,8 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
         return out
 
     n_workers = max(1, min(int(threads), len(starts)))
-    spaces = [ops.workspace(min(chunk, f.shape[0])) for _ in range(n_workers)]
+    spaces = _workspaces(ops, min(chunk, f.shape[0]), n_workers,
+                         [] if workspaces is None else workspaces)
 
     def work(k):
         for s in starts[k::n_workers]:
@@ -309,6 +315,22 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
     else:
         work(0)
     return out
+
+
+def _workspaces(ops: QuadratureProducts, rows: int, count: int, kept: list) -> list:
+    """``count`` workspaces of at least ``rows`` rows for ``ops``, reusing ``kept``
+    (which is updated in place) when the shapes fit."""
+    q_b, n_arrays = ops.recon[0].shape[1], 2 * len(ops.recon)
+    for k in range(count):
+        fits = (k < len(kept) and len(kept[k]) == n_arrays and kept[k][0].shape[0] >= rows
+                and kept[k][0].shape[1] == q_b and kept[k][0].dtype == ops.dtype)
+        if not fits:
+            space = ops.workspace(rows)
+            if k < len(kept):
+                kept[k] = space
+            else:
+                kept.append(space)
+    return kept[:count]
 
 
 def _ol_split(parts, norm: np.ndarray, tables: dict):

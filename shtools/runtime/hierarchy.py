@@ -203,7 +203,7 @@ def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTabl
     leaf_c = forest.centers[forest.leaf_nodes[j_idx]]
     leaf_r = forest.radii[forest.leaf_nodes[j_idx]]
     s_leaf, zh_leaf, d_leaf = _cap(pc[c_idx], leaf_c, leaf_r, table)
-    s_bound, _, _ = _cap(pc[c_idx], forest.centers[o_idx], forest.radii[o_idx], table)
+    s_bound = _direction(pc[c_idx], forest.centers[o_idx])[0]
     # leaves subtending less than theta_min at p* are left out of the detailed sum
     zh_leaf[leaf_r <= np.sin(theta_min) * d_leaf] = 0.0
     cos_gamma = np.clip(np.einsum("ij,ij->i", s_leaf, s_bound), -1.0, 1.0)
@@ -234,11 +234,16 @@ def _legendre(x, order: int) -> np.ndarray:
     return out
 
 
-def _cap(points, centers, radii, table: CapLogTable):
-    """Direction ``(P, 3)``, zonal log ``f*_l`` ``(P, n)`` and distance ``(P,)`` of spheres."""
+def _direction(points, centers):
+    """Unit directions ``(P, 3)`` from points to centres and distances ``(P,)``."""
     delta = centers - points
     d = np.sqrt(np.einsum("ij,ij->i", delta, delta))
     d = np.maximum(d, 1e-300)
-    s = delta / d[:, None]
+    return delta / d[:, None], d
+
+
+def _cap(points, centers, radii, table: CapLogTable):
+    """Direction ``(P, 3)``, zonal log ``f*_l`` ``(P, n)`` and distance ``(P,)`` of spheres."""
+    s, d = _direction(points, centers)
     sin2 = np.minimum((radii / d) ** 2, 1.0)
     return s, table.lookup64_x(sin2 / (1.0 + np.sqrt(1.0 - sin2))), d  # 1 - cos(theta)

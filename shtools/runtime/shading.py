@@ -40,7 +40,7 @@ import numpy as np
 
 from shtools.runtime.blockers import SphereLight
 from shtools.runtime.fast_exp import QuadratureProducts
-from shtools.sh import band_of, basis, cap_zh, clamped_cosine_zh, product_matrix, window
+from shtools.sh import band_of, basis, clamped_cosine_zh, product_matrix, window
 
 
 def band_window(order: int, kind: str | None, h: float | None) -> np.ndarray:
@@ -73,9 +73,9 @@ def light_matrices(env_sh) -> np.ndarray:
 
 
 def tabulated_radiance(transfer, env_matrices, visibility) -> np.ndarray:
-    """Tabulated form: :math:`\\mathbf L_H(N)\\cdot\\mathbf g`.
+    r"""Tabulated form: :math:`\mathbf L_H(N)\cdot\mathbf g`.
 
-    :math:`\\mathbf L_H = \\mathbf L * \\mathbf H(N)` is cosine-weighted incident radiance.
+    :math:`\mathbf L_H = \mathbf L * \mathbf H(N)` is cosine-weighted incident radiance.
 
     Parameters
     ----------
@@ -90,10 +90,30 @@ def tabulated_radiance(transfer, env_matrices, visibility) -> np.ndarray:
     -------
     ndarray, shape (V, 3)
     """
+    return lit_transfer_radiance(lit_transfer(transfer, env_matrices), visibility)
+
+
+def lit_transfer(transfer, env_matrices) -> np.ndarray:
+    r""":math:`\mathbf L_H(N) = \mathbf L * \mathbf H(N)` per vertex and colour.
+
+    Parameters
+    ----------
+    transfer : ndarray, shape (V, n*n)
+    env_matrices : ndarray, shape (3, n*n, n*n)
+
+    Returns
+    -------
+    ndarray, shape (V, 3, n*n)
+        The table a static receiver keeps while the light does not change.
+    """
     n_c, size = env_matrices.shape[0], env_matrices.shape[1]
-    # L_H for all colours with one matrix product: (V, n*n) @ (n*n, 3*n*n); M_L symmetric
-    l_h = transfer @ np.concatenate(list(env_matrices), axis=1)
-    return np.einsum("vcs,vs->vc", l_h.reshape(-1, n_c, size), visibility).astype(np.float64)
+    # all colours with one matrix product: (V, n*n) @ (n*n, 3*n*n); M_L is symmetric
+    return (transfer @ np.concatenate(list(env_matrices), axis=1)).reshape(-1, n_c, size)
+
+
+def lit_transfer_radiance(l_h, visibility) -> np.ndarray:
+    """``L_H (V, 3, n*n)`` dotted with ``visibility (V, n*n)``: radiance ``(V, 3)``."""
+    return np.einsum("vcs,vs->vc", l_h, visibility).astype(np.float64)
 
 
 def on_the_fly_radiance(transfer, env_matrices, visibility) -> np.ndarray:
@@ -115,17 +135,60 @@ def sphere_light_sh(light: SphereLight, points, order: int) -> np.ndarray:
     return zonal_to_sh32(zh, axis)
 
 
-def _sphere_light_dot(light: SphereLight, points, order: int, shadowed, win) -> np.ndarray:
-    """``sphere_light_sh(...) * win`` dotted with ``shadowed (V, n*n)`` per vertex, ``(V,)``.
+#: Vertices per block of the sphere-light term (reused scratch stays in cache).
+LIGHT_CHUNK = 8192
 
-    Without forming the light's ``(V, n*n)`` vectors: ``y(axis) * shadowed`` is
-    summed per band and weighted by the rotated zonal coefficients.
+
+def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win
+                           ) -> np.ndarray:
+    """Radiance of spherical lights through the visibility, shape ``(V, 3)``.
+
+    Per light, ``(H * g) . L_cap``: the shadowed transfer ``H * g`` by exact
+    quadrature (once for all lights), dotted with each light's rotated zonal
+    radiance without forming its ``(V, n*n)`` vector (``y(axis)`` times the
+    shadowed transfer, summed per band, weighted by the zonal coefficients).
+
+    Parameters
+    ----------
+    lights : sequence of SphereLight
+    points : ndarray, shape (V, 3)
+    transfer : ndarray, shape (V, n*n) float32
+        ``H(N)`` (or ``H(N) * g_p``).
+    visibility : ndarray, shape (V, n*n) float32
+        Windowed visibility.
+    order : int
+    win : ndarray, shape (n*n,)
+        Window factors of the lighting.
+
+    Returns
+    -------
+    ndarray, shape (V, 3) float64
     """
-    zh, axis = _sphere_light_zonal(light, points, order)
+    ops = QuadratureProducts(order, np.float32)
+    recon, proj = ops.recon[0], ops.proj[0]
+    band_sum = _band_sum(order)
     scale = np.sqrt(4.0 * np.pi / (2.0 * np.arange(order) + 1.0))
-    per_band = (basis(np.asarray(axis, dtype=np.float32), order) * shadowed) @ _band_sum(order)
-    weights = (zh * (scale * win[np.arange(order) ** 2 + np.arange(order)])).astype(np.float32)
-    return np.einsum("vl,vl->v", per_band, weights).astype(np.float64)
+    zonal_win = scale * win[np.arange(order) ** 2 + np.arange(order)]
+    n_v = points.shape[0]
+    out = np.zeros((n_v, 3))
+    vals_h = np.empty((min(n_v, LIGHT_CHUNK), recon.shape[1]), np.float32)
+    vals_g = np.empty_like(vals_h)
+    for start in range(0, n_v, LIGHT_CHUNK):
+        stop = min(n_v, start + LIGHT_CHUNK)
+        rows = stop - start
+        if len(ops.classes) == 1:  # (H * g) by quadrature: one class below order 5
+            np.matmul(transfer[start:stop], recon, out=vals_h[:rows])
+            np.matmul(visibility[start:stop], recon, out=vals_g[:rows])
+            vals_h[:rows] *= vals_g[:rows]
+            shadowed = vals_h[:rows] @ proj
+        else:
+            shadowed = ops.product(transfer[start:stop], visibility[start:stop])
+        for light in lights:
+            zh, axis = _sphere_light_zonal(light, points[start:stop], order)
+            per_band = (basis(axis, order) * shadowed) @ band_sum
+            lit = np.einsum("vl,vl->v", per_band, zh * zonal_win.astype(np.float32))
+            out[start:stop] += lit[:, None].astype(np.float64) * light.color[None, :]
+    return out
 
 
 def _band_sum(order: int) -> np.ndarray:
@@ -134,22 +197,56 @@ def _band_sum(order: int) -> np.ndarray:
 
 
 def _sphere_light_zonal(light: SphereLight, points, order: int):
-    """Zonal coefficients ``(V, n)`` of a light's radiance cap and its axis ``(V, 3)``."""
-    delta = light.position[None, :] - np.asarray(points, dtype=np.float64)
-    dist = np.linalg.norm(delta, axis=1)
-    axis = delta / np.maximum(dist, 1e-300)[:, None]
-    theta = np.where(dist > light.radius,
-                     np.arcsin(np.minimum(light.radius / np.maximum(dist, 1e-300), 1.0)),
-                     math.pi)
-    zh = -cap_zh(theta, order)
-    zh[:, 0] += math.sqrt(4.0 * math.pi)
-    axis[dist == 0] = (0.0, 0.0, 1.0)  # any axis: the cap is the whole sphere
-    return zh, axis
+    r"""Zonal coefficients ``(V, n)`` of a light's radiance cap and its axis ``(V, 3)``.
+
+    float32: the cap indicator's coefficients are
+    :math:`\sqrt{4\pi}\,\delta_{l0} - g_l` with :func:`shtools.sh.cap_zh`'s closed
+    form in :math:`\cos\theta = \sqrt{1 - R^2/D^2}` (no arcsin).  A receiver
+    inside the light sees it over the whole sphere.
+    """
+    delta = light.position[None, :].astype(np.float32) - np.asarray(points, dtype=np.float32)
+    dist2 = np.einsum("vi,vi->v", delta, delta)
+    inside = dist2 <= np.float32(light.radius) ** 2
+    inv = 1.0 / np.sqrt(np.maximum(dist2, np.float32(1e-30)))
+    axis = delta * inv[:, None]
+    axis[inside] = (0.0, 0.0, 1.0)  # any axis: the cap is the whole sphere
+    sin2 = np.minimum(np.float32(light.radius) ** 2 * inv * inv, 1.0)
+    cos_t = np.where(inside, np.float32(-1.0), np.sqrt(1.0 - sin2))
+    return cap_indicator_zh(cos_t, order), axis
+
+
+def cap_indicator_zh(cos_theta, order: int) -> np.ndarray:
+    r"""Zonal coefficients of a cap's indicator (1 inside, 0 outside), shape ``(..., n)``.
+
+    Closed form (the complement of :func:`shtools.sh.cap_zh`):
+    :math:`c_0 = \sqrt{\pi}(1 - \cos\theta)` and, for :math:`l \ge 1`,
+    :math:`c_l = \sqrt{\pi/(2l+1)}\,(P_{l-1}(\cos\theta) - P_{l+1}(\cos\theta))`.
+
+    Parameters
+    ----------
+    cos_theta : ndarray, shape (...)
+        Cosine of the cap's angular radius (-1: the whole sphere).
+    order : int
+
+    Returns
+    -------
+    ndarray, shape (..., n), dtype of ``cos_theta``
+    """
+    c = np.asarray(cos_theta)
+    p = [np.ones_like(c), c]
+    for l in range(1, order):
+        p.append(((2 * l + 1) * c * p[l] - l * p[l - 1]) / (l + 1))
+    out = np.empty((*c.shape, order), dtype=c.dtype)
+    out[..., 0] = math.sqrt(math.pi) * (1.0 - c)
+    for l in range(1, order):
+        out[..., l] = math.sqrt(math.pi / (2 * l + 1)) * (p[l - 1] - p[l + 1])
+    return out
 
 
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,
           window_kind: str | None = "cosine", window_h: float | None = None,
-          local_visibility=None, form: str = "tabulated", transfer=None) -> np.ndarray:
+          local_visibility=None, form: str = "tabulated", transfer=None,
+          env_transfer=None) -> np.ndarray:
     """Outgoing radiance of white Lambertian receivers, shape ``(V, 3)``.
 
     Parameters
@@ -171,6 +268,10 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         Evaluation of the environment term (identical results).
     transfer : ndarray, shape (V, n*n), optional
         Precomputed :func:`cosine_transfer` of ``normals`` (a cache).
+    env_transfer : ndarray, shape (V, 3, n*n), optional
+        Precomputed :func:`lit_transfer` of ``transfer`` and the windowed
+        environment (:func:`environment_matrices`); the tabulated form then
+        costs one dot product per vertex and colour.
 
     Returns
     -------
@@ -186,18 +287,28 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         local = np.asarray(local_visibility, dtype=np.float32)[:, :size]
         transfer = QuadratureProducts(order, np.float32).product(transfer, local)
     out = np.zeros((g.shape[0], 3))
-    if env_sh is not None:
-        env = np.asarray(env_sh, dtype=np.float64)
-        env_n = np.zeros((size, 3))
-        k = min(size, env.shape[0])
-        env_n[:k] = env[:k]
-        mats = light_matrices(env_n * win[:, None]).astype(np.float32)
+    if env_transfer is not None:
+        out += lit_transfer_radiance(env_transfer, g_w)
+    elif env_sh is not None:
+        mats = environment_matrices(env_sh, order, window_kind, window_h)
         fn = tabulated_radiance if form == "tabulated" else on_the_fly_radiance
         out += fn(transfer, mats, g_w)
     if sphere_lights:
-        # (H * g) by exact quadrature, dotted with each light's radiance
-        shadowed = QuadratureProducts(order, np.float32).product(transfer, g_w)
-        for light in sphere_lights:
-            lit = _sphere_light_dot(light, points, order, shadowed, win)
-            out += lit[:, None] * light.color[None, :]
+        out += sphere_lights_radiance(sphere_lights, np.asarray(points), transfer, g_w, order,
+                                      win)
     return out
+
+
+def environment_matrices(env_sh, order: int, window_kind: str | None = "cosine",
+                         window_h: float | None = None) -> np.ndarray:
+    """float32 product matrices of the windowed RGB environment, ``(3, n*n, n*n)``.
+
+    ``env_sh (n'*n', 3)`` is truncated or zero-padded to order ``n``.
+    """
+    size = order * order
+    env = np.asarray(env_sh, dtype=np.float64)
+    env_n = np.zeros((size, 3))
+    k = min(size, env.shape[0])
+    env_n[:k] = env[:k]
+    win = band_window(order, window_kind, window_h)
+    return light_matrices(env_n * win[:, None]).astype(np.float32)
