@@ -20,8 +20,11 @@ from shtools.scene.scene import BAKE_METHODS
                    "posed meshes (ground truth).  Default: settings.method of the scene.")
 @click.option("--store-visibility", is_flag=True,
               help="Also store the per-vertex visibility SH vectors (T, V, n*n).")
+@click.option("--processes", type=click.IntRange(1, 64), default=None,
+              help="Processes sharing each frame's shadow evaluation (default: one per "
+                   "core; 1 = this process only).")
 @json_option
-def bake(scene, output, frames_text, method, store_visibility, as_json):
+def bake(scene, output, frames_text, method, store_visibility, processes, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.
 
     Frames are written as they are computed; the file appears only when every
@@ -34,7 +37,7 @@ def bake(scene, output, frames_text, method, store_visibility, as_json):
     frames = parse_frames(frames_text, parsed.settings.frames, scene)
     with progress(total=len(frames), desc="bake") as bar:
         summary = bake_to_file(parsed, output, frames=frames, method=method,
-                               store_visibility=store_visibility,
+                               store_visibility=store_visibility, processes=processes,
                                on_frame=lambda _r: bar.update(1))
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "

@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
+import itertools
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
-from shtools.errors import InputError
+from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.parallel import (
+    MIN_PARALLEL_PAIRS,
+    VertexWorkers,
+    resolve_processes,
+    split_clusters,
+)
 from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import cosine_transfer, environment_matrices, lit_transfer
 from shtools.runtime.shading import shade as _shade
@@ -69,6 +77,10 @@ class ShadowRuntime:
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
+        #: processes sharing the per-vertex stages (worker processes start on the
+        #: first frame of at least MIN_PARALLEL_PAIRS pairs)
+        self.processes = resolve_processes(self.settings.processes)
+        self._workers: VertexWorkers | None = None
         self.last_stats: dict = {}
 
     # -- clusters --------------------------------------------------------------
@@ -93,57 +105,13 @@ class ShadowRuntime:
                        clusters: ReceiverClusters | None = None) -> np.ndarray:
         """Accumulated log visibility at the accumulation order, shape ``(V, n_acc^2)`` float32.
 
-        Parameters are those of :meth:`visibility`.
+        Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        blockers = _check_blockers(blockers)
-        s = self.settings
-        stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {}}
-        n_acc2 = self.acc_order * self.acc_order
-        f = np.zeros((pts.shape[0], n_acc2), dtype=np.float32)
-        t0 = time.process_time()
-        if not s.hierarchy:
-            centers, radii = leaf_spheres(blockers)
-            stats["seconds"]["cuts"] = time.process_time() - t0
-            t1 = time.process_time()
-            accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
-                           chunk_pairs=s.chunk_pairs, out=f, kernel=self._kernels[0])
-            stats["pairs"] = stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
-            stats["seconds"]["accumulate"] = time.process_time() - t1
-        else:
-            if clusters is None:
-                clusters = self._clusters_for(pts)
-            if clusters.n_vertices != pts.shape[0]:
-                raise InputError(
-                    f"clusters were built for {clusters.n_vertices} vertices but "
-                    f"{pts.shape[0]} were given; call clusters() on this receiver set"
-                )
-            forest = build_forest(blockers)
-            cl_centers, cl_radii = clusters.bounds(pts)
-            cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
-            weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
-            stats["seconds"]["cuts"] = time.process_time() - t0
-            t1 = time.process_time()
-            sizes = cuts.in_cut.sum(axis=1)
-            s_max = max(1, int(sizes.max(initial=0)))
-            # each cluster's cut nodes first (stable), padded with radius 0
-            node_idx = np.argsort(~cuts.in_cut, axis=1, kind="stable")[:, :s_max]
-            valid = np.arange(s_max)[None, :] < sizes[:, None]
-            sph_c = forest.centers[node_idx]
-            sph_r = np.where(valid, forest.radii[node_idx], 0.0)
-            any_inner = bool((cuts.in_cut & ~forest.is_leaf[None, :]).any())
-            sph_w = (np.take_along_axis(weights, node_idx[:, :, None], axis=1)
-                     if any_inner else None)
-            f = accumulate_clusters(pts, nrm, clusters.order, clusters.offsets, sph_c, sph_r,
-                                    sph_w, sizes, self.table, self_shadow=s.self_shadow,
-                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
-                                    kernels=self._kernels, stats=stats)
-            pairs = int((np.diff(clusters.offsets) * sizes).sum())
-            stats["pairs"] = pairs
-            stats["clusters"] = clusters.n_clusters
-            stats["seconds"]["accumulate"] = time.process_time() - t1
-        stats["spheres_per_vertex"] = stats["pairs"] / max(1, pts.shape[0])
-        self.last_stats = stats
+        work = self._frame_work(pts, _check_blockers(blockers), clusters)
+        t1 = time.process_time()
+        f = self._accumulate(work.task(pts, nrm), self.last_stats)
+        self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
         return f
 
     def visibility(self, vertices, normals, blockers: list[SphereBlocker],
@@ -168,10 +136,120 @@ class ShadowRuntime:
         ndarray, shape (V, n*n) float32
             Visibility vectors ``g`` (eq. 8) at the shading order.
         """
-        f = self.log_visibility(vertices, normals, blockers, clusters)
-        t0 = time.process_time()
+        pts, nrm = _check_receivers(vertices, normals)
+        work = self._frame_work(pts, _check_blockers(blockers), clusters)
+        stats = self.last_stats
+        if self.processes > 1 and stats["pairs"] >= MIN_PARALLEL_PAIRS:
+            w0 = time.perf_counter()
+            g = self._parallel_visibility(work, pts, nrm)
+            stats["seconds"]["accumulate_exp_wall"] = time.perf_counter() - w0
+            return g
+        t1 = time.process_time()
+        f = self._accumulate(work.task(pts, nrm), stats)
+        t2 = time.process_time()
         g = self.exponentiate(f)
-        self.last_stats["seconds"]["exp"] = time.process_time() - t0
+        stats["seconds"]["accumulate"] = t2 - t1
+        stats["seconds"]["exp"] = time.process_time() - t2
+        return g
+
+    def run_part(self, task) -> tuple[np.ndarray, int]:
+        """Visibility ``(V', n*n)`` and evaluated pairs of one part of a frame.
+
+        ``task`` comes from :meth:`FrameWork.task` (also what a worker process
+        runs; see :mod:`shtools.runtime.parallel`).
+        """
+        stats = {"pairs_evaluated": 0}
+        g = self.exponentiate(self._accumulate(task, stats))
+        return g, stats["pairs_evaluated"]
+
+    def close(self) -> None:
+        """Stop the worker processes, if any were started (the runtime stays usable)."""
+        if self._workers is not None:
+            self._workers.close()
+            self._workers = None
+
+    def __enter__(self) -> ShadowRuntime:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _frame_work(self, pts, blockers, clusters) -> FrameWork:
+        """Cuts, ratio weights and per-cluster sphere lists of a frame (this process)."""
+        s = self.settings
+        stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {},
+                 "processes": 1}
+        self.last_stats = stats
+        t0 = time.process_time()
+        if not s.hierarchy:
+            centers, radii = leaf_spheres(blockers)
+            stats["seconds"]["cuts"] = time.process_time() - t0
+            stats["pairs"] = stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
+            stats["spheres_per_vertex"] = float(centers.shape[0])
+            return FrameWork(centers=centers, radii=radii)
+        if clusters is None:
+            clusters = self._clusters_for(pts)
+        if clusters.n_vertices != pts.shape[0]:
+            raise InputError(
+                f"clusters were built for {clusters.n_vertices} vertices but "
+                f"{pts.shape[0]} were given; call clusters() on this receiver set"
+            )
+        forest = build_forest(blockers)
+        cl_centers, cl_radii = clusters.bounds(pts)
+        cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
+        weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
+        sizes = cuts.in_cut.sum(axis=1)
+        s_max = max(1, int(sizes.max(initial=0)))
+        # each cluster's cut nodes first (stable), padded with radius 0
+        node_idx = np.argsort(~cuts.in_cut, axis=1, kind="stable")[:, :s_max]
+        valid = np.arange(s_max)[None, :] < sizes[:, None]
+        any_inner = bool((cuts.in_cut & ~forest.is_leaf[None, :]).any())
+        work = FrameWork(
+            order=clusters.order, offsets=clusters.offsets, sizes=sizes,
+            centers=forest.centers[node_idx],
+            radii=np.where(valid, forest.radii[node_idx], 0.0),
+            weights=(np.take_along_axis(weights, node_idx[:, :, None], axis=1)
+                     if any_inner else None))
+        stats["seconds"]["cuts"] = time.process_time() - t0
+        stats["pairs"] = int((np.diff(clusters.offsets) * sizes).sum())
+        stats["clusters"] = clusters.n_clusters
+        stats["spheres_per_vertex"] = stats["pairs"] / max(1, pts.shape[0])
+        return work
+
+    def _accumulate(self, task, stats: dict) -> np.ndarray:
+        """Log sums ``(V', n_acc^2)`` of a :meth:`FrameWork.task` in this process."""
+        s = self.settings
+        if task[0] == "spheres":
+            _, pts, nrm, centers, radii = task
+            f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+            accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
+                           chunk_pairs=s.chunk_pairs, out=f, kernel=self._kernels[0])
+            stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
+            return f
+        _, pts, nrm, order, offsets, centers, radii, weights, sizes = task
+        return accumulate_clusters(pts, nrm, order, offsets, centers, radii, weights, sizes,
+                                   self.table, self_shadow=s.self_shadow,
+                                   chunk_pairs=s.chunk_pairs, threads=s.threads,
+                                   kernels=self._kernels, stats=stats)
+
+    def _parallel_visibility(self, work: FrameWork, pts, nrm) -> np.ndarray:
+        """Visibility with the frame split over this process and the workers."""
+        if self._workers is None:
+            self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables)
+        parts = work.split(pts, nrm, self.processes)
+        try:
+            futures = [self._workers.submit(task) for _, task in parts[1:]]
+            g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
+            rows, task = parts[0]
+            g[rows], evaluated = self.run_part(task)
+            for (rows, _), future in zip(parts[1:], futures, strict=True):
+                g[rows], count = self._workers.result(future)
+                evaluated += count
+        except ShtoolsError:
+            self.close()  # a dead worker: the next frame starts fresh ones
+            raise
+        self.last_stats["pairs_evaluated"] = evaluated
+        self.last_stats["processes"] = len(parts)
         return g
 
     def exponentiate(self, log_vis) -> np.ndarray:
@@ -268,6 +346,71 @@ class ShadowRuntime:
         if self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]:
             self._auto_clusters = self.clusters(pts)
         return self._auto_clusters
+
+
+@dataclass
+class FrameWork:
+    """What one frame accumulates: per-cluster sphere lists, or one list for all.
+
+    Attributes
+    ----------
+    centers : ndarray, shape (C, S, 3) or (S, 3)
+        Cut spheres of each cluster (padded), or the leaf spheres (no hierarchy).
+    radii : ndarray, shape (C, S) or (S,)
+    order, offsets : ndarray of int, shapes (V,), (C + 1,) or None
+        Receivers sorted by cluster and the cluster boundaries.
+    sizes : ndarray of int, shape (C,) or None
+        Valid spheres per cluster.
+    weights : ndarray, shape (C, S, n_acc) or None
+        Ratio weights (eq. 37) where inner tree nodes are used.
+    """
+
+    centers: np.ndarray
+    radii: np.ndarray
+    order: np.ndarray | None = None
+    offsets: np.ndarray | None = None
+    sizes: np.ndarray | None = None
+    weights: np.ndarray | None = None
+
+    def task(self, pts, nrm) -> tuple:
+        """The whole frame as one task for :meth:`ShadowRuntime.run_part`."""
+        if self.order is None:
+            return ("spheres", pts, nrm, self.centers, self.radii)
+        return ("clusters", pts, nrm, self.order, self.offsets, self.centers, self.radii,
+                self.weights, self.sizes)
+
+    def split(self, pts, nrm, parts: int) -> list[tuple[np.ndarray, tuple]]:
+        """``parts`` tasks of about equal work, with the receiver rows each covers.
+
+        Clusters are dealt whole (:func:`split_clusters`, cost = receivers x
+        cut size); without a hierarchy the receivers are cut into equal ranges.
+        Empty parts are dropped.
+        """
+        pts32 = np.asarray(pts, dtype=np.float32)
+        nrm32 = np.asarray(nrm, dtype=np.float32)
+        if self.order is None:
+            bounds = np.linspace(0, pts.shape[0], parts + 1).astype(np.int64)
+            return [(np.arange(a, b), ("spheres", pts32[a:b], nrm32[a:b], self.centers,
+                                       self.radii))
+                    for a, b in itertools.pairwise(bounds) if b > a]
+        counts = np.diff(self.offsets)
+        groups = split_clusters(counts * self.sizes, parts)
+        cluster_of = np.repeat(np.arange(counts.size), counts)  # cluster of each order slot
+        part_of = np.empty(counts.size, dtype=np.int64)
+        for k, group in enumerate(groups):
+            part_of[group] = k
+        slot_part = part_of[cluster_of]
+        out = []
+        for k, group in enumerate(groups):
+            rows = self.order[slot_part == k]  # cluster by cluster, ascending
+            if rows.size == 0:
+                continue
+            offsets = np.concatenate([[0], np.cumsum(counts[group])])
+            out.append((rows, ("clusters", pts32[rows], nrm32[rows], np.arange(rows.size),
+                               offsets, self.centers[group], self.radii[group],
+                               None if self.weights is None else self.weights[group],
+                               self.sizes[group])))
+        return out
 
 
 def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:

@@ -63,10 +63,18 @@ class ShadowSettings:
     chunk_pairs : int
         Number of sphere-vertex pairs processed per array pass (memory bound).
     threads : int
-        Threads accumulating blocks concurrently (NumPy releases the GIL in its
-        array loops).  Default 1: on the 2-core reference machine the battle-scale
-        frame measured 206 ms wall with 1 thread and 223 ms with 2 (bench_runtime),
-        the array passes being memory-bound; raise it on machines with more cores.
+        Threads accumulating blocks concurrently within a process.  Default 1:
+        NumPy releases the GIL in each array pass, but the kernel makes hundreds
+        of short passes per block and two threads spend the gain handing the GIL
+        over (the battle-scale frame of bench_runtime ran 1.0-1.3x faster with
+        2 threads on 2 cores); ``processes`` is the way to use more cores.
+    processes : int or None
+        Processes sharing the per-vertex stages of a frame (accumulation and
+        exp), see :mod:`shtools.runtime.parallel`; None uses the available
+        cores (at most 8), 1 evaluates in the calling process.  Workers are
+        forked on the first frame with at least ``MIN_PARALLEL_PAIRS``
+        sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
+        process.
     """
 
     order: int = 4
@@ -82,6 +90,7 @@ class ShadowSettings:
     self_shadow: bool = True
     chunk_pairs: int = 1 << 16
     threads: int = 1
+    processes: int | None = None
 
     def __post_init__(self):
         self.validate()
@@ -122,6 +131,11 @@ class ShadowSettings:
             )
         if not _is_int(self.threads) or not 1 <= self.threads <= 64:
             raise InputError(f"threads must be an integer 1..64, got {self.threads!r}")
+        if self.processes is not None and (not _is_int(self.processes)
+                                           or not 1 <= self.processes <= 64):
+            raise InputError(
+                f"processes must be an integer 1..64 (or None: one per core), "
+                f"got {self.processes!r}")
         if not _is_int(self.chunk_pairs) or self.chunk_pairs < 256:
             raise InputError(f"chunk_pairs must be an integer >= 256, got {self.chunk_pairs!r}")
 

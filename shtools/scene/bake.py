@@ -385,8 +385,11 @@ def parse_frames(text: str | None, n_frames: int, path=None) -> range:
     return range(start, stop)
 
 
-def runtime_settings(scene: Scene, method: str):
-    """The runtime's :class:`~shtools.runtime.ShadowSettings` for a scene and method."""
+def runtime_settings(scene: Scene, method: str, processes: int | None = None):
+    """The runtime's :class:`~shtools.runtime.ShadowSettings` for a scene and method.
+
+    ``processes``: processes sharing each frame (None: one per core).
+    """
     from shtools.runtime import ShadowSettings
 
     st = scene.settings
@@ -395,6 +398,7 @@ def runtime_settings(scene: Scene, method: str):
         exp_method=method if method in EXP_NAMES else st.exp_method,
         window=st.window, window_h=st.window_h, theta_max=st.theta_max,
         hierarchy=st.hierarchy, vertices_per_cluster=st.vertices_per_cluster,
+        processes=processes,
     )
     if st.theta_min is not None:
         kwargs["theta_min"] = st.theta_min
@@ -410,6 +414,7 @@ def bake_scene(
     output: str | os.PathLike | None = None,
     prepared: PreparedScene | None = None,
     raytrace_dirs: int | None = None,
+    processes: int | None = None,
 ) -> Iterator[FrameResult]:
     """Bake ``scene`` frame by frame, yielding a :class:`FrameResult` per frame.
 
@@ -430,6 +435,9 @@ def bake_scene(
         Reuse loaded assets (:func:`prepare_scene`).
     raytrace_dirs : int, optional
         Directions per vertex for ``raytrace`` (default: the reference's).
+    processes : int, optional
+        Processes sharing each frame of the runtime methods (default: one per
+        core; see :class:`~shtools.runtime.ShadowSettings`).
 
     Yields
     ------
@@ -446,7 +454,7 @@ def bake_scene(
                          f"0..{scene.settings.frames - 1}", scene.path)
     prepared = prepared or prepare_scene(scene)
     st = scene.settings
-    runtime = ShadowRuntime(runtime_settings(scene, method), tables=prepared.tables)
+    runtime = ShadowRuntime(runtime_settings(scene, method, processes), tables=prepared.tables)
     moving = prepared.receivers_move()
     times = scene.frame_times(frames)
 
@@ -486,9 +494,11 @@ def bake_scene(
                                    visibility=vis if store_visibility else None)
             yield result
     except BaseException as exc:
+        runtime.close()
         if writer is not None:
             writer.__exit__(type(exc), exc, exc.__traceback__)
         raise
+    runtime.close()
     if writer is not None:
         writer.__exit__(None, None, None)
 
@@ -585,6 +595,7 @@ def bake_to_file(
     method: str | None = None,
     store_visibility: bool = False,
     on_frame: Callable[[FrameResult], None] | None = None,
+    processes: int | None = None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -592,7 +603,7 @@ def bake_to_file(
     ``frame_seconds`` (posing + visibility + shading summed over frames),
     ``setup_seconds`` (loading, fits, tables, clustering, file writes),
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
-    ``output``.
+    ``output``.  ``processes`` as in :func:`bake_scene`.
     """
     parent = Path(output).parent
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
@@ -603,7 +614,7 @@ def bake_to_file(
     frame_seconds = 0.0
     for result in bake_scene(scene, frames=frames, method=method,
                              store_visibility=store_visibility, output=output,
-                             prepared=prepared):
+                             prepared=prepared, processes=processes):
         n += 1
         frame_seconds += result.seconds
         if on_frame is not None:

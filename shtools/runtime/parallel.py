@@ -1,0 +1,155 @@
+"""Worker processes that share the per-vertex stages of a frame (accumulate + exp).
+
+The per-pair work of a frame is hundreds of small NumPy array passes per block.
+Threads do not speed it up: every pass releases and re-takes the GIL, and two
+threads contending for it spend most of the frame handing it over (on the
+2-core reference machine two threads gave 1.0-1.3x).  Processes do: the frame's
+receiver clusters are split into parts of about equal work (pairs), the calling
+process evaluates one part while forked workers evaluate the others, and each
+part goes through accumulation *and* exponentiation before it comes back, so
+only receivers, cuts and the ``(V, n*n)`` result cross process boundaries.
+
+Workers are forked (``fork`` start method: no re-import of the caller's main
+module, the log table is inherited), started on the first frame large enough
+to gain from them (:data:`MIN_PARALLEL_PAIRS`), and stopped by
+:meth:`VertexWorkers.close`, when the runtime is garbage-collected, or at exit.
+A part's result does not depend on the other parts, so the visibility equals
+the single-process result up to float32 rounding of the block layout.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import weakref
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+
+import numpy as np
+
+from shtools.errors import ShtoolsError
+
+#: Frames with fewer sphere-receiver pairs run in one process: a worker round
+#: trip (pickling receivers, cuts and the result) costs about a millisecond.
+MIN_PARALLEL_PAIRS = 200_000
+#: ``processes=None`` uses the available cores, at most this many.
+MAX_AUTO_PROCESSES = 8
+
+#: The evaluator of a worker process (set by :func:`_init_worker`).
+_WORKER_RUNTIME = None
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the OS reports it)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def fork_supported() -> bool:
+    """True where worker processes can be forked (Linux, other Unixes)."""
+    return "fork" in multiprocessing.get_all_start_methods()
+
+
+def resolve_processes(processes: int | None) -> int:
+    """The number of processes a runtime uses (``None``: the available cores)."""
+    if not fork_supported():
+        return 1
+    if processes is None:
+        return max(1, min(available_cores(), MAX_AUTO_PROCESSES))
+    return int(processes)
+
+
+def split_clusters(costs: np.ndarray, parts: int) -> list[np.ndarray]:
+    """Clusters dealt into ``parts`` groups of about equal total cost.
+
+    Longest-processing-time rule: clusters by decreasing cost, each to the
+    group with the least cost so far (deterministic: ties go to the lower
+    group and the stable sort keeps cluster order).
+
+    Parameters
+    ----------
+    costs : ndarray, shape (C,)
+        Work per cluster (receivers x cut size).
+    parts : int
+
+    Returns
+    -------
+    list of ndarray of int
+        Ascending cluster indices of each group (some may be empty).
+    """
+    load = np.zeros(parts)
+    owner = np.empty(costs.size, dtype=np.int64)
+    for c in np.argsort(-np.asarray(costs, dtype=np.float64), kind="stable"):
+        k = int(np.argmin(load))
+        owner[c] = k
+        load[k] += costs[c]
+    return [np.flatnonzero(owner == k) for k in range(parts)]
+
+
+class VertexWorkers:
+    """Forked workers evaluating parts of a frame; see the module docstring.
+
+    Parameters
+    ----------
+    count : int
+        Worker processes (the caller evaluates one more part itself).
+    settings : ShadowSettings
+        The runtime's settings (workers run single-process).
+    tables : dict
+        Log/OL tables of the runtime.
+    """
+
+    def __init__(self, count: int, settings, tables: dict):
+        ctx = multiprocessing.get_context("fork")
+        self.count = int(count)
+        self._pool = ProcessPoolExecutor(max_workers=self.count, mp_context=ctx,
+                                         initializer=_init_worker, initargs=(settings, tables))
+        self._close = weakref.finalize(self, _shutdown, self._pool)
+
+    def submit(self, task):
+        """Start one part on a worker; returns a future of ``(g, pairs_evaluated)``."""
+        try:
+            return self._pool.submit(_run_task, task)
+        except BrokenProcessPool as exc:
+            raise _worker_died() from exc
+
+    @staticmethod
+    def result(future):
+        """Wait for a part, turning a dead worker into a readable error."""
+        try:
+            return future.result()
+        except BrokenProcessPool as exc:
+            raise _worker_died() from exc
+
+    def close(self) -> None:
+        """Stop the workers (idempotent)."""
+        self._close()
+
+
+def _worker_died() -> ShtoolsError:
+    return ShtoolsError("a shadow worker process died (out of memory?); run with "
+                        "processes=1 (bake: --processes 1) to evaluate in one process")
+
+
+def _shutdown(pool: ProcessPoolExecutor) -> None:
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _init_worker(settings, tables) -> None:
+    import signal
+    from dataclasses import replace
+
+    # Ctrl-C reaches the whole process group: the caller handles it and stops
+    # the workers, which must not print tracebacks of their own
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    from shtools.runtime.evaluator import ShadowRuntime
+
+    global _WORKER_RUNTIME
+    _WORKER_RUNTIME = ShadowRuntime(replace(settings, processes=1), tables=tables)
+
+
+def _run_task(task):
+    return _WORKER_RUNTIME.run_part(task)
