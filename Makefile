@@ -26,13 +26,13 @@ $(STAMP): pyproject.toml
 	rm -f $(VENV)/.installed-* && touch $@
 
 demo: $(STAMP) ## Set up and bake the bundled demo scene into out/ (baked.h5, GLB, PNGs)
-	$(PY) -m shtools.demo $(OUT)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m shtools.demo $(OUT)
 
 test: $(STAMP) ## Set up and run the whole test suite (2 workers)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
 
 bench: $(STAMP) ## Run every benchmarks/bench_*.py and print their tables (QUICK=1: short)
-	$(PY) -m benchmarks $(if $(QUICK),--quick)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick)
 
 golden: $(STAMP) ## Regenerate tests/golden/golden.h5 on purpose (review with shtools diff)
 	$(PY) tests/golden/regenerate.py

@@ -18,11 +18,16 @@ The demo runs the real stages, in-process through the ``shtools`` command line:
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+# one BLAS thread (see shtools.cli.main): set before NumPy loads
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
 
 #: Scene timing: frames at FPS; one walk cycle (two steps) per STRIDE_SECONDS.
 FRAMES = 48
