@@ -9,6 +9,7 @@ Usage (one frame)::
     from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker, SphereLight
 
     rt = ShadowRuntime(ShadowSettings(order=4))          # tables built if not given
+                                                         # (rt.close() stops workers)
     clusters = rt.clusters(rest_vertices)                # Lloyd, once; reuse every frame
     blockers = [SphereBlocker(centers, radii, tree=(parent, leaf))]
     g = rt.visibility(vertices, normals, blockers, clusters)          # (V, 16)
@@ -37,36 +38,43 @@ sphere set — at about 1.5x the frame CPU time of ``acc_order=4``, the fast
 setting.  Tables passed in must have exactly the accumulation order (the cap
 log depends on the order it is computed at).
 
-Performance notes: accumulation runs on float32 blocks of (tiles of 32
+Performance notes: a frame's receiver clusters are split into parts of equal
+work, one evaluated in the calling process and the others in forked worker
+processes (accumulation and exp per part; :mod:`~shtools.runtime.parallel`,
+``processes=None`` = one per core) -- threads do not scale here, the GIL
+hand-over between hundreds of short NumPy passes eats the gain.
+Accumulation runs on float32 blocks of (tiles of 32
 receivers of one cluster) x (the tile's sphere list, padded with radius-0
 spheres), so per-cluster work is batched without per-pair gathers; a tile's
 list is its cluster's cut minus the spheres behind the tangent plane of all
 its receivers (exactly zero contributions, ~18 % of the pairs of a battle
-scene), ordered so the self-shadow rules run on a prefix of rows only.  The
+scene), ordered so the self-shadow rules run on a prefix of rows only; the cap
+log comes from one gather per band of a ratio table ``F_l(x)/x``.  The
 exp uses exact quadrature SH products on BLAS, split by the z and azimuthal
 parity of the coefficients (4x fewer flops at order >= 5), with reused scratch
 and the last squaring projected onto the shading order only
 (:mod:`~shtools.runtime.fast_exp`); ratio vectors use the addition theorem
 (no per-pair ``n*n`` basis); ``H(N)`` is kept for receivers whose normal did
-not change.  Set ``OPENBLAS_NUM_THREADS=1`` on a loaded machine: threaded
-OpenBLAS spins on the small matrix products.
+not change, and ``L_H(N)`` as well while the environment light is unchanged.
+Set ``OPENBLAS_NUM_THREADS=1`` (the CLI does): threaded OpenBLAS spins on the
+small matrix products.
 
 Public API
 ----------
 ``ShadowSettings(order=4, acc_order=None, exp_method="auto", window="cosine",
 window_h=None, theta_max=radians(25), theta_min=radians(1), hierarchy=True,
-vertices_per_cluster=400, ...)``
+vertices_per_cluster=400, threads=1, processes=None, ...)``
     Parameters (:mod:`~shtools.runtime.settings`); ``acc_order=None`` means
     ``min(n + 2, 6)``.
 ``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``
 ``SphereLight(position (3,), radius, color (3,))``
-``ShadowRuntime(settings=None, tables=None)``
+``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;
     ``.visibility(vertices, normals, blockers, clusters=None) -> (V, n*n)``;
     ``.log_visibility(...) -> (V, n_acc^2)``; ``.exponentiate(f)``;
     ``.shade(visibility, vertices, normals, env_sh=None, sphere_lights=(),
     local_visibility=None, form="tabulated") -> (V, 3)``; ``.last_stats``
-    (pairs, spheres per vertex, clusters, CPU seconds per stage).
+    (pairs, spheres per vertex, clusters, processes, CPU seconds per stage).
 ``ReceiverClusters``, ``lloyd_clusters(vertices, vertices_per_cluster, groups=None)``
 ``fast_exp(f, method, tables)`` — HYB / PS*-p / OL / Volterra for many vectors
 ``accumulate_log(points, normals, centers, radii, table, weights=None, ...)``
