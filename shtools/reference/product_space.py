@@ -55,7 +55,8 @@ def cap_vectors(points, normals, centers, radii, order: int, *, self_shadow: boo
 
 
 def product_space_visibility(vertices, normals, blockers, order: int, acc_order: int | None = None,
-                             *, self_shadow: bool = True, dtype=np.float64) -> np.ndarray:
+                             *, self_shadow: bool = True, dtype=np.float64,
+                             kernel: str = "cp") -> np.ndarray:
     """Visibility by sequential truncated SH products of the blockers' cap vectors.
 
     Parameters
@@ -72,6 +73,10 @@ def product_space_visibility(vertices, normals, blockers, order: int, acc_order:
         Apply the Sec. 6.2 rules (as the runtime does).
     dtype : numpy dtype
         float64 (reference) or float32 (speed comparisons).
+    kernel : {"cp", "sparse"}
+        Product evaluation (:func:`shtools.sh.product`): quadrature factors of Γ
+        (default, fastest here) or the sparse triple-product contraction that
+        product-space methods classically use (Snyder 2006 code generation).
 
     Returns
     -------
@@ -91,6 +96,6 @@ def product_space_visibility(vertices, normals, blockers, order: int, acc_order:
                            self_shadow=self_shadow, dtype=dtype)
         g = caps[:, 0].copy()
         for i in range(1, caps.shape[1]):
-            g = product(g, caps[:, i], n_acc)
+            g = product(g, caps[:, i], n_acc, kernel=kernel)
         out[s : s + step] = g[:, : order * order]
     return out

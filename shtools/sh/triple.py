@@ -152,7 +152,7 @@ def _float_dtype(*arrays) -> np.dtype:
     return dt if dt in (np.float32, np.float64) else np.dtype(np.float64)
 
 
-def product(f, g, order: int | None = None) -> np.ndarray:
+def product(f, g, order: int | None = None, *, kernel: str = "cp") -> np.ndarray:
     """Truncated SH product ``f * g`` (eq. 3).
 
     Parameters
@@ -162,6 +162,9 @@ def product(f, g, order: int | None = None) -> np.ndarray:
     order : int, optional
         Output order (default: the order of ``f``).  A higher order keeps more of
         the exact product (whose order is ``n_f + n_g - 1``).
+    kernel : {"cp", "sparse"}
+        Evaluation (:mod:`shtools.sh._kernels`): quadrature factors of Γ on BLAS
+        (default, faster) or the unrolled sparse Γ contraction; both exact.
 
     Returns
     -------
@@ -178,7 +181,8 @@ def product(f, g, order: int | None = None) -> np.ndarray:
     lead = f.shape[:-1]
     f2 = f.reshape(-1, n_in * n_in)
     g2 = g.reshape(-1, n_in * n_in)
-    out = run_product(np.ascontiguousarray(f2), np.ascontiguousarray(g2), n_in, n_out)
+    out = run_product(np.ascontiguousarray(f2), np.ascontiguousarray(g2), n_in, n_out,
+                      kernel=kernel)
     return out.reshape(*lead, n_out * n_out)
 
 

@@ -94,6 +94,10 @@ def test_product_space_is_sequential_truncated_products():
     for k in range(1, 4):
         want = product(want, caps[k])
     np.testing.assert_allclose(got[0], want[:9], atol=1e-12)
+    # the sparse triple-tensor kernel evaluates the same products (float64 round-off)
+    sparse = product_space_visibility(p, [UP], (centers, radii), 3, acc_order=5,
+                                      kernel="sparse")
+    np.testing.assert_allclose(sparse, got, atol=1e-12)
 
 
 def test_product_space_close_to_ray_traced_union_for_separate_small_spheres():
