@@ -139,6 +139,12 @@ class BattleScene:
 
 #: untimed frames before timing a configuration (steady state)
 WARMUP_FRAMES = 2
+#: untimed frames at the start of the process: its first frames run up to 1.5x
+#: slower because glibc maps large temporaries afresh (page faults) until its
+#: dynamic mmap threshold has grown past their size; measured here, the first
+#: configuration of a process took 172 ms and the same one later 117 ms
+#: (``MALLOC_MMAP_THRESHOLD_=268435456`` removes the difference)
+PROCESS_WARMUP_FRAMES = 6
 
 
 def battle_frames(scene: BattleScene, settings: ShadowSettings, frames: int):
@@ -191,6 +197,8 @@ def table_battle(quick: bool) -> list[dict]:
     frames = 2 if quick else 5
     rows = []
     cores = available_cores()
+    _, _, rt = battle_frames(scene, ShadowSettings(processes=1), PROCESS_WARMUP_FRAMES)
+    rt.close()
     # (order, acc order, exp, threads, processes); processes None = the default (one
     # per core); per-stage CPU times are those of the calling process
     configs = [(4, 4, "auto", 1, 1), (4, 5, "auto", 1, 1), (4, 6, "hyb", 1, 1),
