@@ -86,7 +86,8 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
         kwargs["acc_order"] = base["acc_order"]
     if kwargs.get("acc_order") is not None and kwargs["acc_order"] < kwargs["order"]:
         raise InputError(f"--acc-order {kwargs['acc_order']} is below the order {kwargs['order']}")
-    settings = ShadowSettings(**kwargs)
+    # one process: the times compare methods, and the references run in one too
+    settings = ShadowSettings(processes=1, **kwargs)
     clusters = None
     if settings.hierarchy:
         from shtools.runtime.clusters import lloyd_clusters
