@@ -135,6 +135,13 @@ class ShadowRuntime:
         -------
         ndarray, shape (V, n*n) float32
             Visibility vectors ``g`` (eq. 8) at the shading order.
+
+        Notes
+        -----
+        With ``settings.processes > 1`` (the default on a multi-core machine),
+        frames of at least ``MIN_PARALLEL_PAIRS`` sphere-receiver pairs are
+        split by receiver cluster over this process and forked workers
+        (:mod:`shtools.runtime.parallel`); :meth:`close` stops them.
         """
         pts, nrm = _check_receivers(vertices, normals)
         work = self._frame_work(pts, _check_blockers(blockers), clusters)
