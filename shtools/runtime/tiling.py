@@ -26,6 +26,9 @@ from shtools.runtime.log_table import CapLogTable
 #: Receivers per tile: small enough that padding a cluster's last tile wastes
 #: little, large enough that (tile x cut) blocks batch well.
 TILE_ROWS = 32
+#: Tiles per batched plane test in :func:`_tile_sphere_lists` (bounds its
+#: ``(tiles, TILE_ROWS, S)`` scratch to a few MB).
+_CURVED_TILES_PER_CHUNK = 256
 
 
 def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_centers,
@@ -159,7 +162,6 @@ def _tile_sphere_lists(pts, nrm, rows, tile_cluster, cen, rad, cut_sizes, self_s
     rule_sizes : ndarray of int, shape (NT,)
         Leading spheres of each list that need the self-shadow rules.
     """
-    n_tiles, n_rows = rows.shape
     n_s = cen.shape[1]
     keep = np.arange(n_s)[None, :] < cut_sizes[tile_cluster][:, None]  # (NT, S)
     ruled = keep.copy()  # may be behind or straddle some receiver's plane
@@ -177,23 +179,17 @@ def _tile_sphere_lists(pts, nrm, rows, tile_cluster, cen, rad, cut_sizes, self_s
             radius = rad[tile_cluster[ft]]
             keep[ft] &= n_dot_p - tile_h.min(axis=1)[:, None] > -radius
             ruled[ft] &= n_dot_p - tile_h.max(axis=1)[:, None] < radius
-        # other tiles: every pair, one matrix product per cluster (a cluster's
-        # tiles are consecutive)
-        bounds = np.flatnonzero(np.diff(tile_cluster)) + 1
-        for a, b in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [n_tiles]]),
-                        strict=True):
-            tiles = a + np.flatnonzero(~flat[a:b])
-            if tiles.size == 0:
-                continue
-            c = tile_cluster[a]
-            size = int(cut_sizes[c])
-            r = rows[tiles].ravel()
-            h = nrm[r] @ cen[c, :size].T  # (k*T, size)
-            h -= height[r][:, None]
-            h = h.reshape(tiles.size, n_rows, size)
-            radius = rad[c, :size]
-            keep[tiles, :size] &= _over_rows(np.maximum, h) > -radius  # not behind all planes
-            ruled[tiles, :size] &= _over_rows(np.minimum, h) < radius  # not in front of all
+        # other tiles: every (receiver, sphere) pair, batched matrix products over
+        # chunks of tiles (each tile against its cluster's padded cut)
+        curved = np.flatnonzero(~flat)
+        for start in range(0, curved.size, _CURVED_TILES_PER_CHUNK):
+            tiles = curved[start:start + _CURVED_TILES_PER_CHUNK]
+            c = tile_cluster[tiles]
+            h = np.matmul(tile_n[tiles], cen[c].transpose(0, 2, 1))  # (k, T, S)
+            h -= height[rows[tiles]][:, :, None]
+            radius = rad[c]  # padding: radius 0 and keep already False
+            keep[tiles] &= _over_rows(np.maximum, h) > -radius  # not behind all planes
+            ruled[tiles] &= _over_rows(np.minimum, h) < radius  # not in front of all
     else:
         ruled[:] = False
     # list order: spheres needing the rules, then those in front, then dropped ones
