@@ -283,6 +283,7 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
     g_w = g * win.astype(np.float32)
     if transfer is None:
         transfer = cosine_transfer(normals, order)
+    transfer = np.asarray(transfer, dtype=np.float32)
     if local_visibility is not None:
         local = np.asarray(local_visibility, dtype=np.float32)[:, :size]
         transfer = QuadratureProducts(order, np.float32).product(transfer, local)
