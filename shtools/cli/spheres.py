@@ -30,7 +30,8 @@ def spheres():
 @click.option("--thickness", type=float, default=None,
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
 @click.option("--iterations", type=click.IntRange(min=1), default=None,
-              help="Maximum clustering rounds of the variational fit "
+              help="Round budget of the variational fit, counted in rounds at N spheres "
+                   "(from N = 64 the coarse stages spend part of it in cheaper rounds) "
                    "[default: scaled to the mesh and N, 40-150].")
 @json_option
 def fit(mesh_path, count, output, method, seed, thickness, iterations, as_json):
