@@ -33,8 +33,11 @@ def spheres():
               help="Round budget of the variational fit, counted in rounds at N spheres "
                    "(from N = 64 the coarse stages spend part of it in cheaper rounds) "
                    "[default: scaled to the mesh and N, 40-150].")
+@click.option("--restarts", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
+                   "The fit is a non-convex search: a few starts buy a few percent of E.")
 @json_option
-def fit(mesh_path, count, output, method, seed, thickness, iterations, as_json):
+def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts, as_json):
     """Fit N spheres bounding the solid of MESH with minimal outside volume.
 
     Writes a 'spheres' asset with centers, radii and outside_volume_ratio
@@ -59,11 +62,12 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, as_json):
 
     try:
         result = fit_spheres(mesh, count, method=method, seed=seed, thickness=thickness,
-                             max_iterations=iterations, path=mesh_path, progress=tick)
+                             max_iterations=iterations, path=mesh_path, progress=tick,
+                             restarts=restarts)
     finally:
         bar.close()
     parameters = {"n": count, "method": method, "seed": seed, "thickness": thickness,
-                  "iterations": iterations}
+                  "iterations": iterations, "restarts": restarts}
     write_spheres(output, result, inputs={"mesh": mesh_path}, parameters=parameters)
     summary = {
         "output": output,

@@ -255,6 +255,7 @@ def fit_spheres(
     samples: int | None = None,
     path=None,
     progress=None,
+    restarts: int = 1,
 ) -> SphereSet:
     """Fit ``n`` spheres bounding the solid of ``mesh`` with minimal outside volume.
 
@@ -286,6 +287,11 @@ def fit_spheres(
         Mesh file, named in error messages.
     progress : callable, optional
         Called as ``progress(iteration, E_estimate)`` after each round.
+    restarts : int
+        Independent starts with seeds ``seed, seed + 1, ...``; the fit with the
+        lowest E is returned (the search is non-convex: on spot at N = 40,
+        seeds 0-5 gave E = 0.168, 0.185, 0.164, 0.185, 0.169, 0.197).
+        ``info["restart_E"]`` lists every start's E.
 
     Returns
     -------
@@ -302,7 +308,20 @@ def fit_spheres(
         raise InputError(f"unknown method '{method}'; use one of {', '.join(METHODS)}")
     if int(n) != n or n < 1:
         raise InputError(f"the number of spheres must be >= 1 (got {n})")
+    if int(restarts) != restarts or restarts < 1:
+        raise InputError(f"restarts must be an integer >= 1 (got {restarts})")
     n = int(n)
+    if restarts > 1:
+        start = time.perf_counter()
+        fits = [fit_spheres(mesh, n, method=method, seed=seed + k, thickness=thickness,
+                            max_iterations=max_iterations,
+                            max_teleport_failures=max_teleport_failures, samples=samples,
+                            path=path, progress=progress)
+                for k in range(int(restarts))]
+        best = min(fits, key=lambda f: f.outside_volume_ratio)  # first of equals
+        best.info["restart_E"] = [f.outside_volume_ratio for f in fits]
+        best.info["seconds"] = time.perf_counter() - start
+        return best
     start = time.perf_counter()
     if thickness is not None:
         from shtools.geometry.mesh import thicken

@@ -125,6 +125,19 @@ def test_same_seed_same_spheres(capsule_union_mesh):
     np.testing.assert_array_equal(a.radii, b.radii)
 
 
+def test_restarts_keep_the_lowest_e_of_consecutive_seeds(capsule_union_mesh):
+    kwargs = dict(max_iterations=4, samples=SAMPLES)
+    single = [fit_spheres(capsule_union_mesh, 6, seed=s, **kwargs) for s in (3, 4, 5)]
+    best = fit_spheres(capsule_union_mesh, 6, seed=3, restarts=3, **kwargs)
+    energies = [f.outside_volume_ratio for f in single]
+    assert best.info["restart_E"] == energies
+    k = int(np.argmin(energies))
+    np.testing.assert_array_equal(best.centers, single[k].centers)
+    np.testing.assert_array_equal(best.radii, single[k].radii)
+    with pytest.raises(InputError, match="restarts"):
+        fit_spheres(capsule_union_mesh, 6, restarts=0)
+
+
 def test_flat_sheet_needs_thickness(flat_sheet_mesh):
     with pytest.raises(InputError, match="--thickness"):
         fit_spheres(flat_sheet_mesh, 4)
