@@ -103,8 +103,7 @@ class VertexWorkers:
 
     def __init__(self, count: int, settings, tables: dict):
         ctx = multiprocessing.get_context("fork")
-        self.count = int(count)
-        self._pool = ProcessPoolExecutor(max_workers=self.count, mp_context=ctx,
+        self._pool = ProcessPoolExecutor(max_workers=int(count), mp_context=ctx,
                                          initializer=_init_worker, initargs=(settings, tables))
         self._close = weakref.finalize(self, _shutdown, self._pool)
 

@@ -40,7 +40,7 @@ import numpy as np
 
 from shtools.runtime.blockers import SphereLight
 from shtools.runtime.fast_exp import QuadratureProducts
-from shtools.sh import band_of, basis, clamped_cosine_zh, product_matrix, window
+from shtools.sh import band_of, basis, cap_zh_cos, clamped_cosine_zh, product_matrix, window
 
 
 def band_window(order: int, kind: str | None, h: float | None) -> np.ndarray:
@@ -200,8 +200,8 @@ def _sphere_light_zonal(light: SphereLight, points, order: int):
     r"""Zonal coefficients ``(V, n)`` of a light's radiance cap and its axis ``(V, 3)``.
 
     float32: the cap indicator's coefficients are
-    :math:`\sqrt{4\pi}\,\delta_{l0} - g_l` with :func:`shtools.sh.cap_zh`'s closed
-    form in :math:`\cos\theta = \sqrt{1 - R^2/D^2}` (no arcsin).  A receiver
+    :math:`\sqrt{4\pi}\,\delta_{l0} - g_l` with :func:`shtools.sh.cap_zh_cos`'s
+    closed form in :math:`\cos\theta = \sqrt{1 - R^2/D^2}` (no arcsin).  A receiver
     inside the light sees it over the whole sphere.
     """
     delta = light.position[None, :].astype(np.float32) - np.asarray(points, dtype=np.float32)
@@ -212,35 +212,9 @@ def _sphere_light_zonal(light: SphereLight, points, order: int):
     axis[inside] = (0.0, 0.0, 1.0)  # any axis: the cap is the whole sphere
     sin2 = np.minimum(np.float32(light.radius) ** 2 * inv * inv, 1.0)
     cos_t = np.where(inside, np.float32(-1.0), np.sqrt(1.0 - sin2))
-    return cap_indicator_zh(cos_t, order), axis
-
-
-def cap_indicator_zh(cos_theta, order: int) -> np.ndarray:
-    r"""Zonal coefficients of a cap's indicator (1 inside, 0 outside), shape ``(..., n)``.
-
-    Closed form (the complement of :func:`shtools.sh.cap_zh`):
-    :math:`c_0 = \sqrt{\pi}(1 - \cos\theta)` and, for :math:`l \ge 1`,
-    :math:`c_l = \sqrt{\pi/(2l+1)}\,(P_{l-1}(\cos\theta) - P_{l+1}(\cos\theta))`.
-
-    Parameters
-    ----------
-    cos_theta : ndarray, shape (...)
-        Cosine of the cap's angular radius (-1: the whole sphere).
-    order : int
-
-    Returns
-    -------
-    ndarray, shape (..., n), dtype of ``cos_theta``
-    """
-    c = np.asarray(cos_theta)
-    p = [np.ones_like(c), c]
-    for l in range(1, order):
-        p.append(((2 * l + 1) * c * p[l] - l * p[l - 1]) / (l + 1))
-    out = np.empty((*c.shape, order), dtype=c.dtype)
-    out[..., 0] = math.sqrt(math.pi) * (1.0 - c)
-    for l in range(1, order):
-        out[..., l] = math.sqrt(math.pi / (2 * l + 1)) * (p[l - 1] - p[l + 1])
-    return out
+    zh = -cap_zh_cos(cos_t, order)  # the indicator is 1 minus the cap's visibility
+    zh[:, 0] += np.float32(math.sqrt(4.0 * math.pi))
+    return zh, axis
 
 
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,

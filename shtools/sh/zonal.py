@@ -41,8 +41,8 @@ from shtools.sh.basis import band_of, basis, check_order, order_from_size
 
 
 def _legendre_upto(x: np.ndarray, lmax: int) -> np.ndarray:
-    """Legendre polynomials P_0..P_lmax at ``x``, shape ``(lmax + 1, *x.shape)``."""
-    p = np.empty((lmax + 1, *x.shape), dtype=np.float64)
+    """Legendre polynomials P_0..P_lmax at ``x``, shape ``(lmax + 1, *x.shape)``, dtype of ``x``."""
+    p = np.empty((lmax + 1, *x.shape), dtype=x.dtype)
     p[0] = 1.0
     if lmax >= 1:
         p[1] = x
@@ -67,10 +67,28 @@ def cap_zh(theta, order: int) -> np.ndarray:
         ``g_l``: the coefficient of ``y_{l0}`` of the function that is 0 for
         directions within ``theta`` of ``+z`` and 1 elsewhere.
     """
+    return cap_zh_cos(np.cos(np.asarray(theta, dtype=np.float64)), order)
+
+
+def cap_zh_cos(cos_theta, order: int) -> np.ndarray:
+    """:func:`cap_zh` from the cosine of the cap's angular radius (no arccos needed).
+
+    Parameters
+    ----------
+    cos_theta : array_like, shape (...)
+        ``cos(theta)`` in ``[-1, 1]``; float32 input gives float32 output.
+    order : int
+
+    Returns
+    -------
+    ndarray, shape (..., n)
+    """
     order = check_order(order)
-    c = np.cos(np.asarray(theta, dtype=np.float64))
+    c = np.asarray(cos_theta)
+    if c.dtype not in (np.float32, np.float64):
+        c = c.astype(np.float64)
     p = _legendre_upto(c, order)  # (n+1, ...)
-    out = np.empty((*c.shape, order), dtype=np.float64)
+    out = np.empty((*c.shape, order), dtype=c.dtype)
     out[..., 0] = math.sqrt(math.pi) * (1.0 + c)
     for l in range(1, order):
         k = math.sqrt((2 * l + 1) / (4 * math.pi))

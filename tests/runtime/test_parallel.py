@@ -10,12 +10,16 @@ import pytest
 from shtools.errors import InputError, ShtoolsError
 from shtools.reference.scenes import capsule_scene
 from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker
-from shtools.runtime.parallel import fork_supported, split_clusters
+from shtools.runtime.parallel import fork_supported, resolve_processes, split_clusters
 
 evaluator = importlib.import_module("shtools.runtime.evaluator")
+parallel = importlib.import_module("shtools.runtime.parallel")
 
-pytestmark = pytest.mark.skipif(not fork_supported(),
-                                reason="worker processes need the fork start method")
+#: Tests that start workers; where fork is missing the runtime never starts any
+#: (test_without_fork_the_runtime_stays_in_one_process checks that fallback).
+needs_fork = pytest.mark.skipif(
+    not fork_supported(), reason="this platform cannot fork, so the runtime runs in one "
+    "process and has no workers to test")
 
 
 @pytest.fixture
@@ -24,6 +28,7 @@ def always_parallel(monkeypatch):
     monkeypatch.setattr(evaluator, "MIN_PARALLEL_PAIRS", 0)
 
 
+@needs_fork
 @pytest.mark.parametrize("hierarchy", [True, False])
 def test_processes_reproduce_the_single_process_visibility(always_parallel, hierarchy):
     sc = capsule_scene(grid=24)
@@ -50,6 +55,7 @@ def test_small_frames_stay_in_process():
     assert rt.last_stats["processes"] == 1 and rt._workers is None
 
 
+@needs_fork
 def test_close_stops_the_workers_and_the_runtime_stays_usable(always_parallel):
     sc = capsule_scene(grid=12)
     rt = ShadowRuntime(ShadowSettings(processes=2, vertices_per_cluster=20))
@@ -61,6 +67,7 @@ def test_close_stops_the_workers_and_the_runtime_stays_usable(always_parallel):
     rt.close()
 
 
+@needs_fork
 def test_worker_failures_reach_the_caller(always_parallel):
     import os
     import signal
@@ -75,6 +82,16 @@ def test_worker_failures_reach_the_caller(always_parallel):
             os.kill(pid, signal.SIGKILL)
         with pytest.raises(ShtoolsError, match="processes=1"):
             workers.result(workers.submit(("clusters",)))
+
+
+def test_without_fork_the_runtime_stays_in_one_process(always_parallel, monkeypatch):
+    monkeypatch.setattr(parallel, "fork_supported", lambda: False)
+    assert resolve_processes(None) == 1 and resolve_processes(4) == 1
+    sc = capsule_scene(grid=12)
+    rt = ShadowRuntime(ShadowSettings(processes=4, vertices_per_cluster=20))
+    g = rt.visibility(sc.vertices, sc.normals, [SphereBlocker(sc.centers, sc.radii)])
+    assert rt.processes == 1 and rt._workers is None
+    assert rt.last_stats["processes"] == 1 and np.isfinite(g).all()
 
 
 def test_split_clusters_balances_cost():

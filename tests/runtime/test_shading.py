@@ -143,33 +143,26 @@ def test_cap_visibility_dims_a_sky():
     assert got[0, 0] == pytest.approx(1 - math.sin(theta) ** 2, rel=0.05)
 
 
-def test_cached_transfer_follows_changed_normals():
-    """The runtime keeps H(N) of static receivers; moved normals must be re-evaluated."""
+@pytest.mark.parametrize("change", ["normals", "light"])
+def test_cached_tables_follow_changed_normals_and_lights(change):
+    """The runtime keeps H(N) and L_H of static receivers while the light is unchanged;
+    turned normals and a new light must be re-evaluated."""
     order = 4
     g, env, nrm = _random(order, seed=4)
-    rt = ShadowRuntime(ShadowSettings(order=order, acc_order=order))
+    settings = ShadowSettings(order=order, acc_order=order)
+    rt = ShadowRuntime(settings)
     pts = np.zeros_like(nrm)
     rt.shade(g, pts, nrm, env)
-    moved = nrm.copy()
-    moved[::3] = moved[::3, [2, 0, 1]]  # some receivers turn
-    got = rt.shade(g, pts, moved, env)
-    fresh = ShadowRuntime(ShadowSettings(order=order, acc_order=order)).shade(g, pts, moved, env)
+    if change == "normals":
+        nrm = nrm.copy()
+        nrm[::3] = nrm[::3, [2, 0, 1]]  # some receivers turn
+    else:
+        env = env[:, ::-1] * 0.5
+    got = rt.shade(g, pts, nrm, env)
+    fresh = ShadowRuntime(settings).shade(g, pts, nrm, env)
     # the tables are float32 and a matrix product over a subset of rows may round
     # differently from the full product (BLAS kernel choice): a few ulp
     np.testing.assert_allclose(got, fresh, rtol=1e-6, atol=1e-6)
-
-
-def test_cached_lit_transfer_follows_a_changed_light():
-    """L_H is kept while the light is unchanged; a new light must not reuse it."""
-    order = 4
-    g, env, nrm = _random(order, seed=6)
-    rt = ShadowRuntime(ShadowSettings(order=order, acc_order=order))
-    pts = np.zeros_like(nrm)
-    rt.shade(g, pts, nrm, env)
-    other = env[:, ::-1] * 0.5
-    got = rt.shade(g, pts, nrm, other)
-    fresh = ShadowRuntime(ShadowSettings(order=order, acc_order=order)).shade(g, pts, nrm, other)
-    np.testing.assert_allclose(got, fresh, rtol=1e-6, atol=1e-6)  # float32 tables, as above
     # and the tabulated cache equals the on-the-fly form of the same light
-    otf = rt.shade(g, pts, nrm, other, form="on_the_fly")
+    otf = rt.shade(g, pts, nrm, env, form="on_the_fly")
     np.testing.assert_allclose(got, otf, rtol=1e-5, atol=1e-5)  # float32 sums, other order

@@ -319,7 +319,8 @@ def test_bake_with_worker_processes_matches_one_process(scene_file, tmp_path, ru
     from shtools.runtime.parallel import fork_supported
 
     if not fork_supported():
-        pytest.skip("worker processes need the fork start method")
+        pytest.skip("this platform cannot fork, so bakes run in one process and there "
+                    "are no workers to compare (tests/runtime/test_parallel.py checks it)")
     monkeypatch.setattr(importlib.import_module("shtools.runtime.evaluator"),
                         "MIN_PARALLEL_PAIRS", 0)
     outs = []

@@ -23,7 +23,8 @@ BUILT = [  # every file the pipeline makes, in dependency order
 @pytest.fixture
 def built_copy(tmp_path):
     if shutil.which("make") is None:
-        pytest.skip("GNU make is not installed; the example pipeline needs it")
+        pytest.skip("GNU make is not on PATH: the example pipeline is a Makefile, so "
+                    "there is nothing to run without it (install make to check it)")
     for name in ("Makefile", "scene.toml", "make_meshes.py"):
         shutil.copy(EXAMPLES / name, tmp_path / name)
     (tmp_path / "build" / "meshes").mkdir(parents=True)
