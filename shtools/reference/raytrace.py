@@ -62,27 +62,15 @@ def raytrace_visibility(vertices, normals, meshes, order: int, n_dirs: int = DEF
     -------
     ndarray, shape (V, n*n)
     """
-    import trimesh
-    from trimesh.ray.ray_pyembree import RayMeshIntersector
+    from shtools.geometry.raycast import RayCaster
 
     p = np.asarray(vertices, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
     dirs, w = quadrature_for(n_dirs)
-    mesh = trimesh.util.concatenate(list(meshes)) if len(meshes) > 1 else meshes[0]
+    caster = RayCaster.from_meshes(list(meshes))
     if offset is None:
-        offset = RAY_OFFSET * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
-    tracer = RayMeshIntersector(mesh)
-    vis = np.ones((p.shape[0], dirs.shape[0]))
-    step = max(1, (1 << 20) // dirs.shape[0])
-    for s in range(0, p.shape[0], step):
-        pp, nn = p[s : s + step], nrm[s : s + step]
-        front = nn @ dirs.T > 0  # (v, Q)
-        vi, qi = np.nonzero(front)
-        if vi.size:
-            origins = pp[vi] + offset * nn[vi]
-            hit = tracer.intersects_any(origins, dirs[qi])
-            block = vis[s : s + step]
-            block[vi[hit], qi[hit]] = 0.0
+        offset = RAY_OFFSET * caster.diagonal
+    vis = caster.visibility(p, dirs, normals=nrm, offset=offset).astype(np.float64)
     return project(vis, dirs, w, order)
 
 
