@@ -30,6 +30,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 COMMANDS = {
     "spheres": "shtools.cli.spheres:spheres",
     "tables": "shtools.cli.tables:tables",
+    "transfer": "shtools.cli.transfer:transfer",
     "field": "shtools.cli.field:field",
     "light": "shtools.cli.light:light",
     "bake": "shtools.cli.bake:bake",

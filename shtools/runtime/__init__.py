@@ -68,6 +68,10 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
     ``min(n + 2, 6)``.
 ``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``
 ``SphereLight(position (3,), radius, color (3,))``
+``SelfVisibility(log (R, n_acc^2), rows, rotation=None, blocker=None)``
+    An object's precomputed self-visibility (``transfer`` asset) on its own
+    receiver rows, added in log space in place of its own spheres
+    (``visibility(..., self_visibility=[...])``).
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;
     ``.visibility(vertices, normals, blockers, clusters=None) -> (V, n*n)``;
@@ -83,7 +87,7 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
 """
 
 from shtools.runtime.accumulate import accumulate_log
-from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.blockers import SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
@@ -95,6 +99,7 @@ from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
 __all__ = [
     "CapLogTable",
     "ReceiverClusters",
+    "SelfVisibility",
     "ShadowRuntime",
     "ShadowSettings",
     "SphereBlocker",

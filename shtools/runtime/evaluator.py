@@ -10,7 +10,7 @@ import numpy as np
 
 from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
-from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.blockers import SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
@@ -26,6 +26,7 @@ from shtools.runtime.shading import cosine_transfer, environment_matrices, lit_t
 from shtools.runtime.shading import shade as _shade
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
+from shtools.sh import rotation_matrix
 
 
 class ShadowRuntime:
@@ -74,6 +75,8 @@ class ShadowRuntime:
         self.table = CapLogTable(tables, self.acc_order)
         self._kernels = [BlockKernel(self.table) for _ in range(self.settings.threads)]
         self._auto_clusters: ReceiverClusters | None = None
+        self._auto_groups: np.ndarray | None = None
+        self._rotated_logs: dict = {}  # id(log) -> (rotation, rotated log), last frame
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
@@ -102,20 +105,24 @@ class ShadowRuntime:
 
     # -- visibility ------------------------------------------------------------
     def log_visibility(self, vertices, normals, blockers: list[SphereBlocker],
-                       clusters: ReceiverClusters | None = None) -> np.ndarray:
+                       clusters: ReceiverClusters | None = None, *,
+                       self_visibility: tuple[SelfVisibility, ...] | list = ()) -> np.ndarray:
         """Accumulated log visibility at the accumulation order, shape ``(V, n_acc^2)`` float32.
 
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        work = self._frame_work(pts, _check_blockers(blockers), clusters)
+        blockers = _check_blockers(blockers)
+        extra, exclude = self._self_terms(self_visibility, pts.shape[0], len(blockers))
+        work = self._frame_work(pts, blockers, clusters, exclude, extra)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
         return f
 
     def visibility(self, vertices, normals, blockers: list[SphereBlocker],
-                   clusters: ReceiverClusters | None = None) -> np.ndarray:
+                   clusters: ReceiverClusters | None = None, *,
+                   self_visibility: tuple[SelfVisibility, ...] | list = ()) -> np.ndarray:
         """Shadowing visibility per receiver vertex: accumulate logs, exp, truncate.
 
         Parameters
@@ -129,7 +136,12 @@ class ShadowRuntime:
         clusters : ReceiverClusters, optional
             From :meth:`clusters`; with ``hierarchy`` on and none given, clusters
             are computed on the first call and reused while the vertex count
-            stays the same.
+            stays the same (built per object when ``self_visibility`` is given).
+        self_visibility : sequence of SelfVisibility
+            Precomputed log visibility of objects' real meshes on their own
+            receiver rows, added in log space; each skips its object's own
+            sphere blocker on those rows.  Clusters must not mix rows of
+            different objects (build them with ``groups``).
 
         Returns
         -------
@@ -144,7 +156,9 @@ class ShadowRuntime:
         (:mod:`shtools.runtime.parallel`); :meth:`close` stops them.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        work = self._frame_work(pts, _check_blockers(blockers), clusters)
+        blockers = _check_blockers(blockers)
+        extra, exclude = self._self_terms(self_visibility, pts.shape[0], len(blockers))
+        work = self._frame_work(pts, blockers, clusters, exclude, extra)
         stats = self.last_stats
         if self.processes > 1 and stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
@@ -181,42 +195,100 @@ class ShadowRuntime:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _frame_work(self, pts, blockers, clusters) -> FrameWork:
-        """Cuts, ratio weights and per-cluster sphere lists of a frame (this process)."""
+    def _self_terms(self, self_visibility, n_vertices: int, n_blockers: int):
+        """Rotated self-visibility logs ``(V, n_acc^2)`` and the blocker each row skips ``(V,)``.
+
+        Returns ``(None, None)`` without self-visibility.  A rotated log is kept
+        while its object's rotation does not change (static objects).
+        """
+        if not self_visibility:
+            self._rotated_logs = {}
+            return None, None
+        size = self.acc_order * self.acc_order
+        extra = np.zeros((n_vertices, size), dtype=np.float32)
+        exclude = np.full(n_vertices, -1, dtype=np.int64)
+        kept = {}
+        for sv in self_visibility:
+            if not isinstance(sv, SelfVisibility):
+                raise InputError(f"self_visibility must hold SelfVisibility objects, got "
+                                 f"{type(sv).__name__}")
+            if sv.log.shape[1] != size:
+                raise InputError(
+                    f"self-visibility log has {sv.log.shape[1]} coefficients but the runtime "
+                    f"accumulates at order {self.acc_order} ({size}); rebuild the transfer "
+                    f"with --order {self.acc_order}")
+            rows = np.arange(n_vertices)[sv.rows]
+            if rows.shape[0] != sv.log.shape[0]:
+                raise InputError(f"self-visibility covers {sv.log.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            log = sv.log
+            if sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
+                cached = self._rotated_logs.get(id(sv.log))
+                if cached is not None and np.array_equal(cached[0], sv.rotation):
+                    log = cached[1]
+                else:
+                    d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
+                    log = sv.log @ d.T
+                kept[id(sv.log)] = (sv.rotation.copy(), log)
+            extra[rows] += log
+            if sv.blocker is not None:
+                if not 0 <= int(sv.blocker) < n_blockers:
+                    raise InputError(f"self-visibility names blocker {sv.blocker} but "
+                                     f"{n_blockers} blockers were given")
+                exclude[rows] = int(sv.blocker)
+        self._rotated_logs = kept
+        return extra, (exclude if (exclude >= 0).any() else None)
+
+    def _frame_work(self, pts, blockers, clusters, exclude=None, extra=None) -> FrameWork:
+        """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
+
+        ``exclude (V,)``: blocker each receiver skips (-1: none); ``extra (V,
+        n_acc^2)``: log added to the accumulated sums before exp.
+        """
         s = self.settings
         stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {},
                  "processes": 1}
         self.last_stats = stats
         t0 = time.process_time()
-        if not s.hierarchy:
+        if not s.hierarchy and exclude is None:
             centers, radii = leaf_spheres(blockers)
             stats["seconds"]["cuts"] = time.process_time() - t0
             stats["pairs"] = stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
             stats["spheres_per_vertex"] = float(centers.shape[0])
-            return FrameWork(centers=centers, radii=radii)
-        if clusters is None:
-            clusters = self._clusters_for(pts)
-        if clusters.n_vertices != pts.shape[0]:
-            raise InputError(
-                f"clusters were built for {clusters.n_vertices} vertices but "
-                f"{pts.shape[0]} were given; call clusters() on this receiver set"
-            )
+            return FrameWork(centers=centers, radii=radii, extra=extra)
         forest = build_forest(blockers)
-        cl_centers, cl_radii = clusters.bounds(pts)
-        cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
-        weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
-        sizes = cuts.in_cut.sum(axis=1)
+        if not s.hierarchy:
+            # every leaf everywhere, but per exclusion group: one "cluster" per group
+            clusters = ReceiverClusters.from_labels(exclude)
+            in_cut = np.broadcast_to(forest.is_leaf, (clusters.n_clusters, forest.n_nodes))
+            weights = np.ones((clusters.n_clusters, forest.n_nodes, self.acc_order))
+        else:
+            if clusters is None:
+                clusters = self._clusters_for(pts, exclude)
+            if clusters.n_vertices != pts.shape[0]:
+                raise InputError(
+                    f"clusters were built for {clusters.n_vertices} vertices but "
+                    f"{pts.shape[0]} were given; call clusters() on this receiver set"
+                )
+            cl_centers, cl_radii = clusters.bounds(pts)
+            cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
+            weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
+            in_cut = cuts.in_cut
+        if exclude is not None:
+            in_cut = in_cut & ~_excluded_nodes(clusters, exclude, forest.blocker)
+        sizes = in_cut.sum(axis=1)
         s_max = max(1, int(sizes.max(initial=0)))
         # each cluster's cut nodes first (stable), padded with radius 0
-        node_idx = np.argsort(~cuts.in_cut, axis=1, kind="stable")[:, :s_max]
+        node_idx = np.argsort(~in_cut, axis=1, kind="stable")[:, :s_max]
         valid = np.arange(s_max)[None, :] < sizes[:, None]
-        any_inner = bool((cuts.in_cut & ~forest.is_leaf[None, :]).any())
+        any_inner = bool((in_cut & ~forest.is_leaf[None, :]).any())
         work = FrameWork(
             order=clusters.order, offsets=clusters.offsets, sizes=sizes,
             centers=forest.centers[node_idx],
             radii=np.where(valid, forest.radii[node_idx], 0.0),
             weights=(np.take_along_axis(weights, node_idx[:, :, None], axis=1)
-                     if any_inner else None))
+                     if any_inner else None),
+            extra=extra)
         stats["seconds"]["cuts"] = time.process_time() - t0
         stats["pairs"] = int((np.diff(clusters.offsets) * sizes).sum())
         stats["clusters"] = clusters.n_clusters
@@ -226,18 +298,22 @@ class ShadowRuntime:
     def _accumulate(self, task, stats: dict) -> np.ndarray:
         """Log sums ``(V', n_acc^2)`` of a :meth:`FrameWork.task` in this process."""
         s = self.settings
+        extra = task[-1]  # log added before exp (self-visibility) or None
         if task[0] == "spheres":
-            _, pts, nrm, centers, radii = task
+            _, pts, nrm, centers, radii, _ = task
             f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
             accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
                            chunk_pairs=s.chunk_pairs, out=f, kernel=self._kernels[0])
             stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
-            return f
-        _, pts, nrm, order, offsets, centers, radii, weights, sizes = task
-        return accumulate_clusters(pts, nrm, order, offsets, centers, radii, weights, sizes,
-                                   self.table, self_shadow=s.self_shadow,
-                                   chunk_pairs=s.chunk_pairs, threads=s.threads,
-                                   kernels=self._kernels, stats=stats)
+        else:
+            _, pts, nrm, order, offsets, centers, radii, weights, sizes, _ = task
+            f = accumulate_clusters(pts, nrm, order, offsets, centers, radii, weights, sizes,
+                                    self.table, self_shadow=s.self_shadow,
+                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
+                                    kernels=self._kernels, stats=stats)
+        if extra is not None:
+            f += extra
+        return f
 
     def _parallel_visibility(self, work: FrameWork, pts, nrm) -> np.ndarray:
         """Visibility with the frame split over this process and the workers."""
@@ -349,9 +425,14 @@ class ShadowRuntime:
             l_h[changed] = lit_transfer(transfer[changed], mats)
         return l_h
 
-    def _clusters_for(self, pts: np.ndarray) -> ReceiverClusters:
-        if self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]:
-            self._auto_clusters = self.clusters(pts)
+    def _clusters_for(self, pts: np.ndarray, groups=None) -> ReceiverClusters:
+        same_groups = (groups is None and self._auto_groups is None) or (
+            groups is not None and self._auto_groups is not None
+            and np.array_equal(groups, self._auto_groups))
+        if (self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]
+                or not same_groups):
+            self._auto_clusters = self.clusters(pts, groups=groups)
+            self._auto_groups = None if groups is None else np.array(groups)
         return self._auto_clusters
 
 
@@ -370,6 +451,8 @@ class FrameWork:
         Valid spheres per cluster.
     weights : ndarray, shape (C, S, n_acc) or None
         Ratio weights (eq. 37) where inner tree nodes are used.
+    extra : ndarray, shape (V, n_acc^2) float32 or None
+        Log added to each receiver's sums before exp (self-visibility).
     """
 
     centers: np.ndarray
@@ -378,13 +461,14 @@ class FrameWork:
     offsets: np.ndarray | None = None
     sizes: np.ndarray | None = None
     weights: np.ndarray | None = None
+    extra: np.ndarray | None = None
 
     def task(self, pts, nrm) -> tuple:
         """The whole frame as one task for :meth:`ShadowRuntime.run_part`."""
         if self.order is None:
-            return ("spheres", pts, nrm, self.centers, self.radii)
+            return ("spheres", pts, nrm, self.centers, self.radii, self.extra)
         return ("clusters", pts, nrm, self.order, self.offsets, self.centers, self.radii,
-                self.weights, self.sizes)
+                self.weights, self.sizes, self.extra)
 
     def split(self, pts, nrm, parts: int) -> list[tuple[np.ndarray, tuple]]:
         """``parts`` tasks of about equal work, with the receiver rows each covers.
@@ -398,7 +482,8 @@ class FrameWork:
         if self.order is None:
             bounds = np.linspace(0, pts.shape[0], parts + 1).astype(np.int64)
             return [(np.arange(a, b), ("spheres", pts32[a:b], nrm32[a:b], self.centers,
-                                       self.radii))
+                                       self.radii,
+                                       None if self.extra is None else self.extra[a:b]))
                     for a, b in itertools.pairwise(bounds) if b > a]
         counts = np.diff(self.offsets)
         groups = split_clusters(counts * self.sizes, parts)
@@ -416,7 +501,8 @@ class FrameWork:
             out.append((rows, ("clusters", pts32[rows], nrm32[rows], np.arange(rows.size),
                                offsets, self.centers[group], self.radii[group],
                                None if self.weights is None else self.weights[group],
-                               self.sizes[group])))
+                               self.sizes[group],
+                               None if self.extra is None else self.extra[rows])))
         return out
 
 
@@ -443,3 +529,17 @@ def _check_blockers(blockers) -> list[SphereBlocker]:
         if not isinstance(b, SphereBlocker):
             raise InputError(f"blockers must be SphereBlocker objects, got {type(b).__name__}")
     return blockers
+
+
+def _excluded_nodes(clusters: ReceiverClusters, exclude: np.ndarray,
+                    node_blocker: np.ndarray) -> np.ndarray:
+    """``(C, M)`` bool: forest nodes of the blocker each cluster's receivers skip.
+
+    Raises InputError when a cluster mixes receivers that skip different blockers.
+    """
+    counts = np.diff(clusters.offsets)
+    first = exclude[clusters.order[clusters.offsets[:-1]]]
+    if not np.array_equal(exclude[clusters.order], np.repeat(first, counts)):
+        raise InputError("receiver clusters mix vertices of different self-visibility "
+                         "objects; build the clusters with groups = object id per vertex")
+    return (node_blocker[None, :] == first[:, None]) & (first[:, None] >= 0)
