@@ -62,6 +62,9 @@ class PreparedObject:
     bone_index : ndarray, shape (N, K) or None
         Skin binding of the spheres (skinned blockers).
     bone_vectors : ndarray, shape (N, K, 4) or None
+    self_log : ndarray, shape (V, n_acc^2) or None
+        Self-visibility log in the object's frame (exact self-shadowing,
+        :mod:`shtools.scene.transfer`); None when the object uses its spheres.
     """
 
     spec: ObjectSpec
@@ -74,6 +77,7 @@ class PreparedObject:
     motion: SkinnedMotion | None = None
     bone_index: np.ndarray | None = None
     bone_vectors: np.ndarray | None = None
+    self_log: np.ndarray | None = None
 
     @property
     def moves(self) -> bool:
@@ -123,6 +127,7 @@ class FrameState:
     blockers: list  # list[shtools.runtime.SphereBlocker]
     lights: list  # list[shtools.runtime.SphereLight]
     blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
+    self_visibility: list = field(default_factory=list)  # list[shtools.runtime.SelfVisibility]
 
 
 @dataclass
@@ -311,17 +316,33 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
             inputs[f"{obj.name}.mesh"] = obj.mesh
         _object_blocker(prep, model, scene.settings, inputs)
         objects.append(prep)
+    _self_visibility(scene, objects, inputs, log)
     return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
                          inputs)
+
+
+def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log) -> None:
+    """Self-visibility logs of the rigid role-"both" objects (:mod:`shtools.scene.transfer`)."""
+    from shtools.scene.transfer import object_self_log, uses_self_visibility
+
+    default = scene.settings.self_visibility
+    acc = runtime_settings(scene, "default").resolved_acc_order()
+    for prep in objects:
+        if uses_self_visibility(prep, default):
+            prep.self_log, path = object_self_log(prep, acc, log=log)
+            if path is not None:
+                inputs[f"{prep.spec.name}.transfer"] = path
 
 
 # --------------------------------------------------------------------------- posing
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
     """World-space receivers, blocker spheres, lights (and blocker meshes) at time ``t``."""
-    from shtools.runtime import SphereBlocker, SphereLight
+    from shtools.runtime import SelfVisibility, SphereBlocker, SphereLight
+    from shtools.scene.transfer import rotation_of
 
     worlds = world_matrices(prepared.scene.objects, t)
-    verts, norms, blockers, meshes = [], [], [], []
+    verts, norms, blockers, meshes, selfs = [], [], [], [], []
+    n_rows = 0
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -332,9 +353,15 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             joints = None
             local_v, local_n = o.vertices, o.normals
         world_v = transform_points(m, local_v)
+        rotation = rotation_of(m) if o.self_log is not None else None
+        if rotation is not None:
+            # its own spheres (appended next) are skipped on its own rows
+            selfs.append(SelfVisibility(o.self_log, slice(n_rows, n_rows + len(world_v)),
+                                        rotation=rotation, blocker=len(blockers)))
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
+            n_rows += len(world_v)
         if o.spec.blocks:
             centers = o.centers
             if joints is not None:
@@ -355,7 +382,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
         key = light_at(spec, t)
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
-    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes)
+    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
+                      selfs)
 
 
 # --------------------------------------------------------------------------- baking
@@ -481,7 +509,8 @@ def bake_scene(
                     clusters = _clusters(prepared, state.vertices)
                     setup = time.perf_counter() - setup
                 vis = runtime.visibility(state.vertices, state.normals, state.blockers,
-                                         clusters=clusters)
+                                         clusters=clusters,
+                                         self_visibility=state.self_visibility)
             radiance = runtime.shade(vis, state.vertices, state.normals, prepared.env_sh,
                                      sphere_lights=state.lights)
             result = FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),

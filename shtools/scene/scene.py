@@ -33,10 +33,11 @@ GLTF_SUFFIXES = (".glb", ".gltf")
 SETTINGS_KEYS = (
     "order", "acc_order", "exp_method", "window", "window_h", "theta_max_deg",
     "theta_min_deg", "hierarchy", "vertices_per_cluster", "frames", "fps", "tables", "method",
+    "self_visibility",
 )
 OBJECT_KEYS = (
     "name", "mesh", "primitive", "role", "albedo", "parent", "translate", "rotate",
-    "quaternion", "scale", "keyframes", "loop", "blocker", "skin",
+    "quaternion", "scale", "keyframes", "loop", "blocker", "skin", "self_visibility",
 )
 TRANSFORM_KEYS = ("translate", "rotate", "quaternion", "scale")
 KEYFRAME_KEYS = ("time", "frame", *TRANSFORM_KEYS)
@@ -69,6 +70,8 @@ class Settings:
     fps: float = 24.0
     tables: Path | None = None
     method: str = "default"
+    #: exact self-shadowing of rigid role-"both" objects (objects may override)
+    self_visibility: bool = False
 
 
 @dataclass
@@ -130,6 +133,8 @@ class ObjectSpec:
     loop: bool = False
     blocker: BlockerSpec | None = None
     skin: SkinSpec | None = None
+    #: exact self-shadowing: None (the settings' default), False, True or a transfer asset
+    self_visibility: bool | Path | None = None
 
     @property
     def receives(self) -> bool:
@@ -367,6 +372,10 @@ def _settings(table: dict, ctx: _Ctx, base: Path) -> Settings:
         s.tables = _file(table["tables"], base, ctx.sub("tables"), (".h5",))
     if "method" in table:
         s.method = _choice(table["method"], BAKE_METHODS, ctx.sub("method"))
+    if "self_visibility" in table:
+        if not isinstance(table["self_visibility"], bool):
+            raise ctx.sub("self_visibility").error("must be true or false")
+        s.self_visibility = table["self_visibility"]
     return s
 
 
@@ -480,6 +489,17 @@ def _object(table: Any, index: int, settings: Settings, ctx: _Ctx, base: Path) -
         else:
             raise ctx.error("a blocker needs a representation: add blocker = { fit = 32 } "
                             "or blocker = { spheres = \"file.h5\" }")
+    if "self_visibility" in table:
+        value, vctx = table["self_visibility"], ctx.sub("self_visibility")
+        if obj.role != "both" or obj.skin is not None:
+            raise vctx.error("exact self-shadowing is for rigid objects with role = \"both\"")
+        if isinstance(value, bool):
+            obj.self_visibility = value
+        elif isinstance(value, str):
+            obj.self_visibility = _file(value, base, vctx, (".h5",))
+        else:
+            raise vctx.error("must be true, false or a transfer asset "
+                             "('shtools transfer MESH -o x.transfer.h5')")
     return obj
 
 
