@@ -1,6 +1,6 @@
 """The ``bake`` asset: per-frame, per-vertex outgoing radiance of the receivers.
 
-Layout (DESIGN.md "Asset files"; all frames ``T``, receiver vertices ``V``):
+Layout (``docs/formats.md``; all frames ``T``, receiver vertices ``V``):
 
 =====================  =================  ==============================================
 dataset                shape / dtype      meaning

@@ -314,7 +314,7 @@ class ShadowRuntime:
     def shade(self, visibility, vertices, normals, env_sh=None,
               sphere_lights: tuple[SphereLight, ...] | list = (), *,
               local_visibility=None, form: str = "tabulated") -> np.ndarray:
-        """White Lambertian outgoing radiance (DESIGN.md "Radiance"), shape ``(V, 3)``.
+        """White Lambertian outgoing radiance (docs/conventions.md "Light and radiance"), shape ``(V, 3)``.
 
         Parameters
         ----------
