@@ -314,7 +314,9 @@ class ShadowRuntime:
     def shade(self, visibility, vertices, normals, env_sh=None,
               sphere_lights: tuple[SphereLight, ...] | list = (), *,
               local_visibility=None, form: str = "tabulated") -> np.ndarray:
-        """White Lambertian outgoing radiance (docs/conventions.md "Light and radiance"), shape ``(V, 3)``.
+        """White Lambertian outgoing radiance, shape ``(V, 3)``.
+
+        Radiance as defined in ``docs/conventions.md`` ("Light and radiance").
 
         Parameters
         ----------
