@@ -20,6 +20,7 @@ ray-traced against the posed blocker meshes,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -457,6 +458,7 @@ def bake_scene(
     runtime = ShadowRuntime(runtime_settings(scene, method, processes), tables=prepared.tables)
     moving = prepared.receivers_move()
     times = scene.frame_times(frames)
+    shadows = _light_shadows(prepared)
 
     writer = None
     if output is not None:
@@ -466,7 +468,8 @@ def bake_scene(
         clusters = None
         for k, (frame, t) in enumerate(zip(frames, times, strict=True)):
             start = time.perf_counter()
-            state = pose_frame(prepared, float(t), with_meshes=(method == "raytrace"))
+            state = pose_frame(prepared, float(t),
+                               with_meshes=(method == "raytrace" or shadows is not None))
             setup = 0.0
             if method == "product":
                 from shtools.reference import product_space_visibility
@@ -482,8 +485,13 @@ def bake_scene(
                     setup = time.perf_counter() - setup
                 vis = runtime.visibility(state.vertices, state.normals, state.blockers,
                                          clusters=clusters)
+            lights, extra = state.lights, None
+            if shadows is not None:  # lights shadowed other than by SHEXP (docs/ssoc.md)
+                lights, extra = shadows.frame(state)
             radiance = runtime.shade(vis, state.vertices, state.normals, prepared.env_sh,
-                                     sphere_lights=state.lights)
+                                     sphere_lights=lights)
+            if extra is not None:
+                radiance = radiance + extra
             result = FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
                                  np.asarray(vis) if store_visibility else None,
                                  state.vertices, state.normals,
@@ -501,6 +509,16 @@ def bake_scene(
     runtime.close()
     if writer is not None:
         writer.__exit__(None, None, None)
+
+
+def _light_shadows(prepared: PreparedScene):
+    """The non-SHEXP light shadows of a scene, or None when every light uses SHEXP."""
+    if all(spec.shadows == "shexp" for spec in prepared.scene.lights):
+        return None
+    from shtools.scene.light_shadows import LightShadows
+
+    faces = [o.faces for o in prepared.blockers]
+    return LightShadows(prepared.scene.lights, faces, prepared.scene.path)
 
 
 def _clusters(prepared: PreparedScene, vertices: np.ndarray):
@@ -566,6 +584,10 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         "frames": [frames.start, frames.stop],
         "scene": scene.path.name,
     }
+    if any(spec.shadows != "shexp" for spec in scene.lights):  # absent: all SHEXP (as before)
+        parameters["light_shadows"] = [
+            {"name": spec.name, "shadows": spec.shadows, "samples": spec.samples,
+             "ssoc": dataclasses.asdict(spec.ssoc)} for spec in scene.lights]
     inputs = {"scene": scene.path, **prepared.inputs}
     return BakeWriter(
         output,

@@ -43,7 +43,9 @@ KEYFRAME_KEYS = ("time", "frame", *TRANSFORM_KEYS)
 BLOCKER_KEYS = ("spheres", "tree", "bound", "fit", "method", "seed", "branching", "exact")
 SKIN_KEYS = ("animation", "speed", "offset")
 ENVIRONMENT_KEYS = ("light", "image", "coeffs", "intensity", "rotate_deg")
-LIGHT_KEYS = ("name", "position", "radius", "color", "intensity", "keyframes", "loop")
+LIGHT_KEYS = ("name", "position", "radius", "color", "intensity", "keyframes", "loop",
+              "shadows", "samples", "ssoc")
+SSOC_KEYS = ("resolution", "camera", "guard", "max_steps", "falloff", "filter", "corners")
 LIGHT_KEYFRAME_KEYS = ("time", "frame", "position", "radius", "color")
 TOP_KEYS = ("settings", "environment", "lights", "objects")
 
@@ -166,6 +168,9 @@ class SphereLightSpec:
     name: str
     keys: list[LightKey]
     loop: bool = False
+    shadows: str = "shexp"  # see shtools.scene.light_shadows
+    samples: int = 64  # strata per receiver of shadows = "raytrace"
+    ssoc: Any = None  # shtools.runtime.ssoc.SSOCSettings of shadows = "ssoc" / "auto"
 
 
 @dataclass
@@ -553,7 +558,23 @@ def _light(table: Any, index: int, settings: Settings, ctx: _Ctx) -> SphereLight
     loop = table.get("loop", False)
     if not isinstance(loop, bool):
         raise ctx.sub("loop").error("must be true or false")
-    return SphereLightSpec(str(name), keys, loop)
+    return SphereLightSpec(str(name), keys, loop, *_light_shadows(table, ctx))
+
+
+def _light_shadows(table: dict, ctx: _Ctx):
+    """``shadows``, ``samples`` and the ``ssoc`` table of a light (docs/ssoc.md)."""
+    from shtools.runtime.ssoc import SSOCSettings
+    from shtools.scene.light_shadows import DEFAULT_SAMPLES, SHADOW_WAYS
+
+    shadows = _choice(table.get("shadows", "shexp"), SHADOW_WAYS, ctx.sub("shadows"))
+    samples = _number(table.get("samples", DEFAULT_SAMPLES), ctx.sub("samples"), lo=1,
+                      hi=65536, integer=True)
+    sub = _check_keys(table.get("ssoc", {}), SSOC_KEYS, ctx.sub("ssoc"))
+    try:
+        ssoc = SSOCSettings(**sub)
+    except InputError as exc:
+        raise ctx.sub("ssoc").error(exc.message) from None
+    return shadows, samples, ssoc
 
 
 # --------------------------------------------------------------------------- entry points
