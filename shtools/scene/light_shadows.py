@@ -1,4 +1,4 @@
-"""How each spherical light of a scene is shadowed: ``shadows = "shexp" | "ssoc" | "raytrace" | "auto"``.
+"""How each spherical light of a scene is shadowed (the ``shadows`` key of ``[[lights]]``).
 
 * ``"shexp"`` (default): the light is shaded through the SHEXP visibility with
   the environment (``ShadowRuntime.shade``) -- existing scenes bake unchanged;
