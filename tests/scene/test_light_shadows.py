@@ -90,20 +90,29 @@ def test_ssoc_bake_matches_the_raytraced_light(tmp_path):
 
 
 def test_auto_picks_by_angular_radius(tmp_path):
-    small = parse_scene(lamp_scene("auto", radius=0.02), tmp_path / "s.toml")
-    large = parse_scene(lamp_scene("auto", radius=1.0, position=(0.3, 3.5, 0.2)),
-                        tmp_path / "s.toml")
     from shtools.scene.bake import pose_frame, prepare_scene
-    from shtools.scene.light_shadows import LightShadows
+    from shtools.scene.shadows import LIGHT_SHADOWS, BakeRun
 
-    for sc, want in ((small, "ssoc"), (large, "shexp")):
+    for radius, position, want in ((0.02, (0.3, 2.5, 0.2), "ssoc"),
+                                   (1.0, (0.3, 3.5, 0.2), "shexp")):
+        sc = parse_scene(lamp_scene("auto", radius=radius, position=position),
+                         tmp_path / "s.toml")
         prep = prepare_scene(sc)
         state = pose_frame(prep, 0.0, with_meshes=True)
-        ls = LightShadows(sc.lights, [o.faces for o in prep.blockers])
-        ls.frame(state)
+        run = BakeRun(prep, None if want == "ssoc" else _Shade(), "default")
+        vis = np.zeros((len(state.vertices), 9))
+        vis[:, 0] = np.sqrt(4 * np.pi)
+        LIGHT_SHADOWS["auto"].radiance(run, state, vis, state.lights)
         a = angular_radius(state.lights[0].position, state.lights[0].radius, state.vertices)
         assert (a < AUTO_THRESHOLD) == (want == "ssoc")
-        assert ls.last_ways == [want]
+        assert list(run.cache["auto_ways"].values()) == [want]
+
+
+class _Shade:
+    """Stands in for the runtime's shade call of the lights "auto" leaves to SHEXP."""
+
+    def shade(self, visibility, vertices, normals, env, sphere_lights=()):
+        return np.zeros((len(vertices), 3))
 
 
 def test_light_inside_a_blocker_is_one_line_and_no_output(tmp_path):
