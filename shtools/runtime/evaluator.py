@@ -1,4 +1,4 @@
-"""The per-frame evaluator: :class:`ShadowRuntime` (CONTRACTS.md section D)."""
+"""The per-frame evaluator: :class:`ShadowRuntime` (see ``docs/architecture.md``, runtime)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
-from shtools.runtime.blockers import SelfVisibility, SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
@@ -112,11 +112,14 @@ class ShadowRuntime:
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        blockers = _check_blockers(blockers)
-        extra, exclude = self._self_terms(self_visibility, pts.shape[0], len(blockers))
-        work = self._frame_work(pts, blockers, clusters, exclude, extra)
+        spheres, others = _check_blockers(blockers)
+        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
+        extra = _add(self._other_logs(pts, nrm, others), own)
+        if extra is not None:
+            f += extra
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
         return f
 
@@ -131,8 +134,10 @@ class ShadowRuntime:
             Receiver positions this frame.
         normals : array_like, shape (V, 3)
             Unit receiver normals this frame.
-        blockers : list of SphereBlocker
-            Blocker spheres this frame (trees are refit from their leaves).
+        blockers : list of SphereBlocker or LogBlocker
+            Blockers this frame: sphere sets (trees are refit from their
+            leaves) and blockers that give their own log visibility, added to
+            the spheres' log sum before the exp.
         clusters : ReceiverClusters, optional
             From :meth:`clusters`; with ``hierarchy`` on and none given, clusters
             are computed on the first call and reused while the vertex count
@@ -140,8 +145,8 @@ class ShadowRuntime:
         self_visibility : sequence of SelfVisibility
             Precomputed log visibility of objects' real meshes on their own
             receiver rows, added in log space; each skips its object's own
-            sphere blocker on those rows.  Clusters must not mix rows of
-            different objects (build them with ``groups``).
+            sphere blocker (an index into ``blockers``) on those rows.  Clusters
+            must not mix rows of different objects (build them with ``groups``).
 
         Returns
         -------
@@ -156,17 +161,20 @@ class ShadowRuntime:
         (:mod:`shtools.runtime.parallel`); :meth:`close` stops them.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        blockers = _check_blockers(blockers)
-        extra, exclude = self._self_terms(self_visibility, pts.shape[0], len(blockers))
-        work = self._frame_work(pts, blockers, clusters, exclude, extra)
+        spheres, others = _check_blockers(blockers)
+        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
+        extra = _add(self._other_logs(pts, nrm, others), own)
         if self.processes > 1 and stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
-            g = self._parallel_visibility(work, pts, nrm)
+            g = self._parallel_visibility(work, pts, nrm, extra)
             stats["seconds"]["accumulate_exp_wall"] = time.perf_counter() - w0
             return g
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), stats)
+        if extra is not None:
+            f += extra
         t2 = time.process_time()
         g = self.exponentiate(f)
         stats["seconds"]["accumulate"] = t2 - t1
@@ -177,11 +185,33 @@ class ShadowRuntime:
         """Visibility ``(V', n*n)`` and evaluated pairs of one part of a frame.
 
         ``task`` comes from :meth:`FrameWork.task` (also what a worker process
-        runs; see :mod:`shtools.runtime.parallel`).
+        runs; see :mod:`shtools.runtime.parallel`), or is ``("with_log", task,
+        extra)`` with the part's rows of the other blockers' log sum.
         """
+        extra = None
+        if task[0] == "with_log":
+            _, task, extra = task
         stats = {"pairs_evaluated": 0}
-        g = self.exponentiate(self._accumulate(task, stats))
-        return g, stats["pairs_evaluated"]
+        f = self._accumulate(task, stats)
+        if extra is not None:
+            f += extra
+        return self.exponentiate(f), stats["pairs_evaluated"]
+
+    def _other_logs(self, pts, nrm, others: list) -> np.ndarray | None:
+        """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None."""
+        if not others:
+            return None
+        t0 = time.process_time()
+        total = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+        for b in others:
+            f = np.asarray(b.log_visibility(pts, nrm, self.acc_order))
+            if f.shape != total.shape or not np.isfinite(f).all():
+                raise InputError(
+                    f"{type(b).__name__}.log_visibility returned shape {f.shape} (or "
+                    f"non-finite values); expected finite values of shape {total.shape}")
+            total += f
+        self.last_stats["seconds"]["other_blockers"] = time.process_time() - t0
+        return total
 
     def close(self) -> None:
         """Stop the worker processes, if any were started (the runtime stays usable)."""
@@ -195,16 +225,21 @@ class ShadowRuntime:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _self_terms(self, self_visibility, n_vertices: int, n_blockers: int):
-        """Rotated self-visibility logs ``(V, n_acc^2)`` and the blocker each row skips ``(V,)``.
+    def _self_terms(self, self_visibility, n_vertices: int, blockers: list):
+        """Rotated self-visibility logs ``(V, n_acc^2)`` and the sphere blocker each row skips.
 
-        Returns ``(None, None)`` without self-visibility.  A rotated log is kept
-        while its object's rotation does not change (static objects).
+        Returns ``(None, None)`` without self-visibility; ``exclude (V,)`` indexes
+        the *sphere* blockers (-1: none).  A rotated log is kept while its
+        object's rotation does not change (static objects).
         """
         if not self_visibility:
             self._rotated_logs = {}
             return None, None
         size = self.acc_order * self.acc_order
+        sphere_index = {}  # position in `blockers` -> position among the sphere blockers
+        for k, b in enumerate(blockers):
+            if isinstance(b, SphereBlocker):
+                sphere_index[k] = len(sphere_index)
         extra = np.zeros((n_vertices, size), dtype=np.float32)
         exclude = np.full(n_vertices, -1, dtype=np.int64)
         kept = {}
@@ -232,18 +267,17 @@ class ShadowRuntime:
                 kept[id(sv.log)] = (sv.rotation.copy(), log)
             extra[rows] += log
             if sv.blocker is not None:
-                if not 0 <= int(sv.blocker) < n_blockers:
-                    raise InputError(f"self-visibility names blocker {sv.blocker} but "
-                                     f"{n_blockers} blockers were given")
-                exclude[rows] = int(sv.blocker)
+                if int(sv.blocker) not in sphere_index:
+                    raise InputError(f"self-visibility names blocker {sv.blocker}, which is not "
+                                     f"a SphereBlocker of the {len(blockers)} given")
+                exclude[rows] = sphere_index[int(sv.blocker)]
         self._rotated_logs = kept
         return extra, (exclude if (exclude >= 0).any() else None)
 
-    def _frame_work(self, pts, blockers, clusters, exclude=None, extra=None) -> FrameWork:
+    def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:
         """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
 
-        ``exclude (V,)``: blocker each receiver skips (-1: none); ``extra (V,
-        n_acc^2)``: log added to the accumulated sums before exp.
+        ``exclude (V,)``: sphere blocker each receiver skips (-1: none).
         """
         s = self.settings
         stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {},
@@ -255,7 +289,7 @@ class ShadowRuntime:
             stats["seconds"]["cuts"] = time.process_time() - t0
             stats["pairs"] = stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
             stats["spheres_per_vertex"] = float(centers.shape[0])
-            return FrameWork(centers=centers, radii=radii, extra=extra)
+            return FrameWork(centers=centers, radii=radii)
         forest = build_forest(blockers)
         if not s.hierarchy:
             # every leaf everywhere, but per exclusion group: one "cluster" per group
@@ -272,7 +306,8 @@ class ShadowRuntime:
                 )
             cl_centers, cl_radii = clusters.bounds(pts)
             cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
-            weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
+            weights = ratio_weights(forest, cuts, cl_centers, self.table,
+                                    s.resolved_theta_min())
             in_cut = cuts.in_cut
         if exclude is not None:
             in_cut = in_cut & ~_excluded_nodes(clusters, exclude, forest.blocker)
@@ -287,8 +322,7 @@ class ShadowRuntime:
             centers=forest.centers[node_idx],
             radii=np.where(valid, forest.radii[node_idx], 0.0),
             weights=(np.take_along_axis(weights, node_idx[:, :, None], axis=1)
-                     if any_inner else None),
-            extra=extra)
+                     if any_inner else None))
         stats["seconds"]["cuts"] = time.process_time() - t0
         stats["pairs"] = int((np.diff(clusters.offsets) * sizes).sum())
         stats["clusters"] = clusters.n_clusters
@@ -298,28 +332,26 @@ class ShadowRuntime:
     def _accumulate(self, task, stats: dict) -> np.ndarray:
         """Log sums ``(V', n_acc^2)`` of a :meth:`FrameWork.task` in this process."""
         s = self.settings
-        extra = task[-1]  # log added before exp (self-visibility) or None
         if task[0] == "spheres":
-            _, pts, nrm, centers, radii, _ = task
+            _, pts, nrm, centers, radii = task
             f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
             accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
                            chunk_pairs=s.chunk_pairs, out=f, kernel=self._kernels[0])
             stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
-        else:
-            _, pts, nrm, order, offsets, centers, radii, weights, sizes, _ = task
-            f = accumulate_clusters(pts, nrm, order, offsets, centers, radii, weights, sizes,
-                                    self.table, self_shadow=s.self_shadow,
-                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
-                                    kernels=self._kernels, stats=stats)
-        if extra is not None:
-            f += extra
-        return f
+            return f
+        _, pts, nrm, order, offsets, centers, radii, weights, sizes = task
+        return accumulate_clusters(pts, nrm, order, offsets, centers, radii, weights, sizes,
+                                   self.table, self_shadow=s.self_shadow,
+                                   chunk_pairs=s.chunk_pairs, threads=s.threads,
+                                   kernels=self._kernels, stats=stats)
 
-    def _parallel_visibility(self, work: FrameWork, pts, nrm) -> np.ndarray:
+    def _parallel_visibility(self, work: FrameWork, pts, nrm, extra=None) -> np.ndarray:
         """Visibility with the frame split over this process and the workers."""
         if self._workers is None:
             self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables)
         parts = work.split(pts, nrm, self.processes)
+        if extra is not None:
+            parts = [(rows, ("with_log", task, extra[rows])) for rows, task in parts]
         try:
             futures = [self._workers.submit(task) for _, task in parts[1:]]
             g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
@@ -355,15 +387,18 @@ class ShadowRuntime:
     def shade(self, visibility, vertices, normals, env_sh=None,
               sphere_lights: tuple[SphereLight, ...] | list = (), *,
               local_visibility=None, form: str = "tabulated") -> np.ndarray:
-        """White Lambertian outgoing radiance (DESIGN.md "Radiance"), shape ``(V, 3)``.
+        """White Lambertian outgoing radiance, shape ``(V, 3)``.
+
+        Radiance as defined in ``docs/conventions.md`` ("Light and radiance").
 
         Parameters
         ----------
         visibility : array_like, shape (V, n*n)
             From :meth:`visibility`.
         vertices, normals : array_like, shape (V, 3)
-        env_sh : array_like, shape (n'*n', 3), optional
-            RGB environment lighting in SH (truncated/padded to ``n``).
+        env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+            RGB environment lighting in SH (truncated/padded to ``n``), shared
+            or per vertex (mid-range lighting).
         sphere_lights : sequence of SphereLight
         local_visibility : array_like, shape (V, n*n), optional
             Baked visibility of static local occluders (Sec. 7).
@@ -374,7 +409,8 @@ class ShadowRuntime:
         pts, nrm = _check_receivers(vertices, normals)
         transfer, changed = self._cosine_transfer(nrm)
         env_transfer = None
-        if env_sh is not None and local_visibility is None and form == "tabulated":
+        if (env_sh is not None and local_visibility is None and form == "tabulated"
+                and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
             env_transfer = self._lit_transfer(env_sh, transfer, changed)
         return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                       window_kind=s.resolved_window(), window_h=s.window_h,
@@ -451,8 +487,6 @@ class FrameWork:
         Valid spheres per cluster.
     weights : ndarray, shape (C, S, n_acc) or None
         Ratio weights (eq. 37) where inner tree nodes are used.
-    extra : ndarray, shape (V, n_acc^2) float32 or None
-        Log added to each receiver's sums before exp (self-visibility).
     """
 
     centers: np.ndarray
@@ -461,14 +495,13 @@ class FrameWork:
     offsets: np.ndarray | None = None
     sizes: np.ndarray | None = None
     weights: np.ndarray | None = None
-    extra: np.ndarray | None = None
 
     def task(self, pts, nrm) -> tuple:
         """The whole frame as one task for :meth:`ShadowRuntime.run_part`."""
         if self.order is None:
-            return ("spheres", pts, nrm, self.centers, self.radii, self.extra)
+            return ("spheres", pts, nrm, self.centers, self.radii)
         return ("clusters", pts, nrm, self.order, self.offsets, self.centers, self.radii,
-                self.weights, self.sizes, self.extra)
+                self.weights, self.sizes)
 
     def split(self, pts, nrm, parts: int) -> list[tuple[np.ndarray, tuple]]:
         """``parts`` tasks of about equal work, with the receiver rows each covers.
@@ -482,8 +515,7 @@ class FrameWork:
         if self.order is None:
             bounds = np.linspace(0, pts.shape[0], parts + 1).astype(np.int64)
             return [(np.arange(a, b), ("spheres", pts32[a:b], nrm32[a:b], self.centers,
-                                       self.radii,
-                                       None if self.extra is None else self.extra[a:b]))
+                                       self.radii))
                     for a, b in itertools.pairwise(bounds) if b > a]
         counts = np.diff(self.offsets)
         groups = split_clusters(counts * self.sizes, parts)
@@ -501,8 +533,7 @@ class FrameWork:
             out.append((rows, ("clusters", pts32[rows], nrm32[rows], np.arange(rows.size),
                                offsets, self.centers[group], self.radii[group],
                                None if self.weights is None else self.weights[group],
-                               self.sizes[group],
-                               None if self.extra is None else self.extra[rows])))
+                               self.sizes[group])))
         return out
 
 
@@ -523,12 +554,27 @@ def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
     return pts, nrm
 
 
-def _check_blockers(blockers) -> list[SphereBlocker]:
-    blockers = list(blockers)
+def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
+    """Split blockers into sphere sets and blockers with their own log visibility."""
+    spheres, others = [], []
     for b in blockers:
-        if not isinstance(b, SphereBlocker):
-            raise InputError(f"blockers must be SphereBlocker objects, got {type(b).__name__}")
-    return blockers
+        if isinstance(b, SphereBlocker):
+            spheres.append(b)
+        elif isinstance(b, LogBlocker):
+            others.append(b)
+        else:
+            raise InputError(f"blockers must be SphereBlocker objects or have "
+                             f"log_visibility(points, normals, order), got {type(b).__name__}")
+    return spheres, others
+
+
+def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """Sum of two optional log arrays (None is zero)."""
+    if a is None:
+        return b
+    if b is None:
+        return a
+    return a + b
 
 
 def _excluded_nodes(clusters: ReceiverClusters, exclude: np.ndarray,
