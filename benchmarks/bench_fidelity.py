@@ -135,7 +135,9 @@ def scenes(quick: bool) -> dict[str, dict]:
 
 def _scene_file(name: str, spec: dict, variant: str, extra_settings: str = "") -> Path:
     settings = (f'[settings]\norder = 4\nframes = {spec["frames"]}\nfps = {spec.get("fps", 24)}\n'
-                + ("self_visibility = false\n" if variant == "old" else "") + extra_settings)
+                + ('self_visibility = false\nderinging = "none"\n' if variant == "old"
+                   else "self_visibility = true\n")
+                + extra_settings)
     env = f'[environment]\nimage = "{spec["env"]}"\n'
     path = CACHE / f"{name.replace('+', '_')}.{variant}.toml"
     text = spec["text"]
@@ -168,7 +170,9 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants=("old"
         baked[variant] = [f.radiance.astype(np.float64) for f in frames]
         times[variant] = [f.seconds for f in frames]
     scene, prepared = preps[variants[0]]
-    shader = ShadowRuntime(ShadowSettings(order=4, processes=1))
+    # the references are shaded raw (no de-ringing): what order-4 shading of the real
+    # visibility gives, negative lobes included
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
     rng = np.random.default_rng(0)
     offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
     rows = []
@@ -185,8 +189,9 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants=("old"
             g_sph = sphere_union_visibility(v, n, centers, radii, 4, n_dirs)
             r_mesh = shader.shade(g_mesh, v, n, prepared.env_sh, state.lights)
             r_sph = shader.shade(g_sph, v, n, prepared.env_sh, state.lights)
-            entry = acc.setdefault(obj.spec.name, {"mesh": [], "sph": [],
+            entry = acc.setdefault(obj.spec.name, {"mesh": [], "sph": [], "neg_ref": 0,
                                                    **{vv: [] for vv in variants}})
+            entry["neg_ref"] += int((r_mesh.min(axis=1) < 0).sum())
             entry["mesh"].append(r_mesh)
             entry["sph"].append(r_sph)
             for variant in variants:
@@ -199,6 +204,8 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants=("old"
             r = np.concatenate(e[variant])
             row[f"{variant} vs mesh"] = relative_rmse(r, mesh)
             row[f"{variant} vs spheres"] = relative_rmse(r, sph)
+            row[f"{variant} neg (subset)"] = int((r.min(axis=1) < 0).sum())
+        row["mesh neg (subset)"] = e["neg_ref"]
         rows.append(row)
     summary = {"scene": name}
     for variant in variants:

@@ -22,7 +22,12 @@ from shtools.runtime.parallel import (
     split_clusters,
 )
 from shtools.runtime.settings import ShadowSettings
-from shtools.runtime.shading import cosine_transfer, environment_matrices, lit_transfer
+from shtools.runtime.shading import (
+    cosine_transfer,
+    desaturate_negative,
+    environment_matrices,
+    lit_transfer,
+)
 from shtools.runtime.shading import shade as _shade
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
@@ -404,6 +409,10 @@ class ShadowRuntime:
             Baked visibility of static local occluders (Sec. 7).
         form : {"tabulated", "on_the_fly"}
             Environment evaluation (same result).
+
+        Negative radiance left by SH ringing is desaturated toward luminance
+        (``settings.deringing = "desaturate"``;
+        :func:`~shtools.runtime.shading.desaturate_negative`).
         """
         s = self.settings
         pts, nrm = _check_receivers(vertices, normals)
@@ -412,10 +421,13 @@ class ShadowRuntime:
         if (env_sh is not None and local_visibility is None and form == "tabulated"
                 and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
             env_transfer = self._lit_transfer(env_sh, transfer, changed)
-        return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
-                      window_kind=s.resolved_window(), window_h=s.window_h,
-                      local_visibility=local_visibility, form=form, transfer=transfer,
-                      env_transfer=env_transfer)
+        out = _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
+                     window_kind=s.resolved_window(), window_h=s.window_h,
+                     local_visibility=local_visibility, form=form, transfer=transfer,
+                     env_transfer=env_transfer)
+        if s.deringing == "desaturate":
+            out = desaturate_negative(out)
+        return out
 
     def _cosine_transfer(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
