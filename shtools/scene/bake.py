@@ -72,6 +72,8 @@ class PreparedObject:
     self_log : ndarray, shape (V, n_acc^2) or None
         Self-visibility log in the object's frame (exact self-shadowing,
         :mod:`shtools.scene.transfer`); None when the object uses its spheres.
+    local_log : ndarray, shape (V, n_acc^2) or None
+        Rest-pose local visibility log of a skinned object (``local_visibility``).
     """
 
     spec: ObjectSpec
@@ -86,6 +88,7 @@ class PreparedObject:
     bone_vectors: np.ndarray | None = None
     blocker_data: Any = None
     self_log: np.ndarray | None = None
+    local_log: np.ndarray | None = None
 
     @property
     def moves(self) -> bool:
@@ -283,15 +286,24 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
 
 def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log) -> None:
     """Self-visibility logs of the rigid role-"both" objects (:mod:`shtools.scene.transfer`)."""
-    from shtools.scene.transfer import object_self_log, uses_self_visibility
+    from shtools.scene.transfer import (
+        object_local_log,
+        object_self_log,
+        uses_local_visibility,
+        uses_self_visibility,
+    )
 
-    default = scene.settings.self_visibility
+    st = scene.settings
     acc = runtime_settings(scene, "default").resolved_acc_order()
     for prep in objects:
-        if uses_self_visibility(prep, default):
+        if uses_self_visibility(prep, st.self_visibility):
             prep.self_log, path = object_self_log(prep, acc, log=log)
             if path is not None:
                 inputs[f"{prep.spec.name}.transfer"] = path
+        elif uses_local_visibility(prep, st.local_visibility):
+            if log:
+                log(f"ray tracing the local visibility of {prep.spec.name}")
+            prep.local_log = object_local_log(prep, acc)
 
 
 # --------------------------------------------------------------------------- posing
@@ -301,7 +313,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
     """
     from shtools.runtime import SelfVisibility, SphereLight
-    from shtools.scene.transfer import rotation_of
+    from shtools.scene.transfer import posed_local_log, rotation_of
 
     kinds = blocker_kinds()
     worlds = world_matrices(prepared.scene.objects, t)
@@ -322,6 +334,10 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             # its own spheres (appended next) are skipped on its own rows
             selfs.append(SelfVisibility(o.self_log, slice(n_rows, n_rows + len(world_v)),
                                         rotation=rotation, blocker=len(blockers)))
+        if o.local_log is not None and joints is not None:
+            selfs.append(SelfVisibility(
+                posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m),
+                slice(n_rows, n_rows + len(world_v))))
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))

@@ -64,6 +64,8 @@ class Settings(ShadowSettings):
                           doc="visibility method (shtools.scene.shadows)")
     self_visibility: bool = setting(False, "bool",
                                     doc="exact self-shadowing of rigid role-\"both\" objects")
+    local_visibility: bool = setting(False, "bool",
+                                     doc="local visibility g_p of skinned role-\"both\" objects")
 
 
 @dataclass
@@ -343,10 +345,14 @@ def _object(t: schema.Object, index: int, data: dict, settings: Settings, ctx: _
                             "or blocker = { spheres = \"file.h5\" }")
     if t.self_visibility is not None:
         value, vctx = t.self_visibility, ctx.sub("self_visibility")
-        if obj.role != "both" or obj.skin is not None:
-            raise vctx.error("exact self-shadowing is for rigid objects with role = \"both\"")
+        if obj.role != "both":
+            raise vctx.error("self-shadowing from the real mesh is for objects with "
+                             "role = \"both\"")
         if isinstance(value, bool):
             obj.self_visibility = value
+        elif isinstance(value, str) and obj.skin is not None:
+            raise vctx.error("a skinned object deforms: its transfer cannot be precomputed; "
+                             "use true (local visibility) or false")
         elif isinstance(value, str):
             obj.self_visibility = _file(value, base, vctx, (".h5",))
         else:

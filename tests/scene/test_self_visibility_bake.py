@@ -130,5 +130,5 @@ primitive = "plane"
 role = "receiver"
 self_visibility = true
 """
-    with pytest.raises(InputError, match="rigid objects with role"):
+    with pytest.raises(InputError, match="objects with role"):
         parse_scene(text)
