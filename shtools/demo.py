@@ -18,16 +18,11 @@ The demo runs the real stages, in-process through the ``shtools`` command line:
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
 
-# one BLAS thread (see shtools.cli.main): set before NumPy loads
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import numpy as np  # noqa: E402
+import numpy as np
 
 #: Scene timing: frames at FPS; one walk cycle (two steps) per STRIDE_SECONDS.
 FRAMES = 48
@@ -347,7 +342,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.frames < 2:
         parser.error("--frames must be at least 2")
     out = Path(args.outdir)
-    timings = run_demo(out, frames=args.frames, fit_method=args.fit_method)
+    from shtools.cli._common import one_blas_thread
+
+    with one_blas_thread():  # unless the user set a BLAS thread count
+        timings = run_demo(out, frames=args.frames, fit_method=args.fit_method)
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in timings.items() if k != "total")
     print(f"[demo] stages: {stages}")
     print(f"[demo] done in {timings['total']:.1f} s:")
