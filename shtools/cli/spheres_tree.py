@@ -9,19 +9,8 @@ commands defined here.  Both are thin: read the sphere set, call
 from __future__ import annotations
 
 import click
-import numpy as np
 
 from shtools.cli._common import json_option, output_option, report
-
-
-def _read_sphere_set(path: str) -> tuple[np.ndarray, np.ndarray]:
-    """Centres ``(N, 3)`` and radii ``(N,)`` of a ``spheres`` asset (validated)."""
-    from shtools.data_formats import read_asset
-
-    asset = read_asset(path, "spheres")
-    return np.asarray(asset["centers"], dtype=np.float64), np.asarray(
-        asset["radii"], dtype=np.float64
-    )
 
 
 @click.command("tree")
@@ -37,17 +26,10 @@ def tree(spheres_path, output, branching, seed, as_json):
 
     Every parent is the minimal sphere bounding its children's spheres.
     """
-    from shtools.data_formats.tree import write_tree
-    from shtools.geometry.sphere_tree import build_tree, tree_statistics
+    from shtools.geometry.assets import tree_to_file
+    from shtools.geometry.sphere_tree import tree_statistics
 
-    centers, radii = _read_sphere_set(spheres_path)
-    result = build_tree(centers, radii, branching=branching, seed=seed)
-    write_tree(
-        output,
-        result,
-        inputs={"spheres": spheres_path},
-        parameters={"branching": branching, "seed": seed},
-    )
+    result = tree_to_file(spheres_path, output, branching=branching, seed=seed)
     stats = tree_statistics(result)
     summary = {"output": output, **stats}
     report(
@@ -87,10 +69,11 @@ def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_a
     space (fit them to the rig's rest mesh).
     """
     from shtools.data_formats.bound import write_bound
+    from shtools.geometry.assets import read_sphere_set
     from shtools.geometry.binding import bind_sphere_set
     from shtools.geometry.skin import load_skinned_gltf
 
-    centers, radii = _read_sphere_set(spheres_path)
+    centers, radii = read_sphere_set(spheres_path)
     model = load_skinned_gltf(rig_path)
     bound = bind_sphere_set(centers, radii, model, bones_per_sphere=bones_per_sphere,
                             space=space, cover_animations=cover_animations,

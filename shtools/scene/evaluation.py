@@ -17,7 +17,8 @@ def scene_eval_inputs(path, frame: int = 0, order: int | None = None) -> EvalInp
     """
     import trimesh
 
-    from shtools.scene.bake import pose_frame, prepare_scene
+    from shtools.scene.pose import pose_frame
+    from shtools.scene.prepare import prepare_scene
     from shtools.scene.scene import load_scene
 
     scene = load_scene(path)
