@@ -324,12 +324,14 @@ def _sheet(out: Path, frames: int, step: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
+    from shtools.geometry.fit_methods import FIT_METHODS
+
     parser = argparse.ArgumentParser(prog="python -m shtools.demo",
                                      description="Generate, bake and export the demo scene.")
     parser.add_argument("outdir", help="output folder (created)")
     parser.add_argument("--frames", type=int, default=FRAMES, help=f"default {FRAMES}")
     parser.add_argument("--fit-method", default=FIT_METHOD,
-                        choices=("variational", "octree", "kmeans"),
+                        choices=FIT_METHODS,
                         help=f"sphere fitting method (default {FIT_METHOD})")
     args = parser.parse_args(argv)
     if args.frames < 2:

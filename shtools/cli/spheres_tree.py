@@ -11,6 +11,7 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import json_option, output_option, report
+from shtools.geometry.fit_methods import SPHERE_SPACES
 
 
 @click.command("tree")
@@ -53,7 +54,7 @@ def tree(spheres_path, output, branching, seed, as_json):
               help="Grow each radius so the sphere keeps covering its rest vertices at "
                    "every checked frame of every animation in RIGGED (the paper keeps the "
                    "rest radii); the fitted radii are kept as 'fit_radii'.")
-@click.option("--space", type=click.Choice(["auto", "bind", "scene"]), default="auto",
+@click.option("--space", type=click.Choice(SPHERE_SPACES), default="auto",
               show_default=True,
               help="Space of the sphere set: 'bind' (the rig's POSITION data), 'scene' (the "
                    "glTF as placed in its scene, what 'shtools spheres fit RIG.glb' sees), "

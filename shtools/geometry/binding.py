@@ -41,6 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from shtools.errors import InputError
+from shtools.geometry.fit_methods import SPHERE_SPACES
 from shtools.geometry.mvc import is_closed_surface, mean_value_coordinates
 from shtools.runtime.spheres import pose_bound_spheres
 
@@ -131,7 +132,7 @@ def spheres_to_bind_space(centers, radii, model, space: str = "auto"):
         fewer than half of the rest vertices in either space.
     """
 
-    if space not in ("auto", "bind", "scene"):
+    if space not in SPHERE_SPACES:
         raise InputError(f"unknown sphere space '{space}'; use auto, bind or scene")
     centers = np.asarray(centers, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
