@@ -23,7 +23,7 @@ def light():
 @click.option("--window", type=setting_type("window"),
               default="none", show_default=True,
               help="Per-band window against ringing (cosine: the paper's filter).")
-@click.option("--window-h", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--window-h", type=setting_type("window_h"), default=None,
               help="Window width in bands (default: 2n for cosine, n otherwise).")
 @click.option("--rotate-y", type=float, default=0.0, show_default=True, metavar="DEG",
               help="Rotate the environment about +y (right-hand rule; +90 turns the image "
