@@ -59,8 +59,8 @@ sub-segment of at most ``SEGMENT_PX`` pixels (a long edge's bounding box would
 be the whole image); ``z_far`` is the shadow-map depth outside the edge at each
 texel's nearest point (the deepest of 1.5, 3 and 6 px; the receivers' far
 depth where nothing is behind); the quad width uses the edge's smaller
-``z_near`` and the receivers' far depth (conservative), clamped to the guard
-band; the post-distortion test looks at least 1.5 px outside the edge (a point
+``z_near`` and the deepest of those ``z_far`` at its ends and middle, clamped
+to the guard band; the post-distortion test looks at least 1.5 px outside the edge (a point
 closer than that would find the edge's own rasterised pixels); silhouette
 corners get round caps (``corners="caps"``, default; the seed's bare quads
 leave wedge gaps at the convex corners of tessellated contours, measured in
@@ -207,7 +207,7 @@ class FaceMaps:
 
 @dataclass
 class SSOCStats:
-    """CPU seconds per stage of the last frame (the seed's Table 1 columns)."""
+    """CPU seconds (process time) per stage of the last frame (the seed's Table 1 columns)."""
 
     silhouettes: float = 0.0
     shadow_map: float = 0.0
@@ -278,9 +278,9 @@ class OcclusionCamera:
                 raise InputError(f"the light centre is inside occluder mesh {k}; "
                                  "move the light out of the object")
         stats = SSOCStats()
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         tris, sil = self._silhouettes(verts, c)
-        stats.silhouettes = time.perf_counter() - t0
+        stats.silhouettes = time.process_time() - t0
         stats.n_silhouettes = len(sil[0])
         cam = fit_light_camera(c, pts, mode=st.camera, resolution=st.resolution, guard=st.guard)
         self._camera = cam
@@ -293,16 +293,16 @@ class OcclusionCamera:
         self.maps: dict[int, FaceMaps] = {}
         for k in np.unique(face_of):
             idx = np.flatnonzero(face_of == k)
-            t1 = time.perf_counter()
+            t1 = time.process_time()
             depth = _shadow_map(cam, int(k), tris, near)
-            t2 = time.perf_counter()
+            t2 = time.process_time()
             z_recv = float(cam.to_camera(int(k), pts[idx])[:, 2].max())
             outer, inner = _distortion_maps(cam, int(k), sil, depth, r, near, z_recv, st)
-            t3 = time.perf_counter()
+            t3 = time.process_time()
             maps = FaceMaps(depth.reshape(-1), outer, inner)
             self.maps[int(k)] = maps
             out[idx] = _receivers(cam, int(k), maps, pts[idx], nrm[idx], r, st)
-            t4 = time.perf_counter()
+            t4 = time.process_time()
             stats.shadow_map += t2 - t1
             stats.ssoc += t3 - t2
             stats.receivers += t4 - t3
@@ -467,11 +467,16 @@ def _distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius
     ax, ay, bx, by, za, zb = (x[sel] for x in (ax, ay, bx, by, za, zb))
     nx, ny = nx[sel] / nl[sel], ny[sel] / nl[sel]
     t0, t1, edge_id = t0[sel], t1[sel], edge_id[sel]
-    # per-edge width: the smallest z_near against the receivers' far bound (conservative)
+    # per-edge width: the smallest z_near against the deepest z_far at its ends and middle
     ex, ey = bx - ax, by - ay
     inv_za, inv_zb = 1.0 / za, 1.0 / zb
     inv_zn = np.maximum(inv_za + t0 * (inv_zb - inv_za), inv_za + t1 * (inv_zb - inv_za))
-    width = np.minimum(f * radius * np.maximum(inv_zn - 1.0 / z_recv, 0.0), w_max)
+    zf = np.zeros(len(sel))
+    for t in (0.0, 0.5, 1.0):
+        tt = t0 + t * (t1 - t0)
+        zn_t = 1.0 / (inv_za + tt * (inv_zb - inv_za))
+        zf = np.maximum(zf, _z_far(flat, R, ax + tt * ex, ay + tt * ey, nx, ny, zn_t, z_recv))
+    width = np.minimum(f * radius * np.maximum(inv_zn - 1.0 / zf, 0.0), w_max)
     live = width > 0
     # split each clipped edge into sub-segments of at most SEGMENT_PX pixels
     length = np.hypot(ex, ey) * (t1 - t0)
