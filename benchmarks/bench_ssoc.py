@@ -30,6 +30,7 @@ bunny and the dragon.
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import time
 from pathlib import Path
@@ -170,7 +171,7 @@ def crossover(rows) -> str:
         e = {r["method"]: r["rad RMSE %"] for r in rows if r["alpha"] == a}
         diff.append(np.log(e["SSOC"]) - np.log(e["SHEXP o6"]))
     pairs = list(zip(alphas, diff, strict=True))
-    for (a0, d0), (a1, d1) in zip(pairs, pairs[1:], strict=False):
+    for (a0, d0), (a1, d1) in itertools.pairwise(pairs):
         if d0 < 0 <= d1:
             la = np.log(a0) + (np.log(a1) - np.log(a0)) * (-d0) / (d1 - d0)
             return f"{np.exp(la):.3g} rad (SSOC better below)"
