@@ -87,6 +87,12 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 ``accumulate_log(points, normals, centers, radii, table, weights=None, ...)``
 ``apply_self_shadow_rules(dx, dy, dz, radius, nx, ny, nz)``
 ``CapLogTable(tables, order)``
+``ScalingTable(read_scaling(path))`` — SH scaling (Wang et al.): ``.values_at(k)``,
+    ``.matrix(k) -> (V, n*n, n*n)``, ``.apply(f, k, axes) = D^T M(k) D f``
+    (:mod:`~shtools.runtime.scaling`)
+``midrange_lighting(env_sh, points, center, radius, table, out_order=None)``
+    ``-> (V, n*n, 3)`` per-vertex environment inside a finite sphere; pass it as
+    ``env_sh`` to ``shade``.
 """
 
 from shtools.runtime.accumulate import accumulate_log
@@ -95,6 +101,7 @@ from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
 from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.scaling import ScalingTable, midrange_lighting
 from shtools.runtime.self_shadow import apply_self_shadow_rules
 from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
@@ -103,6 +110,7 @@ __all__ = [
     "CapLogTable",
     "LogBlocker",
     "ReceiverClusters",
+    "ScalingTable",
     "ShadowRuntime",
     "ShadowSettings",
     "SphereBlocker",
@@ -112,6 +120,7 @@ __all__ = [
     "cosine_transfer",
     "fast_exp",
     "lloyd_clusters",
+    "midrange_lighting",
     "shade",
     "sphere_light_sh",
 ]

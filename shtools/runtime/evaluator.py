@@ -323,8 +323,9 @@ class ShadowRuntime:
         visibility : array_like, shape (V, n*n)
             From :meth:`visibility`.
         vertices, normals : array_like, shape (V, 3)
-        env_sh : array_like, shape (n'*n', 3), optional
-            RGB environment lighting in SH (truncated/padded to ``n``).
+        env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+            RGB environment lighting in SH (truncated/padded to ``n``), shared
+            or per vertex (mid-range lighting).
         sphere_lights : sequence of SphereLight
         local_visibility : array_like, shape (V, n*n), optional
             Baked visibility of static local occluders (Sec. 7).
@@ -335,7 +336,8 @@ class ShadowRuntime:
         pts, nrm = _check_receivers(vertices, normals)
         transfer, changed = self._cosine_transfer(nrm)
         env_transfer = None
-        if env_sh is not None and local_visibility is None and form == "tabulated":
+        if (env_sh is not None and local_visibility is None and form == "tabulated"
+                and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
             env_transfer = self._lit_transfer(env_sh, transfer, changed)
         return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                       window_kind=s.resolved_window(), window_h=s.window_h,
