@@ -535,11 +535,14 @@ def _distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius
         rnx = np.where(cap, sgn * gx / np.where(cap, dist, 1.0), rnx)
         rny = np.where(cap, sgn * gy / np.where(cap, dist, 1.0), rny)
         zn = 1.0 / (inv_za[s_] + tc * (inv_zb[s_] - inv_za[s_]))
-        zfar = _z_far(flat, R, exx, eyy, rnx, rny, zn, z_recv)
-        rec = (py * R + px, dist, edge_id[s_], exx, eyy, rnx, rny, zn, zfar)
+        rec = (py * R + px, dist, edge_id[s_], exx, eyy, rnx, rny, zn)
         out_side = sd >= 0
         _splat(outer, tuple(x[out_side] for x in rec))
         _splat(inner, tuple(x[~out_side] for x in rec))
+    for dm in (outer, inner):  # z_far of the winning records only
+        full = np.flatnonzero(dm.edge >= 0)
+        dm.z_far[full] = _z_far(flat, R, dm.e[full, 0], dm.e[full, 1], dm.n[full, 0],
+                                dm.n[full, 1], dm.z_near[full], z_recv)
     return outer, inner
 
 
@@ -559,23 +562,23 @@ def _z_far(flat, R, ex, ey, nx, ny, zn, z_recv) -> np.ndarray:
 
 
 def _splat(dm: DistortionMap, rec) -> None:
-    """Write fragments into a map, keeping per texel the nearest silhouette (Sec. 3.2.1 step 5)."""
+    """Write fragments into a map, keeping per texel the nearest silhouette (Sec. 3.2.1 step 5).
+
+    ``rec = (texel, distance, edge, ex, ey, nx, ny, z_near)``; ``z_far`` is filled
+    in afterwards for the winners.
+    """
     pid, dist = rec[0], rec[1]
     if not pid.size:
         return
-    order = np.lexsort((dist, pid))
-    pid, dist = pid[order], dist[order]
-    first = np.ones(pid.size, dtype=bool)
-    first[1:] = pid[1:] != pid[:-1]
-    sel = order[first]
-    pid, dist = pid[first], dist[first]
-    win = dist < dm.dist[pid]
-    pid, sel = pid[win], sel[win]
-    dm.dist[pid] = dist[win]
-    dm.edge[pid] = rec[2][sel]
-    dm.e[pid, 0], dm.e[pid, 1] = rec[3][sel], rec[4][sel]
-    dm.n[pid, 0], dm.n[pid, 1] = rec[5][sel], rec[6][sel]
-    dm.z_near[pid], dm.z_far[pid] = rec[7][sel], rec[8][sel]
+    best = dm.dist.copy()
+    np.minimum.at(best, pid, dist)
+    win = (dist == best[pid]) & (dist < dm.dist[pid])  # ties: any of the equals
+    pid = pid[win]
+    dm.dist[pid] = rec[1][win]
+    dm.edge[pid] = rec[2][win]
+    dm.e[pid, 0], dm.e[pid, 1] = rec[3][win], rec[4][win]
+    dm.n[pid, 0], dm.n[pid, 1] = rec[5][win], rec[6][win]
+    dm.z_near[pid] = rec[7][win]
 
 
 # ---------------------------------------------------------------------- receivers
