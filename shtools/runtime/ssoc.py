@@ -74,7 +74,7 @@ pipeline embedding :mod:`shtools.runtime` gets the small-light path too.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -216,7 +216,6 @@ class SSOCStats:
     n_silhouettes: int = 0
     camera: str = ""
     faces: int = 0
-    extra: dict = field(default_factory=dict)
 
 
 class OcclusionCamera:
@@ -240,6 +239,8 @@ class OcclusionCamera:
         self.adjacency: list[EdgeAdjacency] = [edge_adjacency(f) for f in self.faces]
         #: Stage times of the last call (:class:`SSOCStats`).
         self.last_stats = SSOCStats()
+        #: Shadow and distortion maps of the last call, by cube face (for inspection).
+        self.maps: dict[int, FaceMaps] = {}
         self._camera: LightCamera | None = None
 
     # ------------------------------------------------------------------ public
@@ -290,7 +291,7 @@ class OcclusionCamera:
         scale = max(float(np.ptp(np.concatenate([pts, tris.reshape(-1, 3)]), axis=0).max())
                     if len(tris) else 1.0, 1e-12)
         near = NEAR_REL * scale
-        self.maps: dict[int, FaceMaps] = {}
+        self.maps = {}
         for k in np.unique(face_of):
             idx = np.flatnonzero(face_of == k)
             t1 = time.process_time()
