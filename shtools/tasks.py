@@ -108,6 +108,8 @@ class TaskPool:
     address: str | None = None
     client: Any = None
     stats: dict = field(default_factory=dict)
+    #: Seconds spent starting a cluster and connecting to it.
+    startup_seconds: float = 0.0
 
     def map_ordered(self, fn: Callable[[Any, Any], Any], items: Iterable, *,
                     shared: Any = None, window: int | None = None) -> Iterator[Any]:
@@ -152,7 +154,7 @@ class TaskPool:
             yield result
 
     def _processes(self, fn, items, shared, window):
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+        from concurrent.futures import ProcessPoolExecutor
         from concurrent.futures.process import BrokenProcessPool
 
         global _SHARED
@@ -160,28 +162,41 @@ class TaskPool:
         context = multiprocessing.get_context("fork")
         items = iter(items)
         pending: collections.OrderedDict = collections.OrderedDict()  # index -> item
-        futures: dict[int, Any] = {}
+        futures: dict[int, Any] = {}  # index -> Future, None when the pool was broken
         resubmits = 0
         next_index = 0
         exhausted = False
-        pool = ProcessPoolExecutor(self.workers, mp_context=context,
-                                   initializer=_worker_init)
+
+        def new_pool():
+            return ProcessPoolExecutor(self.workers, mp_context=context,
+                                       initializer=_worker_init)
+
+        def submit(index):
+            try:
+                futures[index] = pool.submit(_run_local, fn, pending[index])
+            except BrokenProcessPool:  # a worker died since the last check
+                futures[index] = None
+
+        def succeeded(f) -> bool:
+            return f is not None and f.done() and not f.cancelled() and f.exception() is None
+
+        pool = new_pool()
         try:
             while True:
                 while not exhausted and len(pending) < window:
                     try:
-                        item = next(items)
+                        pending[next_index] = next(items)
                     except StopIteration:
                         exhausted = True
                         break
-                    pending[next_index] = item
-                    futures[next_index] = pool.submit(_run_local, fn, item)
+                    submit(next_index)
                     next_index += 1
                 if not pending:
                     return
                 first = next(iter(pending))
                 try:
-                    wait([futures[first]], return_when=FIRST_COMPLETED)
+                    if futures[first] is None:
+                        raise BrokenProcessPool("a worker died")
                     result, worker, seconds = futures[first].result()
                 except BrokenProcessPool:
                     # A worker died (killed, out of memory): rebuild the pool and
@@ -190,13 +205,11 @@ class TaskPool:
                     if resubmits > MAX_RESUBMITS:
                         raise RuntimeError(
                             f"worker processes died {resubmits} times; giving up") from None
-                    pool.shutdown(wait=False, cancel_futures=True)
-                    pool = ProcessPoolExecutor(self.workers, mp_context=context,
-                                               initializer=_worker_init)
-                    for index, item in pending.items():
-                        f = futures[index]
-                        if not (f.done() and f.exception() is None):
-                            futures[index] = pool.submit(_run_local, fn, item)
+                    _terminate(pool)
+                    pool = new_pool()
+                    for index in pending:
+                        if not succeeded(futures[index]):
+                            submit(index)
                     continue
                 del pending[first]
                 del futures[first]
@@ -356,12 +369,13 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
         raise InputError("Dask is not installed: pip install 'shtools[distributed]'",
                          scheduler) from None
     cluster = None
+    start = time.perf_counter()
     try:
         if scheduler == "local":
             # Single-threaded workers: each task uses NumPy/BLAS on one core.
             cluster = distributed.LocalCluster(
                 n_workers=workers or default_workers(), threads_per_worker=1,
-                processes=True, dashboard_address=None, silence_logs=50)
+                processes=True, dashboard_address=":0", silence_logs=50)
             client = distributed.Client(cluster, timeout=CONNECT_TIMEOUT)
         elif "://" in scheduler:
             client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
@@ -374,7 +388,8 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
                          "check the address and that the scheduler runs", scheduler) from None
     try:
         n = len(client.scheduler_info().get("workers", {})) or (workers or 1)
-        yield TaskPool("dask", n, address=client.scheduler.address, client=client)
+        yield TaskPool("dask", n, address=client.scheduler.address, client=client,
+                       startup_seconds=time.perf_counter() - start)
     finally:
         client.close()
         if cluster is not None:
