@@ -36,7 +36,7 @@ class BakeRun:
 
     Attributes
     ----------
-    prepared : shtools.scene.bake.PreparedScene
+    prepared : shtools.scene.prepare.PreparedScene
     runtime : shtools.runtime.ShadowRuntime
         Shading (and the SHEXP visibility) at the scene's settings.
     method : str
@@ -94,7 +94,7 @@ class RuntimeVisibility(VisibilityMethod):
         clusters = run.cache.get("clusters")
         if clusters is None:  # one-time setup, not counted as frame time
             start = time.perf_counter()
-            clusters = run.cache["clusters"] = _clusters(run.prepared, state.vertices)
+            clusters = run.cache["clusters"] = receiver_clusters(run.prepared, state.vertices)
             run.cache["setup_seconds"] = time.perf_counter() - start
         return run.runtime.visibility(state.vertices, state.normals, state.blockers,
                                       clusters=clusters)
@@ -134,7 +134,7 @@ class RaytraceVisibility(VisibilityMethod):
         return raytrace_visibility(state.vertices, state.normals, meshes, order, **kwargs)
 
 
-def _clusters(prepared, vertices: np.ndarray):
+def receiver_clusters(prepared, vertices: np.ndarray):
     """Receiver clusters from the first baked frame, reused for every frame.
 
     Clusters never mix objects, and the runtime recomputes each cluster's bound
