@@ -218,3 +218,36 @@ def _alive(pid: int) -> bool:
     except OSError:
         return False
     return state != "Z"
+
+
+def test_batch_fit_writes_one_asset_per_mesh_identically(tmp_path):
+    import trimesh
+
+    from shtools.geometry.assets import fit_many, fit_to_file
+
+    meshes = []
+    for name, mesh in [("box", trimesh.creation.box(extents=[2, 1, 1])),
+                       ("capsule", trimesh.creation.capsule(height=1.0, radius=0.4))]:
+        path = tmp_path / f"{name}.obj"
+        mesh.export(path)
+        meshes.append(path)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    pool: dict = {}
+    rows = list(fit_many(meshes, out_dir, 6, method="kmeans", workers=2, pool_summary=pool))
+    assert [r["mesh"] for r in rows] == [str(m) for m in meshes]
+    assert pool["scheduler"] == "processes"
+    for mesh, row in zip(meshes, rows, strict=True):
+        # The same fit in this process, written by the single-mesh stage.
+        alone = tmp_path / f"{mesh.stem}.alone.h5"
+        fit_to_file(mesh, 6, alone, method="kmeans")
+        assert filecmp.cmp(row["output"], alone, shallow=False)
+
+
+def test_batch_fit_refuses_clashing_names_and_missing_folder(tmp_path):
+    from shtools.geometry.assets import batch_outputs, fit_many
+
+    with pytest.raises(InputError, match="would both write a.spheres.h5"):
+        batch_outputs([tmp_path / "x" / "a.obj", tmp_path / "y" / "a.obj"], tmp_path)
+    with pytest.raises(InputError, match="is not a folder"):
+        list(fit_many([tmp_path / "a.obj"], tmp_path / "missing", 4))
