@@ -304,8 +304,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         "method": method,
         "order": st.order,
         # what the runtime actually used (the scene may leave these to it)
-        "acc_order": (resolved.resolved_acc_order() if uses_runtime
-                      else st.acc_order or st.order),
+        "acc_order": VISIBILITY_METHODS[method].acc_order(resolved) or st.order,
         "exp_method": resolved.resolved_exp_method() if uses_runtime else None,
         "window": st.window,
         "window_h": st.window_h,
