@@ -247,7 +247,7 @@ def test_batch_fit_writes_one_asset_per_mesh_identically(tmp_path):
 def test_batch_fit_refuses_clashing_names_and_missing_folder(tmp_path):
     from shtools.geometry.assets import batch_outputs, fit_many
 
-    with pytest.raises(InputError, match="would both write a.spheres.h5"):
+    with pytest.raises(InputError, match=r"would both write a\.spheres\.h5"):
         batch_outputs([tmp_path / "x" / "a.obj", tmp_path / "y" / "a.obj"], tmp_path)
     with pytest.raises(InputError, match="is not a folder"):
         list(fit_many([tmp_path / "a.obj"], tmp_path / "missing", 4))
