@@ -94,7 +94,7 @@ def test_auto_picks_by_angular_radius(tmp_path):
     from shtools.scene.shadows import LIGHT_SHADOWS, BakeRun
 
     for radius, position, want in ((0.02, (0.3, 2.5, 0.2), "ssoc"),
-                                   (1.0, (0.3, 3.5, 0.2), "shexp")):
+                                   (1.6, (0.3, 3.5, 0.2), "shexp")):
         sc = parse_scene(lamp_scene("auto", radius=radius, position=position),
                          tmp_path / "s.toml")
         prep = prepare_scene(sc)
