@@ -72,7 +72,6 @@ def test_shadows_default_is_shexp_and_keys_are_checked(tmp_path):
         parse_scene(lamp_scene(extra="ssoc = { resolutoin = 512 }"), tmp_path / "s.toml")
 
 
-@pytest.mark.slow
 def test_ssoc_bake_matches_the_raytraced_light(tmp_path):
     ssoc = _bake(lamp_scene("ssoc"), tmp_path).radiance
     truth = _bake(lamp_scene("raytrace", extra="samples = 256"), tmp_path).radiance
