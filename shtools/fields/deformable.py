@@ -116,6 +116,7 @@ def _sampling_plan(layout: tuple, rays: tuple, order: int):
 
 def sample_deformable_field(vertices, faces, order: int, *, layout=DEFAULT_LAYOUT,
                             rays=DEFAULT_RAYS, center=None, radius=None, log: bool = True,
+                            log_method: str = "eigen",
                             caster: RayCaster | None = None) -> DeformableField:
     """Sample a posed mesh's visibility on its bounding sphere.
 
@@ -134,8 +135,11 @@ def sample_deformable_field(vertices, faces, order: int, *, layout=DEFAULT_LAYOU
         Sphere to sample on (default :func:`bounding_sphere` of ``vertices``);
         it must enclose the mesh.
     log : bool
-        Also store the SH log of every sample (eigen-inversion) for log-space
-        accumulation.
+        Also store the SH log of every sample for log-space accumulation.
+    log_method : {"eigen", "naive"}
+        :func:`shtools.sh.log` method: eigen-inversion (SHEXP eqs. 30–32, as the
+        runtime's cap tables) or the quadrature of the clipped pointwise log
+        (about 10x cheaper; ``benchmarks/bench_scaling.py`` compares them).
     caster : RayCaster, optional
         A caster already built on this posed mesh.
 
@@ -158,7 +162,7 @@ def sample_deformable_field(vertices, faces, order: int, *, layout=DEFAULT_LAYOU
     occlusion = np.einsum("sij,sj->si", to_world, hit @ local_projection)
     visibility = -occlusion
     visibility[:, 0] += math.sqrt(4.0 * math.pi)  # V = 1 - O
-    log_vis = sh_log(visibility, "eigen") if log else None
+    log_vis = sh_log(visibility, log_method) if log else None
     return DeformableField(center=center, radius=float(radius), layout=tuple(layout),
                            visibility=visibility, log_visibility=log_vis,
                            rays=int(s * q), occluded_fraction=float(hit.mean()))
