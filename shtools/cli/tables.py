@@ -6,7 +6,7 @@ import time
 
 import click
 
-from shtools.cli._common import json_option, output_option, report
+from shtools.cli._common import json_option, output_option, report, setting_type
 from shtools.errors import InputError
 
 
@@ -16,7 +16,8 @@ def tables():
 
 
 @tables.command("log")
-@click.option("--order", "-n", type=click.IntRange(1, 16), required=True, help="SH order n.")
+@click.option("--order", "-n", type=setting_type("acc_order"),
+              required=True, help="SH order n (the accumulation order of the runtime).")
 @output_option
 @click.option(
     "--samples",

@@ -67,6 +67,8 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
     Parameters (:mod:`~shtools.runtime.settings`); ``acc_order=None`` means
     ``min(n + 2, 6)``.
 ``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``
+``LogBlocker`` — protocol: any object with ``log_visibility(points (V,3), normals (V,3),
+order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 ``SphereLight(position (3,), radius, color (3,))``
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;
@@ -89,7 +91,7 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
 """
 
 from shtools.runtime.accumulate import accumulate_log
-from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
@@ -101,6 +103,7 @@ from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
 
 __all__ = [
     "CapLogTable",
+    "LogBlocker",
     "ReceiverClusters",
     "ScalingTable",
     "ShadowRuntime",

@@ -1,4 +1,4 @@
-r"""Shading of white Lambertian receivers (SHEXP Sec. 7, DESIGN.md "Radiance").
+r"""Shading of white Lambertian receivers (SHEXP Sec. 7, docs/conventions.md "Light and radiance").
 
 Outgoing radiance of an albedo-1 diffuse receiver with unit normal ``N`` under
 distant lighting ``L`` and visibility ``g`` is the triple product
