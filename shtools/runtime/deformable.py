@@ -166,3 +166,28 @@ def deformable_visibility(field: DeformableField, table: ScalingTable, points, *
     s_r = interpolate_samples(samples, field.layout, w)
     out[near] = table.apply(s_r, k[near], -w)  # axis: from the receiver to the centre
     return out
+
+
+class DeformableBlocker:
+    """A :class:`~shtools.runtime.LogBlocker` of one frame's deformable field.
+
+    The runtime adds its log to the other blockers' before the one exp.
+
+    Parameters
+    ----------
+    field : DeformableField
+        Sampled with its log, at the runtime's accumulation order.
+    table : ScalingTable
+        Plain cone table of the same order.
+    """
+
+    def __init__(self, field: DeformableField, table: ScalingTable):
+        self.field = field
+        self.table = table
+
+    def log_visibility(self, points, normals, order: int) -> np.ndarray:
+        """Scaled log visibility ``(V, order*order)`` (see :func:`deformable_visibility`)."""
+        if order != self.field.order:
+            raise ValueError(f"the deformable field was sampled at order {self.field.order} "
+                             f"but the runtime accumulates at order {order}")
+        return deformable_visibility(self.field, self.table, points, log=True)

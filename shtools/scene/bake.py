@@ -97,6 +97,8 @@ class PreparedScene:
     env_sh: np.ndarray | None  # (n*n, 3)
     tables: dict | None
     inputs: dict[str, Path] = field(default_factory=dict)
+    #: a finite environment sphere (shtools.scene.midrange), None at infinity
+    midrange: object | None = None
 
     @property
     def receivers(self) -> list[PreparedObject]:
@@ -271,8 +273,11 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
             inputs[f"{obj.name}.mesh"] = obj.mesh
         _object_blocker(prep, model, scene.settings, inputs)
         objects.append(prep)
-    return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
-                         inputs)
+    from shtools.scene.midrange import prepare_midrange
+
+    env_sh = _environment(scene, inputs)
+    return PreparedScene(scene, objects, env_sh, _tables(scene, inputs), inputs,
+                         prepare_midrange(scene, env_sh, inputs))
 
 
 # --------------------------------------------------------------------------- posing
