@@ -9,3 +9,4 @@ schema and the baker see it:
 """
 
 import shtools.scene.deformable  # noqa: F401  (blocker = { deformable = true })
+import shtools.scene.light_shadows  # noqa: F401  (shadows = "ssoc" | "raytrace" | "auto")
