@@ -105,7 +105,7 @@ class RuntimeVisibility(VisibilityMethod):
         clusters = run.cache.get("clusters")
         if clusters is None:  # one-time setup, not counted as frame time
             start = time.perf_counter()
-            clusters = run.cache["clusters"] = _clusters(run.prepared, state.vertices)
+            clusters = run.cache["clusters"] = receiver_clusters(run.prepared, state.vertices)
             run.cache["setup_seconds"] = time.perf_counter() - start
         return run.runtime.visibility(state.vertices, state.normals, state.blockers,
                                       clusters=clusters,
@@ -150,7 +150,7 @@ class RaytraceVisibility(VisibilityMethod):
         return raytrace_visibility(state.vertices, state.normals, meshes, order, **kwargs)
 
 
-def _clusters(prepared, vertices: np.ndarray):
+def receiver_clusters(prepared, vertices: np.ndarray):
     """Receiver clusters from the first baked frame, reused for every frame.
 
     Clusters never mix objects, and the runtime recomputes each cluster's bound
@@ -248,8 +248,11 @@ def shade_frame(run: BakeRun, state, visibility: np.ndarray) -> np.ndarray:
         groups.setdefault(way, []).append(light)
     joined = [light for way, group in groups.items() if LIGHT_SHADOWS[way].joins_environment
               for light in group]
-    radiance = run.runtime.shade(visibility, state.vertices, state.normals,
-                                 run.prepared.env_sh, sphere_lights=joined)
+    env = run.prepared.env_sh
+    if run.prepared.midrange is not None:  # a finite environment sphere: per-vertex SH
+        env = run.prepared.midrange.radiance_sh(state.vertices)
+    radiance = run.runtime.shade(visibility, state.vertices, state.normals, env,
+                                 sphere_lights=joined)
     for way, group in groups.items():
         if not LIGHT_SHADOWS[way].joins_environment:
             radiance = radiance + LIGHT_SHADOWS[way].radiance(run, state, visibility, group)
