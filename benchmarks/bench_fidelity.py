@@ -135,8 +135,9 @@ def scenes(quick: bool) -> dict[str, dict]:
 
 def _scene_file(name: str, spec: dict, variant: str, extra_settings: str = "") -> Path:
     settings = (f'[settings]\norder = 4\nframes = {spec["frames"]}\nfps = {spec.get("fps", 24)}\n'
-                + ('self_visibility = false\nderinging = "none"\n' if variant == "old"
-                   else "self_visibility = true\nderinging = \"desaturate\"\n")
+                + ('self_visibility = false\nlocal_visibility = false\nderinging = "none"\n'
+                   if variant == "old" else
+                   'self_visibility = true\nlocal_visibility = true\nderinging = "desaturate"\n')
                 + extra_settings)
     env = f'[environment]\nimage = "{spec["env"]}"\n'
     path = CACHE / f"{name.replace('+', '_')}.{variant}.toml"

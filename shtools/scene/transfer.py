@@ -159,7 +159,7 @@ def posed_local_log(local_log: np.ndarray, blend: np.ndarray, world: np.ndarray)
     ``blend (V, 4, 4)``: blended skinning matrices; ``world (4, 4)``: the object's
     transform.  Each vertex turns by the rotation part of ``world @ blend``.
     """
-    from shtools.sh import rotation_matrix
+    from shtools.sh import basis, sphere_quadrature
 
     linear = np.einsum("ij,vjk->vik", np.asarray(world)[:3, :3], blend[:, :3, :3])
     u, _, vt = np.linalg.svd(linear)
@@ -169,8 +169,13 @@ def posed_local_log(local_log: np.ndarray, blend: np.ndarray, world: np.ndarray)
         u[flip, :, -1] *= -1
         r[flip] = u[flip] @ vt[flip]
     order = math.isqrt(local_log.shape[1])
-    d = rotation_matrix(r, order).astype(np.float32)
-    return np.einsum("vij,vj->vi", d, local_log)
+    # (R f)(s) = f(R^T s), projected exactly by a rule of degree 2(n - 1): evaluate the
+    # rest-pose log at R_v^T s_q (one basis per vertex and node), project with the
+    # shared y(s_q) -- no (V, n^2, n^2) rotation matrices
+    dirs, w = sphere_quadrature(2 * (order - 1))
+    back = np.einsum("vji,qj->vqi", r, dirs).astype(np.float32)  # R_v^T s_q
+    values = np.einsum("vqj,vj->vq", basis(back, order), local_log.astype(np.float32))
+    return values @ (w[:, None] * basis(dirs, order)).astype(np.float32)
 
 
 def rotation_of(matrix: np.ndarray) -> np.ndarray | None:
