@@ -42,6 +42,11 @@ class PreparedObject:
     bone_vectors : ndarray, shape (N, K, 4) or None
     blocker_data : object
         What a blocker kind that is not a sphere set prepared (its own type).
+    self_log : ndarray, shape (V, n_acc^2) or None
+        Self-visibility log in the object's frame (exact self-shadowing,
+        :mod:`shtools.scene.transfer`); None when the object uses its spheres.
+    local_log : ndarray, shape (V, n_acc^2) or None
+        Rest-pose local visibility log of a skinned object (``local_visibility``).
     """
 
     spec: ObjectSpec
@@ -55,6 +60,8 @@ class PreparedObject:
     bone_index: np.ndarray | None = None
     bone_vectors: np.ndarray | None = None
     blocker_data: Any = None
+    self_log: np.ndarray | None = None
+    local_log: np.ndarray | None = None
 
     @property
     def moves(self) -> bool:
@@ -70,6 +77,8 @@ class PreparedScene:
     env_sh: np.ndarray | None  # (n*n, 3)
     tables: dict | None
     inputs: dict[str, Path] = field(default_factory=dict)
+    #: a finite environment sphere (shtools.scene.midrange), None at infinity
+    midrange: object | None = None
 
     @property
     def receivers(self) -> list[PreparedObject]:
@@ -195,6 +204,8 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
         A file cannot be used, a skinned glTF has no skin or animation, SH
         orders disagree between assets, a bound set does not match its rig.
     """
+    from shtools.scene.midrange import prepare_midrange
+
     inputs: dict[str, Path] = {}
     objects = []
     for obj in scene.objects:
@@ -205,5 +216,29 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
             inputs[f"{obj.name}.mesh"] = obj.mesh
         _object_blocker(prep, model, scene.settings, inputs)
         objects.append(prep)
-    return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
-                         inputs)
+    _self_visibility(scene, objects, inputs, log)
+    env_sh = _environment(scene, inputs)
+    return PreparedScene(scene, objects, env_sh, _tables(scene, inputs), inputs,
+                         prepare_midrange(scene, env_sh, inputs))
+
+
+def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log) -> None:
+    """Self-visibility logs of role-"both" objects (:mod:`shtools.scene.transfer`)."""
+    from shtools.scene.transfer import (
+        object_local_log,
+        object_self_log,
+        uses_local_visibility,
+        uses_self_visibility,
+    )
+
+    st = scene.settings
+    acc = st.resolved_acc_order()
+    for prep in objects:
+        if uses_self_visibility(prep, st.self_visibility):
+            prep.self_log, path = object_self_log(prep, acc, log=log)
+            if path is not None:
+                inputs[f"{prep.spec.name}.transfer"] = path
+        elif uses_local_visibility(prep, st.local_visibility):
+            if log:
+                log(f"ray tracing the local visibility of {prep.spec.name}")
+            prep.local_log = object_local_log(prep, acc)
