@@ -204,6 +204,8 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
         A file cannot be used, a skinned glTF has no skin or animation, SH
         orders disagree between assets, a bound set does not match its rig.
     """
+    from shtools.scene.midrange import prepare_midrange
+
     inputs: dict[str, Path] = {}
     objects = []
     for obj in scene.objects:
@@ -215,8 +217,6 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
         _object_blocker(prep, model, scene.settings, inputs)
         objects.append(prep)
     _self_visibility(scene, objects, inputs, log)
-    from shtools.scene.midrange import prepare_midrange
-
     env_sh = _environment(scene, inputs)
     return PreparedScene(scene, objects, env_sh, _tables(scene, inputs), inputs,
                          prepare_midrange(scene, env_sh, inputs))
