@@ -54,6 +54,8 @@ DEFAULT_THETA_MIN = math.radians(1.0)
 EXP_CHOICES = ("auto", *(m.value for m in ExpMethod))
 #: windows a setting accepts: one of :class:`shtools.sh.WindowKind` or "none".
 WINDOW_CHOICES = (*(k.value for k in WindowKind), "none")
+#: Removal of negative radiance left by SH ringing (``shtools.runtime.shading``).
+DERINGING_CHOICES = ("desaturate", "none")
 #: kept for callers of the previous name
 RUNTIME_EXP_METHODS = EXP_CHOICES
 
@@ -283,8 +285,11 @@ class ShadowSettings:
         2 threads on 2 cores); ``processes`` is the way to use more cores.
     processes : int or None
         Processes sharing the per-vertex stages of a frame (accumulation and
-        exp), see :mod:`shtools.runtime.parallel`; None uses the available
-        cores (at most 8), 1 evaluates in the calling process.  Workers are
+        exp), see :mod:`shtools.runtime.parallel`.  Default 1: the library
+        evaluates in the calling process, so an embedding program gets no
+        processes it did not ask for; None uses the available cores (at most
+        8) -- what ``shtools bake`` and :func:`shtools.scene.bake.bake_scene`
+        choose unless told otherwise.  Workers are
         forked on the first frame with at least ``MIN_PARALLEL_PAIRS``
         sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
         process.
@@ -313,11 +318,14 @@ class ShadowSettings:
     vertices_per_cluster: int = setting(400, "int", lo=1,
                                         doc="average receiver-cluster size")
     self_shadow: bool = setting(True, "bool", doc="self-shadow rules of Sec. 6.2")
+    deringing: str = setting("none", "choice", choices=DERINGING_CHOICES,
+                             doc="negative radiance from SH ringing: desaturate toward "
+                                 "luminance (0 where it is negative) or keep it")
     chunk_pairs: int = setting(1 << 16, "int", lo=256, scene=False,
                                doc="sphere-vertex pairs per array pass (memory bound)")
     threads: int = setting(1, "int", lo=1, hi=64, scene=False,
                            doc="threads accumulating blocks within a process")
-    processes: int | None = setting(None, "int", lo=1, hi=64, scene=False,
+    processes: int | None = setting(1, "int", lo=1, hi=64, scene=False,
                                     none_means="one per core",
                                     doc="processes sharing each frame")
 

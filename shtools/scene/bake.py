@@ -1,10 +1,12 @@
 """The baker: a parsed scene in, per-frame per-vertex radiance out.
 
-:func:`prepare_scene` loads everything a bake needs once (meshes, blocker
+Three jobs, one module each: :func:`~shtools.scene.prepare.prepare_scene`
+(:mod:`shtools.scene.prepare`) loads everything a bake needs once (meshes, blocker
 spheres and trees — fitted on the fly when the scene asks —, skins, the
-environment SH, the log tables) and checks that SH orders agree.
-:func:`bake_scene` then poses the scene frame by frame (rigid keyframes, parent
-chains, skinning, keyframed lights), evaluates visibility with the chosen method
+environment SH, the log tables) and checks that SH orders agree;
+:func:`~shtools.scene.pose.pose_frame` (:mod:`shtools.scene.pose`) poses it at a
+time (rigid keyframes, parent chains, skinning, keyframed lights);
+:func:`bake_scene` (here) runs the frames: it evaluates visibility with the chosen method
 and shades it, yielding a :class:`FrameResult` per frame and, given ``output``,
 streaming the frames into a ``bake`` asset that appears only when every frame
 is done.
@@ -17,29 +19,21 @@ shadowed by its registered way (:mod:`shtools.scene.shadows`).
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from shtools.data_formats.bake import parse_frames  # noqa: F401  (re-exported)
+from shtools.data_formats.bake import parse_frames
 from shtools.errors import AssetError, InputError
-from shtools.scene.animation import (
-    SkinnedMotion,
-    light_at,
-    transform_normals,
-    transform_points,
-    vertex_normals,
-    world_matrices,
-)
-from shtools.scene.blockers import PrepareContext, blocker_kinds
-from shtools.scene.scene import ObjectSpec, Scene
+from shtools.scene.pose import FrameState, pose_frame
+from shtools.scene.prepare import PreparedObject, PreparedScene, prepare_scene
+from shtools.scene.scene import Scene
 from shtools.scene.shadows import (
     LIGHT_SHADOWS,
     VISIBILITY_METHODS,
@@ -48,90 +42,9 @@ from shtools.scene.shadows import (
     shade_frame,
 )
 
-
-@dataclass
-class PreparedObject:
-    """An object with its geometry and blocker spheres in its local frame.
-
-    Attributes
-    ----------
-    spec : ObjectSpec
-    vertices, normals : ndarray, shape (V, 3)
-        Rest geometry (local frame).
-    faces : ndarray, shape (F, 3)
-    centers : ndarray, shape (N, 3) or None
-        Blocker spheres (local frame, rest pose for skinned objects).
-    radii : ndarray, shape (N,) or None
-    tree : tuple of (parent (M,), leaf (M,)) or None
-    motion : SkinnedMotion or None
-    bone_index : ndarray, shape (N, K) or None
-        Skin binding of the spheres (skinned blockers).
-    bone_vectors : ndarray, shape (N, K, 4) or None
-    blocker_data : object
-        What a blocker kind that is not a sphere set prepared (its own type).
-    """
-
-    spec: ObjectSpec
-    vertices: np.ndarray
-    normals: np.ndarray
-    faces: np.ndarray
-    centers: np.ndarray | None = None
-    radii: np.ndarray | None = None
-    tree: tuple[np.ndarray, np.ndarray] | None = None
-    motion: SkinnedMotion | None = None
-    bone_index: np.ndarray | None = None
-    bone_vectors: np.ndarray | None = None
-    blocker_data: Any = None
-
-    @property
-    def moves(self) -> bool:
-        return self.motion is not None or bool(self.spec.keyframes)
-
-
-@dataclass
-class PreparedScene:
-    """Everything a bake needs, loaded and checked."""
-
-    scene: Scene
-    objects: list[PreparedObject]
-    env_sh: np.ndarray | None  # (n*n, 3)
-    tables: dict | None
-    inputs: dict[str, Path] = field(default_factory=dict)
-
-    @property
-    def receivers(self) -> list[PreparedObject]:
-        return [o for o in self.objects if o.spec.receives]
-
-    @property
-    def blockers(self) -> list[PreparedObject]:
-        return [o for o in self.objects if o.spec.blocks]
-
-    @property
-    def n_vertices(self) -> int:
-        return sum(len(o.vertices) for o in self.receivers)
-
-    def receivers_move(self) -> bool:
-        """True when any receiver (or one of its parents) is animated."""
-        by_name = {o.spec.name: o for o in self.objects}
-        for o in self.receivers:
-            cur = o
-            while cur is not None:
-                if cur.moves:
-                    return True
-                cur = by_name.get(cur.spec.parent) if cur.spec.parent else None
-        return False
-
-
-@dataclass
-class FrameState:
-    """The posed scene at one frame (world space)."""
-
-    vertices: np.ndarray  # (V, 3)
-    normals: np.ndarray  # (V, 3)
-    blockers: list  # runtime blockers (SphereBlocker or LogBlocker), one per blocker object
-    lights: list  # list[shtools.runtime.SphereLight]
-    blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
-    light_shadows: list = field(default_factory=list)  # the way of each light (by name)
+#: the three jobs' public names, importable from here as before the split
+__all__ = ["FrameResult", "FrameState", "PreparedObject", "PreparedScene", "bake_scene",
+           "bake_to_file", "parse_frames", "pose_frame", "prepare_scene", "runtime_settings"]
 
 
 @dataclass
@@ -160,159 +73,6 @@ class FrameResult:
     seconds: float
 
 
-# --------------------------------------------------------------------------- preparation
-def _object_geometry(obj: ObjectSpec) -> tuple[PreparedObject, object]:
-    """Load or generate an object's mesh; returns it and the skinned model if any."""
-    if obj.primitive is not None:
-        from shtools.scene.primitives import make_primitive
-
-        kind, params = obj.primitive
-        try:
-            prim = make_primitive(kind, params)
-        except InputError as exc:
-            raise InputError(f"objects '{obj.name}': {exc.message}") from None
-        prep = PreparedObject(obj, np.asarray(prim.mesh.vertices, float), prim.normals,
-                              np.asarray(prim.mesh.faces, np.int64))
-        if prim.spheres is not None and obj.blocker is not None and obj.blocker.kind == "exact":
-            prep.centers, prep.radii = prim.spheres
-        return prep, None
-    if obj.skin is not None:
-        from shtools.geometry.skin import load_skinned_gltf
-
-        model = load_skinned_gltf(obj.mesh)
-        v = np.asarray(model.rest_vertices, float)
-        f = np.asarray(model.faces, np.int64)
-        prep = PreparedObject(obj, v, vertex_normals(v, f), f)
-        prep.motion = SkinnedMotion(model, obj.skin.animation, obj.skin.speed, obj.skin.offset)
-        return prep, model
-    from shtools.geometry.mesh import load_mesh
-
-    mesh = load_mesh(obj.mesh)
-    return PreparedObject(obj, np.asarray(mesh.vertices, float),
-                          np.asarray(mesh.vertex_normals, float),
-                          np.asarray(mesh.faces, np.int64)), None
-
-
-def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None:
-    """Prepare the object's blocker with its kind (spheres, tree, skin binding, ...)."""
-    spec = prep.spec.blocker
-    if spec is None:
-        return
-    blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs))
-
-
-def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
-    env = scene.environment
-    order = scene.settings.order
-    if env.kind is None:
-        return None
-    if env.kind == "coeffs":
-        coeffs = env.coeffs
-    elif env.kind == "light":
-        from shtools.data_formats.light import read_light
-
-        coeffs, _ = read_light(env.path)
-        n = math.isqrt(len(coeffs))
-        if n != order:
-            raise AssetError(f"light is SH order {n} but the scene's settings.order is {order}; "
-                             f"re-project it with --order {order} or change the order", env.path)
-        inputs["environment"] = env.path
-    else:
-        from shtools.lighting.environment import project_environment
-
-        # the same code path as `shtools light project`; the runtime windows later
-        coeffs, _ = project_environment(env.path, order, rotate_y=math.degrees(env.rotate))
-        inputs["environment"] = env.path
-    coeffs = np.asarray(coeffs, dtype=float) * env.intensity
-    if env.rotate and env.kind != "image":
-        from shtools.sh import rotate
-
-        c, s = np.cos(env.rotate), np.sin(env.rotate)
-        r_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-        coeffs = rotate(coeffs.T, r_y).T
-    return coeffs
-
-
-def _tables(scene: Scene, inputs: dict) -> dict | None:
-    st = scene.settings
-    if st.tables is None:
-        return None
-    from shtools.data_formats.tables import read_tables
-    from shtools.runtime import ShadowSettings
-
-    tables = read_tables(st.tables)
-    # cap logs are order-specific (an order-8 log truncated is not the order-6 log),
-    # so the tables must be built at exactly the order the runtime accumulates at
-    want = ShadowSettings(order=st.order, acc_order=st.acc_order).resolved_acc_order()
-    if int(tables["order"]) != want:
-        raise AssetError(f"tables are SH order {tables['order']} but the scene accumulates at "
-                         f"order {want}; rebuild them with 'shtools tables log --order {want}'",
-                         st.tables)
-    inputs["tables"] = st.tables
-    return tables
-
-
-def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> PreparedScene:
-    """Load meshes, blockers, skins, environment and tables of a parsed scene.
-
-    Raises
-    ------
-    InputError, AssetError
-        A file cannot be used, a skinned glTF has no skin or animation, SH
-        orders disagree between assets, a bound set does not match its rig.
-    """
-    inputs: dict[str, Path] = {}
-    objects = []
-    for obj in scene.objects:
-        if log:
-            log(f"loading {obj.name}")
-        prep, model = _object_geometry(obj)
-        if obj.mesh is not None:
-            inputs[f"{obj.name}.mesh"] = obj.mesh
-        _object_blocker(prep, model, scene.settings, inputs)
-        objects.append(prep)
-    return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
-                         inputs)
-
-
-# --------------------------------------------------------------------------- posing
-def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
-    """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
-
-    Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
-    """
-    from shtools.runtime import SphereLight
-
-    kinds = blocker_kinds()
-    worlds = world_matrices(prepared.scene.objects, t)
-    verts, norms, blockers, meshes = [], [], [], []
-    for o in prepared.objects:
-        m = worlds[o.spec.name]
-        if o.motion is not None:
-            joints = o.motion.joint_matrices(t)
-            local_v = np.asarray(o.motion.model.skin(joints), dtype=float)
-            local_n = vertex_normals(local_v, o.faces)
-        else:
-            joints = None
-            local_v, local_n = o.vertices, o.normals
-        world_v = transform_points(m, local_v)
-        if o.spec.receives:
-            verts.append(world_v)
-            norms.append(transform_normals(m, local_n))
-        if o.spec.blocks:
-            blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
-            if with_meshes:
-                meshes.append((world_v, o.faces))
-    lights = []
-    for spec in prepared.scene.lights:
-        key = light_at(spec, t)
-        lights.append(SphereLight(position=key.position, radius=float(key.radius),
-                                  color=key.color))
-    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
-                      [spec.shadows for spec in prepared.scene.lights])
-
-
-# --------------------------------------------------------------------------- baking
 def runtime_settings(scene: Scene, method: str, processes: int | None = None):
     """The runtime's :class:`~shtools.runtime.ShadowSettings` for a scene and method.
 
@@ -322,6 +82,106 @@ def runtime_settings(scene: Scene, method: str, processes: int | None = None):
     exp = VISIBILITY_METHODS[method].exp_method(st) if method in VISIBILITY_METHODS \
         else st.exp_method
     return replace(st.runtime_only(), exp_method=exp, processes=processes)
+
+
+class FrameBaker:
+    """Evaluates posed frames of a prepared scene; one per process that bakes frames.
+
+    Holds the runtime (and its worker processes) and the per-bake state of the
+    visibility method.  The receiver clusters are fixed up front (from the
+    first frame of the bake) so every process evaluates a frame identically,
+    whichever frames it is given: a bake is the same bytes on one process,
+    a local pool or a Dask cluster.
+
+    Parameters
+    ----------
+    prepared : PreparedScene
+    method : str
+        A registered visibility method.
+    clusters : ndarray or None
+        Receiver clusters of the runtime methods (:func:`bake_clusters`).
+    raytrace_dirs : int, optional
+    processes : int, optional
+        Processes the runtime shares each frame over (1: this process only).
+    store_visibility : bool
+    """
+
+    def __init__(self, prepared: PreparedScene, method: str, clusters=None, *,
+                 raytrace_dirs: int | None = None, processes: int | None = None,
+                 store_visibility: bool = False):
+        from shtools.runtime import ShadowRuntime
+
+        scene = prepared.scene
+        self.method = VISIBILITY_METHODS[method]
+        self.with_meshes = self.method.needs_meshes or any(
+            LIGHT_SHADOWS[spec.shadows].needs_meshes for spec in scene.lights)
+        self.store_visibility = store_visibility
+        self.runtime = ShadowRuntime(runtime_settings(scene, method, processes),
+                                     tables=prepared.tables)
+        self.run = BakeRun(prepared, self.runtime, method, raytrace_dirs)
+        if clusters is not None:
+            self.run.cache["clusters"] = clusters
+
+    def close(self) -> None:
+        """Stop the runtime's worker processes."""
+        self.runtime.close()
+
+    def __enter__(self) -> FrameBaker:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def frame(self, frame: int, t: float) -> FrameResult:
+        """Pose, shadow and shade scene frame ``frame`` at time ``t``."""
+        start = time.perf_counter()
+        state = pose_frame(self.run.prepared, float(t), with_meshes=self.with_meshes)
+        vis = self.method.visibility(self.run, state)
+        setup = self.run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
+        radiance = shade_frame(self.run, state, vis)
+        return FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
+                           np.asarray(vis) if self.store_visibility else None,
+                           state.vertices, state.normals,
+                           time.perf_counter() - start - setup)
+
+
+def bake_clusters(prepared: PreparedScene, method: str, t: float):
+    """Receiver clusters of a runtime method, from the scene posed at time ``t``; else None."""
+    from shtools.scene.shadows import receiver_clusters
+
+    if not VISIBILITY_METHODS[method].uses_runtime:
+        return None
+    state = pose_frame(prepared, float(t))
+    return receiver_clusters(prepared, state.vertices)
+
+
+@dataclass
+class _FrameJob:
+    """What every frame task shares: the prepared scene and how to bake it."""
+
+    prepared: PreparedScene
+    method: str
+    clusters: Any
+    raytrace_dirs: int | None
+    store_visibility: bool
+    token: str  # tells one bake's job from another's in a long-lived worker
+
+
+#: Per-process FrameBaker of the current job (a worker keeps one across its tasks).
+_WORKER_BAKER: dict[str, FrameBaker] = {}
+
+
+def _bake_frame_task(job: _FrameJob, item: tuple[int, float]) -> FrameResult:
+    """Task body: one frame on a worker (one process per frame: ``processes=1``)."""
+    baker = _WORKER_BAKER.get(job.token)
+    if baker is None:
+        for old in _WORKER_BAKER.values():
+            old.close()
+        _WORKER_BAKER.clear()
+        baker = _WORKER_BAKER[job.token] = FrameBaker(
+            job.prepared, job.method, job.clusters, raytrace_dirs=job.raytrace_dirs,
+            processes=1, store_visibility=job.store_visibility)
+    return baker.frame(*item)
 
 
 def bake_scene(
@@ -334,8 +194,17 @@ def bake_scene(
     prepared: PreparedScene | None = None,
     raytrace_dirs: int | None = None,
     processes: int | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    pool_summary: dict | None = None,
 ) -> Iterator[FrameResult]:
     """Bake ``scene`` frame by frame, yielding a :class:`FrameResult` per frame.
+
+    Frames are independent tasks (:mod:`shtools.tasks`): with several frames
+    and cores they are spread over forked local workers by default, or over a
+    Dask cluster (``scheduler``); results are yielded and written in frame
+    order by this process, the one writer, and the asset is the same bytes
+    whichever way it was computed.
 
     Parameters
     ----------
@@ -356,14 +225,23 @@ def bake_scene(
     raytrace_dirs : int, optional
         Directions per vertex for ``raytrace`` (default: the reference's).
     processes : int, optional
-        Processes sharing each frame of the runtime methods (default: one per
-        core; see :class:`~shtools.runtime.ShadowSettings`).
+        Processes sharing each frame of the runtime methods when frames are
+        evaluated in this process (one frame, or ``workers=1``); default one
+        per core (see :class:`~shtools.runtime.ShadowSettings`).
+    scheduler : str, optional
+        Where frames run: None (local cores), ``"inline"``, ``"local"`` (a Dask
+        LocalCluster), ``"tcp://HOST:PORT"`` or a scheduler file
+        (:func:`shtools.tasks.task_pool`).
+    workers : int, optional
+        Local workers (default: the usable cores).
+    pool_summary : dict, optional
+        Filled with the scheduler's per-worker task counts and times.
 
     Yields
     ------
     FrameResult
     """
-    from shtools.runtime import ShadowRuntime
+    from shtools.tasks import task_pool
 
     method = method or scene.settings.method
     names = bake_method_names()
@@ -374,34 +252,34 @@ def bake_scene(
         raise InputError(f"frames {frames.start}:{frames.stop} are outside the scene's frames "
                          f"0..{scene.settings.frames - 1}", scene.path)
     prepared = prepared or prepare_scene(scene)
-    vis_method = VISIBILITY_METHODS[method]
-    with_meshes = vis_method.needs_meshes or any(
-        LIGHT_SHADOWS[spec.shadows].needs_meshes for spec in scene.lights)
     times = scene.frame_times(frames)
     with ExitStack() as stack:
-        runtime = stack.enter_context(
-            ShadowRuntime(runtime_settings(scene, method, processes), tables=prepared.tables))
+        pool = stack.enter_context(task_pool(scheduler, workers, n_tasks=len(frames)))
         writer = None
         if output is not None:
             writer = stack.enter_context(
                 _writer(prepared, output, frames, times, method, store_visibility,
                         prepared.receivers_move()))
-        run = BakeRun(prepared, runtime, method, raytrace_dirs)
-        for k, (frame, t) in enumerate(zip(frames, times, strict=True)):
-            start = time.perf_counter()
-            state = pose_frame(prepared, float(t), with_meshes=with_meshes)
-            vis = vis_method.visibility(run, state)
-            setup = run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
-            radiance = shade_frame(run, state, vis)
-            result = FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
-                                 np.asarray(vis) if store_visibility else None,
-                                 state.vertices, state.normals,
-                                 time.perf_counter() - start - setup)
+        clusters = bake_clusters(prepared, method, times[0])
+        items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
+        if pool.scheduler == "inline":
+            baker = stack.enter_context(FrameBaker(
+                prepared, method, clusters, raytrace_dirs=raytrace_dirs, processes=processes,
+                store_visibility=store_visibility))
+            results = (baker.frame(*item) for item in items)
+        else:
+            import uuid
+
+            job = _FrameJob(prepared, method, clusters, raytrace_dirs, store_visibility,
+                            uuid.uuid4().hex)
+            results = pool.map_ordered(_bake_frame_task, items, shared=job)
+        for k, result in enumerate(results):
             if writer is not None:
-                writer.write_frame(k, result.radiance, vertices=state.vertices,
-                                   normals=state.normals,
-                                   visibility=vis if store_visibility else None)
+                writer.write_frame(k, result.radiance, vertices=result.vertices,
+                                   normals=result.normals, visibility=result.visibility)
             yield result
+        if pool_summary is not None:
+            pool_summary.update(pool.summary())
 
 
 def _writer(prepared: PreparedScene, output, frames, times, method, store_visibility, moving):
@@ -426,8 +304,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         "method": method,
         "order": st.order,
         # what the runtime actually used (the scene may leave these to it)
-        "acc_order": (resolved.resolved_acc_order() if uses_runtime
-                      else st.acc_order or st.order),
+        "acc_order": VISIBILITY_METHODS[method].acc_order(resolved) or st.order,
         "exp_method": resolved.resolved_exp_method() if uses_runtime else None,
         "window": st.window,
         "window_h": st.window_h,
@@ -473,6 +350,8 @@ def bake_to_file(
     store_visibility: bool = False,
     on_frame: Callable[[FrameResult], None] | None = None,
     processes: int | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -480,7 +359,9 @@ def bake_to_file(
     ``frame_seconds`` (posing + visibility + shading summed over frames),
     ``setup_seconds`` (loading, fits, tables, clustering, file writes),
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
-    ``output``.  ``processes`` as in :func:`bake_scene`.
+    ``output``, ``pool`` (scheduler, workers, per-worker task counts and
+    seconds).  ``processes``, ``scheduler`` and ``workers`` as in
+    :func:`bake_scene`.
     """
     parent = Path(output).parent
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
@@ -489,9 +370,11 @@ def bake_to_file(
     prepared = prepare_scene(scene)
     n = 0
     frame_seconds = 0.0
+    pool: dict = {}
     for result in bake_scene(scene, frames=frames, method=method,
                              store_visibility=store_visibility, output=output,
-                             prepared=prepared, processes=processes):
+                             prepared=prepared, processes=processes, scheduler=scheduler,
+                             workers=workers, pool_summary=pool):
         n += 1
         frame_seconds += result.seconds
         if on_frame is not None:
@@ -507,4 +390,5 @@ def bake_to_file(
         "vertex_frames_per_second": round(n * V / max(frame_seconds, 1e-9), 1),
         "method": method or scene.settings.method,
         "output": os.fspath(output),
+        "pool": pool,
     }
