@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, output_option, report
+from shtools.cli._common import json_option, output_option, progress, report
 
 FORMATS = (".ply", ".glb", ".png", ".gif")
 
@@ -57,5 +57,5 @@ def export(baked, output, frame, frames_text, exposure, fixed_exposure, curve, s
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
                 auto_exposure=not fixed_exposure, curve=curve)
     summary = export_bake(bake_asset, output, frame=frame, frames_text=frames_text, view=view,
-                          size=size, columns=columns, fps=fps)
+                          size=size, columns=columns, fps=fps, progress=progress)
     report(summary, as_json, f"wrote {output} ({summary['detail']})")

@@ -53,19 +53,9 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
     if thickness is not None and not thickness > 0:
         raise InputError(f"--thickness must be > 0 (got {thickness})")
     mesh = load_mesh(mesh_path)
-    bar = progress(total=iterations, desc="fit")
-
-    def tick(iteration, energy):
-        bar.n = iteration if iterations is None else min(iteration, iterations)
-        bar.set_postfix(E=f"{energy:.3f}")
-        bar.refresh()
-
-    try:
-        result = fit_spheres(mesh, count, method=method, seed=seed, thickness=thickness,
-                             max_iterations=iterations, path=mesh_path, progress=tick,
-                             restarts=restarts)
-    finally:
-        bar.close()
+    result = fit_spheres(mesh, count, method=method, seed=seed, thickness=thickness,
+                         max_iterations=iterations, path=mesh_path, progress=progress,
+                         restarts=restarts)
     parameters = {"n": count, "method": method, "seed": seed, "thickness": thickness,
                   "iterations": iterations, "restarts": restarts}
     write_spheres(output, result, inputs={"mesh": mesh_path}, parameters=parameters)

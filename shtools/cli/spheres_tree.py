@@ -11,7 +11,7 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, output_option, report
+from shtools.cli._common import json_option, output_option, progress, report
 from shtools.errors import InputError
 
 
@@ -42,7 +42,7 @@ def tree(spheres_path, output, branching, seed, as_json):
     from shtools.geometry.sphere_tree import build_tree, tree_statistics
 
     centers, radii = _read_sphere_set(spheres_path)
-    result = build_tree(centers, radii, branching=branching, seed=seed)
+    result = build_tree(centers, radii, branching=branching, seed=seed, progress=progress)
     write_tree(
         output,
         result,

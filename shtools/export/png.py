@@ -83,13 +83,21 @@ def _camera(bake: Bake, positions: list[int], view: View):
     )
 
 
-def render_frames(bake: Bake, positions: list[int], view: View) -> list[np.ndarray]:
-    """Render asset frames ``positions`` with one camera and exposure; uint8 (H, W, 3) each."""
+def render_frames(bake: Bake, positions: list[int], view: View,
+                  progress=None) -> list[np.ndarray]:
+    """Render asset frames ``positions`` with one camera and exposure; uint8 (H, W, 3) each.
+
+    ``progress``: a progress factory (:mod:`shtools.progress`), one step per frame.
+    """
+    from shtools.progress import silent
+
     scale = exposure_scale(bake, positions, view)
     camera = _camera(bake, positions, view)
     bg = _background(view.width, view.height)
     images = []
-    for t in positions:
+    steps = positions if len(positions) == 1 else (progress or silent)(
+        positions, desc="render", unit="frames")
+    for t in steps:
         colors = vertex_colors(bake, t, scale, view.curve)
         img, _ = rasterize(
             np.asarray(bake.frame_vertices(t), dtype=float), bake.faces, colors, camera,

@@ -55,13 +55,15 @@ def export_bake(
     size: tuple[int, int] | None = None,
     columns: int | None = None,
     fps: float | None = None,
+    progress=None,
 ) -> dict:
     """Write ``bake`` to ``output`` (format from the suffix); returns a summary dict.
 
     ``.ply``/``.glb`` take one frame (``frame``, a scene frame number; default
     the first baked).  ``.png`` renders one frame, or a contact sheet when
     ``frames_text`` (``"A:B"``) is given; ``.gif`` animates ``frames_text``
-    (default every baked frame).
+    (default every baked frame).  ``progress``: a progress factory
+    (:mod:`shtools.progress`) for frame sequences.
     """
     view = view or View()
     suffix = Path(output).suffix.lower()
@@ -99,7 +101,8 @@ def export_bake(
         w, h = size or TILE_SIZE
         # GIF frames are palette-quantised anyway: skip the supersampling (4x faster)
         ss = 1 if suffix == ".gif" else view.supersample
-        images = render_frames(bake, positions, replace(view, width=w, height=h, supersample=ss))
+        images = render_frames(bake, positions, replace(view, width=w, height=h, supersample=ss),
+                               progress=progress)
         if suffix == ".png":
             labels = [f"frame {int(bake.frame_index[t])}" for t in positions]
             save_png(contact_sheet(images, labels, columns), output)

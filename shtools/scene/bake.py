@@ -184,7 +184,7 @@ def _object_geometry(obj: ObjectSpec) -> tuple[PreparedObject, object]:
                           np.asarray(mesh.faces, np.int64)), None
 
 
-def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None:
+def _object_blocker(prep: PreparedObject, model, settings, inputs: dict, progress=None) -> None:
     """Fill in the object's blocker spheres, tree and skin binding."""
     spec = prep.spec.blocker
     if spec is None or spec.kind == "exact":
@@ -225,13 +225,14 @@ def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None
         from shtools.geometry.sphere_fit import fit_spheres
 
         mesh = trimesh.Trimesh(prep.vertices, prep.faces, process=False)
-        s = fit_spheres(mesh, spec.count, method=spec.method, seed=spec.seed)
+        s = fit_spheres(mesh, spec.count, method=spec.method, seed=spec.seed,
+                        progress=progress, _desc=f"fit {prep.spec.name}")
         prep.centers, prep.radii = s.centers, s.radii
     if prep.tree is None and settings.hierarchy and len(prep.radii) > 1:
         from shtools.geometry.sphere_tree import build_tree
 
         branching = spec.branching if spec.kind == "fit" else 4
-        t = build_tree(prep.centers, prep.radii, branching=branching, seed=0)
+        t = build_tree(prep.centers, prep.radii, branching=branching, seed=0, progress=progress)
         prep.tree = (np.asarray(t.parent), np.asarray(t.leaf))
     if model is not None and prep.bone_index is None:
         from shtools.geometry.binding import bind_spheres
@@ -251,11 +252,20 @@ def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
     elif env.kind == "light":
         from shtools.data_formats.light import read_light
 
-        coeffs, _ = read_light(env.path)
+        coeffs, attrs = read_light(env.path)
         n = math.isqrt(len(coeffs))
         if n != order:
             raise AssetError(f"light is SH order {n} but the scene's settings.order is {order}; "
                              f"re-project it with --order {order} or change the order", env.path)
+        # the runtime windows the light with settings.window; a light projected
+        # with a window of its own would be windowed twice
+        own = (attrs.get("parameters") or {}).get("window") or "none"
+        if own != "none" and scene.settings.window is not None:
+            raise AssetError(f"light was projected with --window {own} and the scene's "
+                             f"settings.window is '{scene.settings.window}', so the bake would "
+                             "window it twice; re-project it without --window (the bake "
+                             "windows lighting and visibility together) or set "
+                             "window = \"none\"", env.path)
         inputs["environment"] = env.path
     else:
         from shtools.lighting.environment import project_environment
@@ -292,8 +302,12 @@ def _tables(scene: Scene, inputs: dict) -> dict | None:
     return tables
 
 
-def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> PreparedScene:
+def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
+                  progress=None) -> PreparedScene:
     """Load meshes, blockers, skins, environment and tables of a parsed scene.
+
+    ``progress`` is a progress factory (:mod:`shtools.progress`): one bar over
+    the objects, plus the bars of sphere fits and trees built on the fly.
 
     Raises
     ------
@@ -301,16 +315,21 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
         A file cannot be used, a skinned glTF has no skin or animation, SH
         orders disagree between assets, a bound set does not match its rig.
     """
+    from shtools.progress import silent
+
     inputs: dict[str, Path] = {}
     objects = []
-    for obj in scene.objects:
-        if log:
-            log(f"loading {obj.name}")
-        prep, model = _object_geometry(obj)
-        if obj.mesh is not None:
-            inputs[f"{obj.name}.mesh"] = obj.mesh
-        _object_blocker(prep, model, scene.settings, inputs)
-        objects.append(prep)
+    with (progress or silent)(total=len(scene.objects), desc="bake set-up",
+                              unit="objects") as bar:
+        for obj in scene.objects:
+            if log:
+                log(f"loading {obj.name}")
+            prep, model = _object_geometry(obj)
+            if obj.mesh is not None:
+                inputs[f"{obj.name}.mesh"] = obj.mesh
+            _object_blocker(prep, model, scene.settings, inputs, progress)
+            objects.append(prep)
+            bar.update(1)
     return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
                          inputs)
 
@@ -596,6 +615,7 @@ def bake_to_file(
     store_visibility: bool = False,
     on_frame: Callable[[FrameResult], None] | None = None,
     processes: int | None = None,
+    progress=None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -603,22 +623,28 @@ def bake_to_file(
     ``frame_seconds`` (posing + visibility + shading summed over frames),
     ``setup_seconds`` (loading, fits, tables, clustering, file writes),
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
-    ``output``.  ``processes`` as in :func:`bake_scene`.
+    ``output``.  ``processes`` as in :func:`bake_scene`; ``progress`` a
+    progress factory (:mod:`shtools.progress`) for the set-up and the frames.
     """
+    from shtools.progress import silent
+
     parent = Path(output).parent
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
         raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
-    prepared = prepare_scene(scene)
+    prepared = prepare_scene(scene, progress=progress)
     n = 0
     frame_seconds = 0.0
-    for result in bake_scene(scene, frames=frames, method=method,
-                             store_visibility=store_visibility, output=output,
-                             prepared=prepared, processes=processes):
-        n += 1
-        frame_seconds += result.seconds
-        if on_frame is not None:
-            on_frame(result)
+    total = len(frames) if frames is not None else scene.settings.frames
+    with (progress or silent)(total=total, desc="bake", unit="frames") as bar:
+        for result in bake_scene(scene, frames=frames, method=method,
+                                 store_visibility=store_visibility, output=output,
+                                 prepared=prepared, processes=processes):
+            n += 1
+            frame_seconds += result.seconds
+            bar.update(1)
+            if on_frame is not None:
+                on_frame(result)
     end = time.perf_counter()
     V = prepared.n_vertices
     return {
