@@ -10,9 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pygltflib
@@ -22,8 +19,6 @@ from shtools.data_formats.bake import read_bake, write_bake
 from shtools.export.tonemap import aces
 from shtools.scene.primitives import make_primitive
 
-REPO = Path(__file__).resolve().parents[2]
-VALIDATOR = REPO / ".venv" / "node" / "node_modules" / "gltf-validator"
 FRAMES = [5, 6, 7, 8]  # scene frame numbers held by the bake
 FPS = 12.0
 
@@ -119,20 +114,6 @@ def test_usd_passes_the_usd_validators(run_cli, bake_file, tmp_path):
 
 
 # ----------------------------------------------------------------------------- glTF
-def _khronos(path: Path) -> dict:
-    node = shutil.which("node")
-    if node is None or not VALIDATOR.is_dir():
-        pytest.skip("Khronos glTF validator not installed (make test installs it with npm)")
-    script = ("const v=require(process.argv[1]);const fs=require('fs');"
-              "v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])))"
-              ".then(r=>console.log(JSON.stringify(r.issues)))"
-              ".catch(e=>{console.error(String(e));process.exit(2)});")
-    proc = subprocess.run([node, "-e", script, str(VALIDATOR), str(path)], capture_output=True,
-                          text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout)
-
-
 def _accessor(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
     """Strict accessor read: bounds of the view and buffer checked, no padding guessed."""
     acc = gltf.accessors[index]
@@ -148,7 +129,7 @@ def _accessor(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
     return data.reshape(acc.count, width) if width > 1 else data
 
 
-def test_glb_sequence_keeps_objects_and_frames(run_cli, bake_file, tmp_path):
+def test_glb_sequence_keeps_objects_and_frames(run_cli, bake_file, tmp_path, khronos):
     out = tmp_path / "shot.glb"
     summary = _export(run_cli, bake_file, out, "--frames", "5:9:2", "--quantity", "irradiance")
     files = [tmp_path / "shot.0005.glb", tmp_path / "shot.0007.glb"]
@@ -169,7 +150,7 @@ def test_glb_sequence_keeps_objects_and_frames(run_cli, bake_file, tmp_path):
                                        math.pi * bake.radiance[t, lo:hi], rtol=1e-6)
             np.testing.assert_array_equal(
                 _accessor(gltf, mesh.primitives[0].indices).reshape(-1, 3), bake.object_faces(o))
-        issues = _khronos(path)
+        issues = khronos(path)
         assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
 
 
@@ -210,7 +191,8 @@ def test_visibility_needs_stored_vectors(run_cli, tmp_path):
 
 
 # ----------------------------------------------------------------------------- VAT
-def test_vat_texture_and_uvs_index_every_vertex_and_frame(run_cli, bake_file, tmp_path):
+def test_vat_texture_and_uvs_index_every_vertex_and_frame(run_cli, bake_file, tmp_path,
+                                                         khronos):
     import OpenEXR
 
     out = tmp_path / "fx.exr"
@@ -224,7 +206,7 @@ def test_vat_texture_and_uvs_index_every_vertex_and_frame(run_cli, bake_file, tm
     assert tex.shape == pos.shape == (H, W, 3) and H == 3 * R
     gltf = pygltflib.GLTF2().load(str(tmp_path / "fx.glb"))
     assert gltf.asset.extras["shtools_vat"]["frames"] == [6, 7, 8]
-    issues = _khronos(tmp_path / "fx.glb")
+    issues = khronos(tmp_path / "fx.glb")
     assert issues["numErrors"] == 0, issues["messages"]
     for o, mesh in enumerate(gltf.meshes):
         lo, hi = bake.object_offsets[o], bake.object_offsets[o + 1]
