@@ -311,6 +311,8 @@ def _pose(table: dict, ctx: _Ctx, base: Pose | None = None) -> Pose:
         s = table["scale"]
         if isinstance(s, int | float) and not isinstance(s, bool):
             s = [s, s, s]
+        elif not isinstance(s, list):
+            raise ctx.sub("scale").error(f"must be a number or a list of 3 numbers, got {s!r}")
         pose.scale = _vector(s, 3, ctx.sub("scale"), positive=True)
     return pose
 
