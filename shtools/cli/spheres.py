@@ -126,7 +126,7 @@ def export_cmd(spheres_path, output, as_json):
 @click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
 @click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--size", nargs=2, type=click.IntRange(min=16), default=(640, 480),
+@click.option("--size", nargs=2, type=click.IntRange(min=16), default=(480, 360),
               show_default=True, metavar="W H", help="Size of each of the two PNG panels.")
 @click.option("--elevation", type=float, default=20.0, show_default=True,
               help="Camera elevation, degrees.")

@@ -59,8 +59,8 @@ def render_spheres_png(
     centers: np.ndarray,
     radii: np.ndarray,
     *,
-    width: int = 640,
-    height: int = 480,
+    width: int = 480,
+    height: int = 360,
     elevation: float = 20.0,
     azimuth: float = 35.0,
 ) -> np.ndarray:
