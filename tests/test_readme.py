@@ -116,5 +116,6 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
     _run_sh(script, tmp_path)
     walk = read_bake(tmp_path / "walk.h5")
     assert walk.n_frames == 24 and walk.vertices.ndim == 3  # the character moves
-    for name in ("character.bound.h5", "character.spheres.png", "walk.usda", "walk.png"):
+    for name in ("character.bound.h5", "character.spheres.png", "walk.usda", "walk.png",
+                 "walk_lit.glb"):
         assert (tmp_path / name).is_file(), name

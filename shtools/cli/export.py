@@ -23,6 +23,9 @@ from shtools.cli._common import json_option, output_option, progress, report
                    "needs a bake with --store-visibility).")
 @click.option("--target", metavar="OBJECT", default=None,
               help="Frame this receiver object in a .png/.gif preview.")
+@click.option("--rig", metavar="OBJECT=RIG.glb", default=None,
+              help="With .glb and --frame: write skinned OBJECT as its source glTF with skin "
+                   "and clips kept and this frame's baked colours.")
 @click.option("--distance", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Camera distance from the framed centre, scene units (default: fitted).")
 @click.option("--exposure", type=float, default=0.0, show_default=True,
@@ -42,7 +45,7 @@ from shtools.cli._common import json_option, output_option, progress, report
 @click.option("--columns", type=int, default=None, help="Contact sheet columns.")
 @click.option("--fps", type=float, default=None, help="GIF frame rate (default the bake's).")
 @json_option
-def export(baked, output, frame, frames_text, quantity, target, distance, exposure,
+def export(baked, output, frame, frames_text, quantity, target, rig, distance, exposure,
            fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, as_json):
     """Export a bake: PLY/GLB frames (one named mesh per object), a time-sampled USD
     stage, a vertex animation texture (.exr + .glb), PNG previews, a contact
@@ -61,12 +64,17 @@ def export(baked, output, frame, frames_text, quantity, target, distance, exposu
         raise InputError("--zoom must be > 0")
     if size is not None and (size[0] < 8 or size[1] < 8):
         raise InputError("--size must be at least 8 8 pixels")
+    if rig is not None:
+        name, sep, rig_path = rig.partition("=")
+        if not sep or not name or not rig_path:
+            raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
+        rig = (name, rig_path)
     bake_asset = read_bake(baked)
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
                 auto_exposure=not fixed_exposure, curve=curve, distance=distance)
     summary = export_bake(bake_asset, output, frame=frame, frames_text=frames_text, view=view,
                           size=size, columns=columns, fps=fps, quantity=quantity,
-                          target=target, progress=progress)
+                          target=target, rig=rig, progress=progress)
     files = summary.get("files", [output])
     written = files[0] if len(files) == 1 else f"{len(files)} files"
     report(summary, as_json, f"wrote {written} ({summary['detail']})")

@@ -123,6 +123,7 @@ def export_bake(
     fps: float | None = None,
     quantity: str = "radiance",
     target: str | None = None,
+    rig: tuple[str, str] | None = None,
     progress=None,
 ) -> dict:
     """Write ``bake`` to ``output`` (format from the suffix); returns a summary dict.
@@ -142,6 +143,9 @@ def export_bake(
         (:mod:`shtools.export.quantity`).
     target : str, optional
         Frame this receiver object with the preview camera (``.png``/``.gif``).
+    rig : (object name, glTF path), optional
+        ``.glb`` of one frame: write that skinned object's source glTF with
+        its skin and clips and this frame's colours (:mod:`shtools.export.rig`).
     progress : callable, optional
         Progress factory (:mod:`shtools.progress`) for frame sequences.
     """
@@ -162,7 +166,18 @@ def export_bake(
     scale = display_scale(bake, positions, quantity, view.exposure, view.auto_exposure)
     summary = {"output": os.fspath(output), "format": suffix[1:], "frames": frames,
                "quantity": quantity}
-    if suffix in (".ply", ".glb"):
+    if rig is not None:
+        if suffix != ".glb" or len(positions) != 1:
+            raise InputError("--rig writes one .glb of one frame (--frame F): the skin and "
+                             "clips animate it, the colours are that frame's", output)
+        from shtools.export.rig import write_rig_glb
+
+        info = write_rig_glb(output, bake, positions[0], rig[0], rig[1], quantity=quantity,
+                             scale=scale, curve=view.curve)
+        summary.update(info)
+        summary["detail"] = (f"'{rig[0]}' with its skin and {len(info['animations'])} "
+                             f"clip(s), colours of frame {frames[0]}")
+    elif suffix in (".ply", ".glb"):
         paths = sequence_paths(output, frames)
         steps = positions if len(positions) == 1 else (progress or silent)(
             positions, desc=suffix[1:], unit="frames")
