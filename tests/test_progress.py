@@ -64,7 +64,8 @@ def test_bake_logs_setup_and_frames_and_quiet_silences(tmp_path):
         shutil.copy(GOLDEN / name, tmp_path / name)
     lines = _run(["bake", "scene.toml", "-o", "b.h5", "--processes", 1], tmp_path)
     setup, frames = _parsed(lines, "bake set-up"), _parsed(lines, "bake")
-    assert setup and setup[-1]["n"] == setup[-1]["total"] == "3", lines  # three objects
+    # three objects, the environment, the tables
+    assert setup and setup[-1]["n"] == setup[-1]["total"] == "5", lines
     assert frames and frames[-1]["n"] == frames[-1]["total"] == "4", lines
     assert frames[-1]["pct"] == "100" and frames[-1]["unit"] == "frames"
 

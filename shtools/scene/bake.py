@@ -267,7 +267,8 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
     """Load meshes, blockers, skins, environment and tables of a parsed scene.
 
     ``progress`` is a progress factory (:mod:`shtools.progress`): one bar over
-    the objects, plus the bars of sphere fits and trees built on the fly.
+    the objects, the environment and the tables, plus the bars of sphere fits
+    and trees built on the fly.
 
     Raises
     ------
@@ -279,8 +280,9 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
 
     inputs: dict[str, Path] = {}
     objects = []
-    with (progress or silent)(total=len(scene.objects), desc="bake set-up",
-                              unit="objects") as bar:
+    # steps: every object, then the environment (an HDR is projected here), the tables
+    with (progress or silent)(total=len(scene.objects) + 2, desc="bake set-up",
+                              unit="steps") as bar:
         for obj in scene.objects:
             if log:
                 log(f"loading {obj.name}")
@@ -290,8 +292,11 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
             _object_blocker(prep, model, scene.settings, inputs, progress)
             objects.append(prep)
             bar.update(1)
-    return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
-                         inputs)
+        env = _environment(scene, inputs)
+        bar.update(1)
+        tables = _tables(scene, inputs)
+        bar.update(1)
+    return PreparedScene(scene, objects, env, tables, inputs)
 
 
 # --------------------------------------------------------------------------- posing
