@@ -115,7 +115,7 @@ blocker = { exact = true }
 def test_eval_maps_have_a_colour_bar_per_row_with_units():
     from types import SimpleNamespace
 
-    from shtools.cli.eval import ERROR_LABEL, RADIANCE_LABEL, comparison_figure
+    from shtools.reference.maps import ERROR_LABEL, RADIANCE_LABEL, comparison_figure
 
     rng = np.random.default_rng(0)
     verts = rng.uniform(-1, 1, (50, 3))
