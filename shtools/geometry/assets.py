@@ -8,7 +8,6 @@ inputs and parameters recorded, so the same call gives the same bytes.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 
 import numpy as np
 
