@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml
 	  { echo "error: shtools needs Python >= 3.11; run e.g. 'make PYTHON=python3.11 $(MAKECMDGOALS)'" >&2; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[all,test,bench]'
+	$(PY) -m pip install --quiet -e '.[all,distributed,test,bench]'
 	@# the Khronos glTF validator (npm) for the export tests, when npm is there
 	command -v npm >/dev/null && npm install --silent --no-audit --no-fund \
 	  --prefix $(VENV)/node gltf-validator@$(GLTF_VALIDATOR) \
