@@ -77,6 +77,8 @@ class PreparedScene:
     env_sh: np.ndarray | None  # (n*n, 3)
     tables: dict | None
     inputs: dict[str, Path] = field(default_factory=dict)
+    #: a finite environment sphere (shtools.scene.midrange), None at infinity
+    midrange: object | None = None
 
     @property
     def receivers(self) -> list[PreparedObject]:
@@ -218,6 +220,7 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
         orders disagree between assets, a bound set does not match its rig.
     """
     from shtools.progress import silent
+    from shtools.scene.midrange import prepare_midrange
 
     inputs: dict[str, Path] = {}
     objects = []
@@ -234,11 +237,12 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
             objects.append(prep)
             bar.update(1)
         _self_visibility(scene, objects, inputs, log)
-        env = _environment(scene, inputs)
+        env_sh = _environment(scene, inputs)
         bar.update(1)
         tables = _tables(scene, inputs)
         bar.update(1)
-    return PreparedScene(scene, objects, env, tables, inputs)
+    return PreparedScene(scene, objects, env_sh, tables, inputs,
+                         prepare_midrange(scene, env_sh, inputs))
 
 
 def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log) -> None:
