@@ -68,6 +68,12 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
     ``min(n + 2, 6)``.
 ``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``
 ``SphereLight(position (3,), radius, color (3,))``
+``FieldBlocker(table, rotation (3,3), translation (3,), scale=1.0, skip_rows=None)``
+    A rigid object's shadow field (``read_field`` of a ``field`` asset) posed
+    for the frame; ``FieldBlocker.from_matrix(field, M (4,4))`` refuses
+    non-uniform scale and shear.  Pass it in ``blockers`` with sphere blockers;
+    ``settings.field_space`` ("log" default, or "product") says how it combines
+    (:mod:`~shtools.runtime.fields`).
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;
     ``.visibility(vertices, normals, blockers, clusters=None) -> (V, n*n)``;
@@ -87,6 +93,12 @@ from shtools.runtime.blockers import SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
+from shtools.runtime.fields import (
+    FieldBlocker,
+    FieldTable,
+    field_log_visibility,
+    field_product_visibility,
+)
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.self_shadow import apply_self_shadow_rules
 from shtools.runtime.settings import ShadowSettings
@@ -94,6 +106,8 @@ from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
 
 __all__ = [
     "CapLogTable",
+    "FieldBlocker",
+    "FieldTable",
     "ReceiverClusters",
     "ShadowRuntime",
     "ShadowSettings",
@@ -103,6 +117,8 @@ __all__ = [
     "apply_self_shadow_rules",
     "cosine_transfer",
     "fast_exp",
+    "field_log_visibility",
+    "field_product_visibility",
     "lloyd_clusters",
     "shade",
     "sphere_light_sh",

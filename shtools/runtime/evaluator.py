@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import time
 from dataclasses import dataclass
@@ -12,6 +13,7 @@ from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
+from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
@@ -106,11 +108,21 @@ class ShadowRuntime:
         """Accumulated log visibility at the accumulation order, shape ``(V, n_acc^2)`` float32.
 
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
+        Shadow fields add their SH logs (order ``n``, zero above).
         """
         pts, nrm = _check_receivers(vertices, normals)
-        work = self._frame_work(pts, _check_blockers(blockers), clusters)
-        t1 = time.process_time()
-        f = self._accumulate(work.task(pts, nrm), self.last_stats)
+        spheres, fields = _check_blockers(blockers)
+        if spheres:
+            work = self._frame_work(pts, spheres, clusters)
+            t1 = time.process_time()
+            f = self._accumulate(work.task(pts, nrm), self.last_stats)
+        else:
+            self.last_stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0,
+                               "seconds": {}, "processes": 1}
+            t1 = time.process_time()
+            f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+        if fields:
+            field_log_visibility(pts, nrm, fields, self.order, self.acc_order, out=f)
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
         return f
 
@@ -124,8 +136,9 @@ class ShadowRuntime:
             Receiver positions this frame.
         normals : array_like, shape (V, 3)
             Unit receiver normals this frame.
-        blockers : list of SphereBlocker
-            Blocker spheres this frame (trees are refit from their leaves).
+        blockers : list of SphereBlocker or FieldBlocker
+            Blocker spheres this frame (trees are refit from their leaves) and
+            posed shadow fields, combined as ``settings.field_space`` says.
         clusters : ReceiverClusters, optional
             From :meth:`clusters`; with ``hierarchy`` on and none given, clusters
             are computed on the first call and reused while the vertex count
@@ -144,7 +157,10 @@ class ShadowRuntime:
         (:mod:`shtools.runtime.parallel`); :meth:`close` stops them.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        work = self._frame_work(pts, _check_blockers(blockers), clusters)
+        spheres, fields = _check_blockers(blockers)
+        if fields:
+            return self._visibility_with_fields(pts, nrm, spheres, fields, clusters)
+        work = self._frame_work(pts, spheres, clusters)
         stats = self.last_stats
         if self.processes > 1 and stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
@@ -165,9 +181,66 @@ class ShadowRuntime:
         ``task`` comes from :meth:`FrameWork.task` (also what a worker process
         runs; see :mod:`shtools.runtime.parallel`).
         """
+        if task[0] == "fields":
+            return self._field_part(task), 0
         stats = {"pairs_evaluated": 0}
         g = self.exponentiate(self._accumulate(task, stats))
         return g, stats["pairs_evaluated"]
+
+    def _visibility_with_fields(self, pts, nrm, spheres, fields, clusters) -> np.ndarray:
+        """Visibility of a frame with shadow fields (sphere logs first, then the fields).
+
+        The sphere blockers' log sum is accumulated in this process; the field
+        lookups and the exp (log space) or products (product space) are split by
+        receiver rows over this process and the workers.
+        """
+        if spheres:
+            f = self.log_visibility(pts, nrm, spheres, clusters)
+        else:
+            self.last_stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0,
+                               "seconds": {}, "processes": 1}
+            f = None
+        stats = self.last_stats
+        stats["field_pairs"] = pts.shape[0] * len(fields)
+        parts = self.processes if stats["field_pairs"] >= MIN_PARALLEL_PAIRS else 1
+        bounds = np.linspace(0, pts.shape[0], parts + 1).astype(np.int64)
+        tasks = [(a, b, ("fields", self.settings.field_space, pts[a:b], nrm[a:b],
+                         None if f is None else f[a:b], _field_rows(fields, a, b)))
+                 for a, b in itertools.pairwise(bounds) if b > a]
+        w0 = time.perf_counter()
+        g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
+        if len(tasks) == 1:
+            g[:] = self._field_part(tasks[0][2])
+        else:
+            if self._workers is None:
+                self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables)
+            try:
+                futures = [self._workers.submit(task) for _, _, task in tasks[1:]]
+                a, b, task = tasks[0]
+                g[a:b] = self._field_part(task)
+                for (a, b, _), future in zip(tasks[1:], futures, strict=True):
+                    g[a:b] = self._workers.result(future)[0]
+            except ShtoolsError:
+                self.close()
+                raise
+        stats["processes"] = len(tasks)
+        stats["seconds"]["fields_exp_wall"] = time.perf_counter() - w0
+        return g
+
+    def _field_part(self, task) -> np.ndarray:
+        """Visibility ``(V', n*n)`` of one ``"fields"`` part: add field logs and exp, or
+        exp the sphere logs and multiply the fields' OCVs in."""
+        _, space, pts, nrm, f, fields = task
+        if space == "log":
+            if f is None:
+                f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+            else:
+                f = np.array(f, dtype=np.float32)
+            field_log_visibility(pts, nrm, fields, self.order, self.acc_order, out=f)
+            return self.exponentiate(f)
+        base = None if f is None else self.exponentiate(f)
+        g = field_product_visibility(pts, nrm, fields, self.order, self.acc_order, base=base)
+        return g.astype(np.float32)
 
     def close(self) -> None:
         """Stop the worker processes, if any were started (the runtime stays usable)."""
@@ -437,9 +510,27 @@ def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
     return pts, nrm
 
 
-def _check_blockers(blockers) -> list[SphereBlocker]:
-    blockers = list(blockers)
+def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[FieldBlocker]]:
+    """The frame's sphere blockers and shadow-field blockers, in their given order."""
+    spheres, fields = [], []
     for b in blockers:
-        if not isinstance(b, SphereBlocker):
-            raise InputError(f"blockers must be SphereBlocker objects, got {type(b).__name__}")
-    return blockers
+        if isinstance(b, SphereBlocker):
+            spheres.append(b)
+        elif isinstance(b, FieldBlocker):
+            fields.append(b)
+        else:
+            raise InputError("blockers must be SphereBlocker or FieldBlocker objects, got "
+                             f"{type(b).__name__}")
+    return spheres, fields
+
+
+def _field_rows(fields: list[FieldBlocker], a: int, b: int) -> list[FieldBlocker]:
+    """The field blockers for receiver rows ``a:b`` (own-object rows renumbered)."""
+    out = []
+    for fb in fields:
+        skip = None
+        if fb.skip_rows is not None:
+            rows = np.asarray(fb.skip_rows, dtype=np.int64)
+            skip = rows[(rows >= a) & (rows < b)] - a
+        out.append(dataclasses.replace(fb, skip_rows=skip))
+    return out

@@ -10,6 +10,8 @@ from shtools.errors import InputError
 #: exp methods the runtime accepts ("auto" picks one from the accumulation order).
 RUNTIME_EXP_METHODS = ("auto", "hyb", "ps*", "ps", "ol", "exact", "volterra")
 
+#: How shadow-field blockers are combined (ShadowSettings.field_space).
+FIELD_SPACES = ("log", "product")
 #: Accumulation order used when ``acc_order`` is None: ``n + 2`` (at most 6).
 #: From ``benchmarks/bench_runtime.py`` (accuracy vs order on a procedural scene,
 #: shading order 4): radiance error vs ray tracing of the sphere set 4.7 % at
@@ -75,6 +77,11 @@ class ShadowSettings:
         forked on the first frame with at least ``MIN_PARALLEL_PAIRS``
         sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
         process.
+    field_space : {"log", "product"}
+        How shadow-field blockers combine (:mod:`~shtools.runtime.fields`):
+        ``"log"`` adds their SH logs to the sphere blockers' log sum before the
+        one exp; ``"product"`` multiplies their visibility vectors in with
+        truncated SH products at the accumulation order (the papers' way).
     """
 
     order: int = 4
@@ -91,6 +98,7 @@ class ShadowSettings:
     chunk_pairs: int = 1 << 16
     threads: int = 1
     processes: int | None = None
+    field_space: str = "log"
 
     def __post_init__(self):
         self.validate()
@@ -129,6 +137,8 @@ class ShadowSettings:
             raise InputError(
                 f"vertices_per_cluster must be an integer >= 1, got {self.vertices_per_cluster!r}"
             )
+        if self.field_space not in FIELD_SPACES:
+            raise InputError(f"unknown field_space {self.field_space!r}; use log or product")
         if not _is_int(self.threads) or not 1 <= self.threads <= 64:
             raise InputError(f"threads must be an integer 1..64, got {self.threads!r}")
         if self.processes is not None and (not _is_int(self.processes)
