@@ -157,7 +157,7 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
     ocv, log_q, offs, steps, log_offs, log_steps = [], [], [], [], [], []
     res, level_err, cum_err = [], [], []
     t_cast = t_log = 0.0
-    for c, r in enumerate(radii):
+    for _c, r in enumerate(radii):
         ts = time.perf_counter()
         points = center + r * sample_dirs
         grid = sample_ocvs(caster, center, vr, points, dirs, weights, params.order,
@@ -186,7 +186,7 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         sv = np.asarray(self_visibility(v, np.asarray(mesh.vertex_normals), [mesh],
                                         params.order), dtype=np.float32)
     t_sv = time.perf_counter() - ts
-    n_boundary = int(len(boundary_edges(mesh)))
+    n_boundary = len(boundary_edges(mesh))
     attrs = {
         "quadrature": f"latlong {params.map_size}x{params.map_size} cell-centred, exact cell "
                       "solid angles",

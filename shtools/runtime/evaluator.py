@@ -13,8 +13,8 @@ from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
-from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
+from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.parallel import (

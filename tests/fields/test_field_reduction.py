@@ -1,4 +1,4 @@
-"""Adaptive reduction (Tamura Sec. 4), eq. (1) and quantization, against independent computations."""
+"""Adaptive reduction (Tamura Sec. 4), eq. (1) and quantization vs independent computations."""
 
 from __future__ import annotations
 

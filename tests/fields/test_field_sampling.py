@@ -61,7 +61,7 @@ def test_sample_field_on_a_small_box(tmp_path):
     params = FieldParameters(shells=8, resolution=16, map_size=24, order=3, min_resolution=4)
     fld, rep = sample_field(mesh, params)
     assert fld.n_shells == 8
-    center, vr = bounding_sphere(mesh.vertices)
+    _center, vr = bounding_sphere(mesh.vertices)
     assert np.allclose(fld.shell_radii, shell_radii(vr, 8)) and fld.shell_radii[0] == 0.2 * vr
     assert set(fld.resolution.tolist()) <= {4, 8, 16}
     assert fld.attrs["closed"] is True

@@ -82,7 +82,7 @@ def test_lookup_is_continuous_across_phi_zero_and_shell_boundaries():
         va, vb = table.lookup(fld.center + np.array([a, b]))
         assert np.abs(va - vb).max() < 1e-4  # two points 2e-7 rad apart
     d = np.array([0.48, -0.6, 0.64])
-    for r in list(fld.shell_radii) + [fld.shell_radii[-1] + 0.2]:  # shells, fade end
+    for r in [*list(fld.shell_radii), fld.shell_radii[-1] + 0.2]:  # shells, fade end
         va, vb = table.lookup(fld.center + np.array([(r - 1e-9) * d, (r + 1e-9) * d]))
         assert np.abs(va - vb).max() < 1e-4
     far = table.lookup(fld.center + np.array([(fld.shell_radii[-1] + 0.2) * d,
