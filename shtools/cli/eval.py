@@ -33,6 +33,11 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
               help="Sphere set of the mesh (spheres asset).")
 @click.option("--tree", "tree_path", type=click.Path(dir_okay=False),
               help="Sphere tree of the set (tree asset); enables the hierarchy.")
+@click.option("--field", "field_path", type=click.Path(dir_okay=False),
+              help="Shadow field of the mesh (field asset), instead of --spheres.")
+@click.option("--field-space", type=click.Choice(["log", "product"]), default=None,
+              help="How shadow fields combine in the runtime methods (default: log, or "
+                   "the scene's).")
 @click.option("--light", "light_path", type=click.Path(dir_okay=False),
               help="Environment light asset (default: a procedural sky).")
 @click.option("--grid", default=64, show_default=True, type=click.IntRange(2, 1024),
@@ -55,8 +60,9 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
 @click.option("--png", "png_path", type=click.Path(dir_okay=False),
               help="Write a false-colour side-by-side comparison image.")
 @json_option
-def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame, methods, order,
-             acc_order, no_hierarchy, no_window, n_dirs, png_path, as_json):
+def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, light_path, grid,
+             gap, frame, methods, order, acc_order, no_hierarchy, no_window, n_dirs, png_path,
+             as_json):
     """Compare shadowing methods with ray tracing (relative RMSE of radiance, time)."""
     from shtools.reference.evaluation import evaluate, parse_methods
     from shtools.runtime import ShadowSettings
@@ -65,14 +71,19 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
     if png_path is not None:
         _check_png_path(png_path)
     if scene is not None:
-        if mesh or spheres_path:
-            raise InputError("give either a scene file or --mesh/--spheres, not both", scene)
+        if mesh or spheres_path or field_path:
+            raise InputError("give either a scene file or --mesh/--spheres/--field, not both",
+                             scene)
         data = _scene_inputs(scene, frame, order)
     else:
-        if not (mesh and spheres_path):
-            raise InputError("give a scene file, or --mesh MESH --spheres spheres.h5")
-        data = _builtin_inputs(mesh, spheres_path, tree_path, light_path, grid, gap,
-                               order or 4)
+        if not mesh or (spheres_path is None) == (field_path is None):
+            raise InputError("give a scene file, or --mesh MESH with --spheres spheres.h5 "
+                             "or --field x.field.h5")
+        if field_path is not None:
+            data = _field_inputs(mesh, field_path, light_path, grid, gap, order)
+        else:
+            data = _builtin_inputs(mesh, spheres_path, tree_path, light_path, grid, gap,
+                                   order or 4)
     base = data["settings"]
     kwargs = {"order": base.get("order", order or 4)}
     for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster"):
@@ -80,6 +91,7 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
             kwargs[key] = base[key]
     kwargs["window"] = None if no_window else base.get("window", "cosine")
     kwargs["hierarchy"] = False if no_hierarchy else base.get("hierarchy", True)
+    kwargs["field_space"] = field_space or base.get("field_space", "log")
     if acc_order is not None:
         kwargs["acc_order"] = acc_order
     elif base.get("acc_order") is not None:
@@ -102,7 +114,9 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
              "seconds": r.seconds} for r in out["results"]]
     summary = {
         "scene": data["name"], "vertices": len(data["vertices"]),
-        "spheres": int(sum(b.n_spheres for b in data["blockers"])),
+        "spheres": int(sum(b.n_spheres for b in data["blockers"] if hasattr(b, "n_spheres"))),
+        "fields": int(sum(not hasattr(b, "n_spheres") for b in data["blockers"])),
+        "field_space": settings.field_space,
         "order": settings.order, "acc_order_default": settings.resolved_acc_order(),
         "window": settings.resolved_window(), "hierarchy": settings.hierarchy,
         "n_dirs": n_dirs,
@@ -118,20 +132,24 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
 
 
 def _table(summary: dict) -> str:
+    def num(x, fmt="{:.4f}"):
+        return "-" if x is None else fmt.format(x)
+
     lines = [
         f"scene {summary['scene']}: {summary['vertices']} receivers, {summary['spheres']} "
-        f"spheres, order {summary['order']} (default accumulation order "
+        f"spheres, {summary['fields']} shadow fields ({summary['field_space']} space), "
+        f"order {summary['order']} (default accumulation order "
         f"{summary['acc_order_default']}), window {summary['window']}, hierarchy "
         f"{'on' if summary['hierarchy'] else 'off'}, {summary['n_dirs']} ray directions",
         "",
         "| method | rel. RMSE vs mesh | rel. RMSE vs spheres | time (s) |",
         "|---|---|---|---|",
-        f"| spheres, ray traced | {summary['spheres_vs_mesh_rmse']:.4f} | 0 | "
+        f"| spheres, ray traced | {num(summary['spheres_vs_mesh_rmse'])} | 0 | "
         f"{summary['raytrace_spheres_seconds']:.3f} |",
         f"| mesh, ray traced | 0 | - | {summary['raytrace_mesh_seconds']:.3f} |",
     ]
     for r in summary["methods"]:
-        lines.append(f"| {r['method']} | {r['rmse_vs_mesh']:.4f} | {r['rmse_vs_spheres']:.4f} | "
+        lines.append(f"| {r['method']} | {r['rmse_vs_mesh']:.4f} | {num(r['rmse_vs_spheres'])} | "
                      f"{r['seconds']:.4f} |")
     if "png" in summary:
         lines.append(f"\nwrote {summary['png']}")
@@ -171,6 +189,32 @@ def _builtin_inputs(mesh_path, spheres_path, tree_path, light_path, grid, gap, o
     }
 
 
+def _field_inputs(mesh_path, field_path, light_path, grid, gap, order):
+    """The built-in ground-grid scene with a shadow-field blocker (no sphere set)."""
+    from shtools.data_formats.field import read_field
+    from shtools.geometry.mesh import load_mesh
+    from shtools.reference.scenes import mesh_scene
+    from shtools.runtime import FieldBlocker
+
+    mesh = load_mesh(mesh_path)
+    fld = read_field(field_path)
+    if order is not None and order != fld.order:
+        raise InputError(f"the field is SH order {fld.order} but --order is {order}; resample "
+                         f"it with `shtools field sample --order {order}`", field_path)
+    env = None
+    if light_path is not None:
+        from shtools.data_formats.light import read_light
+
+        env, _ = read_light(light_path)
+    sc = mesh_scene(mesh, np.zeros((0, 3)), np.zeros(0), grid=grid, order=fld.order,
+                    env_sh=env, gap=gap)
+    return {
+        "name": Path(mesh_path).name, "vertices": sc.vertices, "normals": sc.normals,
+        "groups": None, "blockers": [FieldBlocker(fld)], "meshes": sc.meshes,
+        "env": sc.env_sh, "lights": [], "settings": {"order": fld.order, "hierarchy": False},
+    }
+
+
 def _scene_inputs(path, frame, order):
     import trimesh
 
@@ -193,7 +237,8 @@ def _scene_inputs(path, frame, order):
                              for k, o in enumerate(prepared.receivers)])
     settings = {"order": order or st.order, "acc_order": st.acc_order, "window": st.window,
                 "window_h": st.window_h, "theta_max": st.theta_max, "theta_min": st.theta_min,
-                "hierarchy": st.hierarchy, "vertices_per_cluster": st.vertices_per_cluster}
+                "hierarchy": st.hierarchy, "vertices_per_cluster": st.vertices_per_cluster,
+                "field_space": st.field_space}
     return {
         "name": Path(path).name, "vertices": state.vertices, "normals": state.normals,
         "groups": groups, "blockers": state.blockers, "meshes": meshes,

@@ -27,7 +27,13 @@ from shtools.reference.raytrace import (
     raytrace_visibility,
     sphere_union_visibility,
 )
-from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker
+from shtools.runtime import (
+    FieldBlocker,
+    ShadowRuntime,
+    ShadowSettings,
+    SphereBlocker,
+    field_product_visibility,
+)
 from shtools.runtime.hierarchy import leaf_spheres
 from shtools.runtime.settings import RUNTIME_EXP_METHODS
 
@@ -40,7 +46,7 @@ class MethodResult:
 
     method: str
     rmse_mesh: float
-    rmse_spheres: float
+    rmse_spheres: float | None  # None without sphere blockers
     seconds: float
     radiance: np.ndarray
 
@@ -75,7 +81,10 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
     Parameters
     ----------
     vertices, normals : ndarray, shape (V, 3)
-    blockers : list of SphereBlocker
+    blockers : list of SphereBlocker or FieldBlocker
+        Shadow fields combine as ``settings.field_space`` says (runtime
+        methods) or by products (``product``); the sphere-set reference is
+        only computed when there are sphere blockers.
     meshes : list of trimesh.Trimesh
         Actual blocker geometry.
     env_sh : ndarray, shape (n*n, 3) or None
@@ -108,17 +117,26 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
     t0 = time.perf_counter()
     g_mesh = raytrace_visibility(vertices, normals, meshes, order, n_dirs)
     t_mesh = time.perf_counter() - t0
-    centers, radii = leaf_spheres(blockers)
+    spheres = [b for b in blockers if isinstance(b, SphereBlocker)]
+    fields = [b for b in blockers if isinstance(b, FieldBlocker)]
+    centers, radii = leaf_spheres(spheres) if spheres else (np.zeros((0, 3)), np.zeros(0))
     t0 = time.perf_counter()
-    g_sph = sphere_union_visibility(vertices, normals, centers, radii, order, n_dirs)
+    g_sph = sphere_union_visibility(vertices, normals, centers, radii, order, n_dirs) \
+        if spheres else None
     t_sph = time.perf_counter() - t0
-    r_mesh, r_sph = shade(g_mesh), shade(g_sph)
+    r_mesh = shade(g_mesh)
+    r_sph = shade(g_sph) if g_sph is not None else None
     results = []
     for label, name, acc in specs:
         if name == "product":
             t0 = time.perf_counter()
-            g = product_space_visibility(vertices, normals, (centers, radii), order,
-                                         acc if acc is not None else order)
+            g = None
+            if spheres or not fields:
+                g = product_space_visibility(vertices, normals, (centers, radii), order,
+                                             acc if acc is not None else order)
+            if fields:
+                g = field_product_visibility(vertices, normals, fields, order,
+                                             acc if acc is not None else order, base=g)
             seconds = time.perf_counter() - t0
         else:
             s = dataclasses.replace(settings, exp_method=name,
@@ -132,11 +150,13 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
             g = rt.visibility(vertices, normals, blockers, clusters)
             seconds = time.perf_counter() - t0
         rad = shade(g)
-        results.append(MethodResult(label, relative_rmse(rad, r_mesh), relative_rmse(rad, r_sph),
+        results.append(MethodResult(label, relative_rmse(rad, r_mesh),
+                                    relative_rmse(rad, r_sph) if r_sph is not None else None,
                                     seconds, rad))
     return {
         "references": {"mesh_seconds": t_mesh, "spheres_seconds": t_sph,
-                       "spheres_rmse_mesh": relative_rmse(r_sph, r_mesh)},
+                       "spheres_rmse_mesh": relative_rmse(r_sph, r_mesh)
+                       if r_sph is not None else None},
         "results": results,
         "mesh_radiance": r_mesh,
         "spheres_radiance": r_sph,

@@ -62,6 +62,8 @@ class PreparedObject:
     bone_index : ndarray, shape (N, K) or None
         Skin binding of the spheres (skinned blockers).
     bone_vectors : ndarray, shape (N, K, 4) or None
+    field : shtools.runtime.FieldTable or None
+        Shadow field of a rigid blocker (``blocker = { field = ... }``).
     """
 
     spec: ObjectSpec
@@ -74,6 +76,7 @@ class PreparedObject:
     motion: SkinnedMotion | None = None
     bone_index: np.ndarray | None = None
     bone_vectors: np.ndarray | None = None
+    field: object | None = None
 
     @property
     def moves(self) -> bool:
@@ -123,6 +126,8 @@ class FrameState:
     blockers: list  # list[shtools.runtime.SphereBlocker]
     lights: list  # list[shtools.runtime.SphereLight]
     blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
+    #: per field object that also receives: (receiver rows, O_v rotated to the world)
+    self_visibility: list = field(default_factory=list)
 
 
 @dataclass
@@ -189,6 +194,9 @@ def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None
     spec = prep.spec.blocker
     if spec is None or spec.kind == "exact":
         return
+    if spec.kind == "field":
+        _field_blocker(prep, settings, inputs)
+        return
     import trimesh
 
     if spec.kind == "spheres":
@@ -239,6 +247,53 @@ def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None
         binding = bind_spheres(prep.centers, model)
         prep.bone_index = np.asarray(binding.bone_index)
         prep.bone_vectors = np.asarray(binding.bone_vectors)
+
+
+def _field_blocker(prep: PreparedObject, settings, inputs: dict) -> None:
+    """Load a ``field`` asset for a rigid blocker; its order must be the scene's."""
+    from shtools.data_formats.field import read_field
+    from shtools.runtime import FieldTable
+
+    path = prep.spec.blocker.path
+    fld = read_field(path)
+    if fld.order != settings.order:
+        raise AssetError(f"field is SH order {fld.order} but the scene's settings.order is "
+                         f"{settings.order}; resample it with `shtools field sample --order "
+                         f"{settings.order}` or change the order", path)
+    if fld.self_visibility is not None and prep.spec.receives and \
+            len(fld.self_visibility) != len(prep.vertices):
+        raise AssetError(f"field holds self-visibility for {len(fld.self_visibility)} vertices "
+                         f"but '{prep.spec.name}' has {len(prep.vertices)}; resample it from "
+                         "this mesh", path)
+    prep.field = FieldTable(fld)
+    inputs[f"{prep.spec.name}.field"] = path
+
+
+def _field_pose(o: PreparedObject, m: np.ndarray, rows: np.ndarray | None, state_self: list):
+    """The posed :class:`~shtools.runtime.FieldBlocker` of a field object (and its O_v)."""
+    from shtools.runtime import FieldBlocker
+    from shtools.sh import rotate
+
+    try:
+        blocker = FieldBlocker.from_matrix(o.field, m, skip_rows=rows)
+    except InputError as exc:
+        raise InputError(f"objects '{o.spec.name}': {exc.message}") from None
+    sv = o.field.field.self_visibility
+    if rows is not None and sv is not None:
+        state_self.append((rows, rotate(np.asarray(sv, np.float64), blocker.rotation)))
+    return blocker
+
+
+def apply_self_visibility(vis: np.ndarray, state: FrameState, order: int) -> np.ndarray:
+    """Multiply the field objects' own O_v into their receiver rows (truncated product)."""
+    if not state.self_visibility:
+        return vis
+    from shtools.sh import product
+
+    vis = np.array(vis, dtype=np.float64)
+    for rows, sv in state.self_visibility:
+        vis[rows] = product(vis[rows], sv, order)
+    return vis
 
 
 def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
@@ -321,7 +376,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
     from shtools.runtime import SphereBlocker, SphereLight
 
     worlds = world_matrices(prepared.scene.objects, t)
-    verts, norms, blockers, meshes = [], [], [], []
+    verts, norms, blockers, meshes, self_vis = [], [], [], [], []
+    n_rows = 0
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -332,10 +388,17 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             joints = None
             local_v, local_n = o.vertices, o.normals
         world_v = transform_points(m, local_v)
+        rows = None
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
-        if o.spec.blocks:
+            rows = np.arange(n_rows, n_rows + len(world_v))
+            n_rows += len(world_v)
+        if o.spec.blocks and o.field is not None:
+            blockers.append(_field_pose(o, m, rows, self_vis))
+            if with_meshes:
+                meshes.append((world_v, o.faces))
+        elif o.spec.blocks:
             centers = o.centers
             if joints is not None:
                 from shtools.runtime.spheres import pose_bound_spheres
@@ -355,7 +418,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
         key = light_at(spec, t)
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
-    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes)
+    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
+                      self_vis)
 
 
 # --------------------------------------------------------------------------- baking
@@ -398,7 +462,7 @@ def runtime_settings(scene: Scene, method: str, processes: int | None = None):
         exp_method=method if method in EXP_NAMES else st.exp_method,
         window=st.window, window_h=st.window_h, theta_max=st.theta_max,
         hierarchy=st.hierarchy, vertices_per_cluster=st.vertices_per_cluster,
-        processes=processes,
+        processes=processes, field_space=st.field_space,
     )
     if st.theta_min is not None:
         kwargs["theta_min"] = st.theta_min
@@ -469,10 +533,7 @@ def bake_scene(
             state = pose_frame(prepared, float(t), with_meshes=(method == "raytrace"))
             setup = 0.0
             if method == "product":
-                from shtools.reference import product_space_visibility
-
-                vis = product_space_visibility(state.vertices, state.normals, state.blockers,
-                                               st.order, acc_order=st.acc_order)
+                vis = _product(state, st)
             elif method == "raytrace":
                 vis = _raytrace(state, st.order, raytrace_dirs)
             else:
@@ -482,6 +543,8 @@ def bake_scene(
                     setup = time.perf_counter() - setup
                 vis = runtime.visibility(state.vertices, state.normals, state.blockers,
                                          clusters=clusters)
+            if method != "raytrace":  # the ray tracer already sees the object's own mesh
+                vis = apply_self_visibility(vis, state, st.order)
             radiance = runtime.shade(vis, state.vertices, state.normals, prepared.env_sh,
                                      sphere_lights=state.lights)
             result = FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
@@ -515,6 +578,24 @@ def _clusters(prepared: PreparedScene, vertices: np.ndarray):
     groups = np.concatenate([np.full(len(o.vertices), k)
                              for k, o in enumerate(prepared.receivers)])
     return lloyd_clusters(vertices, prepared.scene.settings.vertices_per_cluster, groups=groups)
+
+
+def _product(state: FrameState, st):
+    """Product-space visibility: sphere caps, then shadow fields' OCVs multiplied in."""
+    from shtools.reference import product_space_visibility
+    from shtools.runtime import FieldBlocker, SphereBlocker, field_product_visibility
+
+    spheres = [b for b in state.blockers if isinstance(b, SphereBlocker)]
+    fields = [b for b in state.blockers if isinstance(b, FieldBlocker)]
+    acc = st.acc_order or st.order
+    vis = None
+    if spheres or not fields:
+        vis = product_space_visibility(state.vertices, state.normals, spheres, st.order,
+                                       acc_order=acc)
+    if fields:
+        vis = field_product_visibility(state.vertices, state.normals, fields, st.order,
+                                       acc_order=acc, base=vis)
+    return vis
 
 
 def _raytrace(state: FrameState, order: int, n_dirs: int | None):
@@ -563,6 +644,8 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         "hierarchy": st.hierarchy,
         "vertices_per_cluster": st.vertices_per_cluster,
         "fps": st.fps,
+        **({"field_space": st.field_space}
+           if any(o.field is not None for o in prepared.objects) else {}),
         "frames": [frames.start, frames.stop],
         "scene": scene.path.name,
     }

@@ -33,6 +33,7 @@ GLTF_SUFFIXES = (".glb", ".gltf")
 SETTINGS_KEYS = (
     "order", "acc_order", "exp_method", "window", "window_h", "theta_max_deg",
     "theta_min_deg", "hierarchy", "vertices_per_cluster", "frames", "fps", "tables", "method",
+    "field_space",
 )
 OBJECT_KEYS = (
     "name", "mesh", "primitive", "role", "albedo", "parent", "translate", "rotate",
@@ -40,7 +41,9 @@ OBJECT_KEYS = (
 )
 TRANSFORM_KEYS = ("translate", "rotate", "quaternion", "scale")
 KEYFRAME_KEYS = ("time", "frame", *TRANSFORM_KEYS)
-BLOCKER_KEYS = ("spheres", "tree", "bound", "fit", "method", "seed", "branching", "exact")
+BLOCKER_KEYS = ("spheres", "tree", "bound", "field", "fit", "method", "seed", "branching",
+                "exact")
+FIELD_SPACES = ("log", "product")
 SKIN_KEYS = ("animation", "speed", "offset")
 ENVIRONMENT_KEYS = ("light", "image", "coeffs", "intensity", "rotate_deg")
 LIGHT_KEYS = ("name", "position", "radius", "color", "intensity", "keyframes", "loop")
@@ -69,6 +72,7 @@ class Settings:
     fps: float = 24.0
     tables: Path | None = None
     method: str = "default"
+    field_space: str = "log"
 
 
 @dataclass
@@ -92,7 +96,7 @@ class Keyframe:
 class BlockerSpec:
     """How an object blocks light.
 
-    ``kind`` is ``"spheres"``, ``"tree"`` or ``"bound"`` (an asset at ``path``),
+    ``kind`` is ``"spheres"``, ``"tree"``, ``"bound"`` or ``"field"`` (an asset at ``path``),
     ``"fit"`` (fit ``count`` spheres on the fly) or ``"exact"`` (the primitive's
     own spheres, for ``sphere`` primitives).
     """
@@ -367,18 +371,22 @@ def _settings(table: dict, ctx: _Ctx, base: Path) -> Settings:
         s.tables = _file(table["tables"], base, ctx.sub("tables"), (".h5",))
     if "method" in table:
         s.method = _choice(table["method"], BAKE_METHODS, ctx.sub("method"))
+    if "field_space" in table:
+        s.field_space = _choice(table["field_space"], FIELD_SPACES, ctx.sub("field_space"))
     return s
 
 
 def _blocker(value, obj: ObjectSpec, ctx: _Ctx, base: Path) -> BlockerSpec:
     table = _check_keys(value, BLOCKER_KEYS, ctx)
-    sources = [k for k in ("spheres", "tree", "bound", "fit", "exact") if k in table]
+    sources = [k for k in ("spheres", "tree", "bound", "field", "fit", "exact") if k in table]
     if len(sources) != 1:
-        raise ctx.error("give exactly one of 'spheres', 'tree', 'bound' (asset files), "
-                        "'fit' (number of spheres to fit) or 'exact = true'")
+        raise ctx.error("give exactly one of 'spheres', 'tree', 'bound', 'field' (asset "
+                        "files), 'fit' (number of spheres to fit) or 'exact = true'")
     kind = sources[0]
     spec = BlockerSpec(kind)
-    if kind in ("spheres", "tree", "bound"):
+    if kind == "field":
+        _field_blocker_check(obj, ctx.sub("field"))
+    if kind in ("spheres", "tree", "bound", "field"):
         spec.path = _file(table[kind], base, ctx.sub(kind), (".h5",))
     elif kind == "fit":
         spec.count = _number(table["fit"], ctx.sub("fit"), lo=1, integer=True)
@@ -401,6 +409,17 @@ def _blocker(value, obj: ObjectSpec, ctx: _Ctx, base: Path) -> BlockerSpec:
     if "branching" in table:
         spec.branching = _number(table["branching"], ctx.sub("branching"), lo=2, integer=True)
     return spec
+
+
+def _field_blocker_check(obj: ObjectSpec, ctx: _Ctx) -> None:
+    """A shadow field is precomputed for a rigid shape: no skin, uniform scale only."""
+    if obj.skin is not None:
+        raise ctx.error("a shadow field is for rigid objects; a skinned object needs "
+                        "'bound' or 'fit' spheres")
+    for pose in [obj.pose] + [k.pose for k in obj.keyframes]:
+        if np.ptp(pose.scale) > 1e-9 * np.max(pose.scale):
+            raise ctx.error(f"a shadow field needs a uniform scale, got {pose.scale.tolist()}; "
+                            "use a sphere-set blocker for a stretched object")
 
 
 def _object(table: Any, index: int, settings: Settings, ctx: _Ctx, base: Path) -> ObjectSpec:
