@@ -10,7 +10,15 @@ The runtime lookup is :mod:`shtools.runtime.fields` (NumPy + h5py only); the ass
 is :mod:`shtools.data_formats.field`.  Nothing here imports :mod:`shtools.reference`.
 """
 
-from shtools.fields.build import FieldParameters, FieldReport, log_ocvs, sample_field
+from shtools.fields.build import (
+    FieldParameters,
+    FieldReport,
+    SampledShells,
+    build_field,
+    log_ocvs,
+    sample_field,
+    sample_shells,
+)
 from shtools.fields.quantize import dequantize, quantize
 from shtools.fields.reduction import l1_error, reduce_shell
 from shtools.fields.sampling import (
@@ -25,7 +33,9 @@ from shtools.fields.sampling import (
 __all__ = [
     "FieldParameters",
     "FieldReport",
+    "SampledShells",
     "bounding_sphere",
+    "build_field",
     "cone_mask",
     "dequantize",
     "direction_map",
@@ -36,5 +46,6 @@ __all__ = [
     "reduce_shell",
     "sample_field",
     "sample_ocvs",
+    "sample_shells",
     "shell_radii",
 ]

@@ -108,6 +108,84 @@ def log_ocvs(ocv, floor: float = LOG_FLOOR, eps: float = LOG_EPS) -> np.ndarray:
     return sh_log(g, "eigen", eps=eps)
 
 
+@dataclass
+class SampledShells:
+    """Full-resolution OCVs of every shell, before reduction (:func:`sample_shells`).
+
+    Attributes
+    ----------
+    center : ndarray, shape (3,)
+    bounding_radius : float
+    radii : ndarray, shape (C,)
+    grids : ndarray, shape (C, R, R, n*n)
+    rays : int
+        Rays cast (after the cone cull).
+    rays_uncull : int
+        Rays a sampler without the cull would cast.
+    seconds : float
+        Time spent casting and projecting.
+    """
+
+    center: np.ndarray
+    bounding_radius: float
+    radii: np.ndarray
+    grids: np.ndarray
+    rays: int
+    rays_uncull: int
+    seconds: float
+
+
+def _check_solid(v: np.ndarray) -> None:
+    # a flat mesh blocks nothing from most points and has no interior (qhull fails on it)
+    centred = v - v.mean(axis=0)
+    sing = np.linalg.svd(centred, compute_uv=False) if len(v) >= 3 else np.zeros(3)
+    if len(sing) < 3 or sing[2] <= 1e-9 * max(sing[0], 1e-300):
+        raise InputError("the mesh is flat (no extent along one axis); a shadow field needs a "
+                         "solid -- thicken it first (e.g. `shtools spheres fit --thickness`)")
+
+
+def sample_shells(mesh, params: FieldParameters | None = None, *,
+                  progress: Callable[[int], None] | None = None) -> SampledShells:
+    """Cast and project the OCVs of every shell at the initial resolution.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+    params : FieldParameters, optional
+        ``shells``, ``resolution``, ``map_size`` and ``order`` are used.
+    progress : callable, optional
+        Called with the number of samples done after each shell.
+
+    Returns
+    -------
+    SampledShells
+    """
+    from shtools.geometry.raycast import RayCaster
+
+    params = params or FieldParameters()
+    params.validate()
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    _check_solid(v)
+    center, vr = bounding_sphere(v)
+    caster = RayCaster(v, mesh.faces)
+    dirs, weights = direction_map(params.map_size)
+    radii = shell_radii(vr, params.shells)
+    R0 = params.resolution
+    sample_dirs = grid_directions(R0).reshape(-1, 3)
+    n2 = params.order ** 2
+    stats = {"rays": 0}
+    grids = np.empty((params.shells, R0, R0, n2))
+    t0 = time.perf_counter()
+    for c, r in enumerate(radii):
+        points = center + r * sample_dirs
+        grids[c] = sample_ocvs(caster, center, vr, points, dirs, weights, params.order,
+                               stats=stats).reshape(R0, R0, n2)
+        if progress is not None:
+            progress(R0 * R0)
+    return SampledShells(center, vr, radii, grids, stats["rays"],
+                         params.shells * R0 * R0 * dirs.shape[0], time.perf_counter() - t0)
+
+
 def sample_field(mesh, params: FieldParameters | None = None, *,
                  self_visibility: Callable | None = None,
                  progress: Callable[[int], None] | None = None) -> tuple[ShadowField, FieldReport]:
@@ -120,7 +198,8 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
     params : FieldParameters, optional
     self_visibility : callable, optional
         ``f(vertices, normals, meshes, order) -> (V, n*n)``: per-vertex
-        self-visibility O_v stored with the field (rigid objects).
+        self-visibility O_v stored with the field (rigid objects;
+        :func:`shtools.fields.self_visibility.self_visibility`).
     progress : callable, optional
         Called with the number of samples done after each shell.
 
@@ -131,38 +210,44 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
     Raises
     ------
     InputError
-        Bad parameters, or a flat mesh (zero-volume bounding sphere).
+        Bad parameters, or a flat mesh.
+    """
+    params = params or FieldParameters()
+    params.validate()
+    t0 = time.perf_counter()
+    sampled = sample_shells(mesh, params, progress=progress)
+    fld, rep = build_field(sampled, params, mesh=mesh, self_visibility=self_visibility)
+    rep.seconds["total"] = time.perf_counter() - t0
+    return fld, rep
+
+
+def build_field(sampled: SampledShells, params: FieldParameters | None = None, *, mesh=None,
+                self_visibility: Callable | None = None) -> tuple[ShadowField, FieldReport]:
+    """Reduce, log and quantize sampled shells into a :class:`ShadowField`.
+
+    Parameters
+    ----------
+    sampled : SampledShells
+    params : FieldParameters, optional
+        ``threshold``, ``min_resolution``, ``cumulative``, ``bits``, ``log_floor``,
+        ``log_eps`` are used.
+    mesh : trimesh.Trimesh, optional
+        For O_v and the open-mesh record.
+    self_visibility : callable, optional
+        See :func:`sample_field`.
+
+    Returns
+    -------
+    ShadowField, FieldReport
     """
     from shtools.geometry.mesh import boundary_edges
-    from shtools.geometry.raycast import RayCaster
 
     params = params or FieldParameters()
     params.validate()
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    # a flat mesh blocks nothing from most points and has no interior (qhull fails on it)
-    centred = v - v.mean(axis=0)
-    sing = np.linalg.svd(centred, compute_uv=False) if len(v) >= 3 else np.zeros(3)
-    if len(sing) < 3 or sing[2] <= 1e-9 * max(sing[0], 1e-300):
-        raise InputError("the mesh is flat (no extent along one axis); a shadow field needs a "
-                         "solid -- thicken it first (e.g. `shtools spheres fit --thickness`)")
-    center, vr = bounding_sphere(v)
-    caster = RayCaster(v, mesh.faces)
-    dirs, weights = direction_map(params.map_size)
-    radii = shell_radii(vr, params.shells)
-    R0 = params.resolution
-    sample_dirs = grid_directions(R0).reshape(-1, 3)
-    n2 = params.order ** 2
-    stats = {"rays": 0}
-    t0 = time.perf_counter()
     ocv, log_q, offs, steps, log_offs, log_steps = [], [], [], [], [], []
     res, level_err, cum_err = [], [], []
-    t_cast = t_log = 0.0
-    for _c, r in enumerate(radii):
-        ts = time.perf_counter()
-        points = center + r * sample_dirs
-        grid = sample_ocvs(caster, center, vr, points, dirs, weights, params.order,
-                           stats=stats).reshape(R0, R0, n2)
-        t_cast += time.perf_counter() - ts
+    t_log = 0.0
+    for grid in sampled.grids:
         red = reduce_shell(grid, params.threshold, params.min_resolution,
                            cumulative=params.cumulative)
         q, o, s = quantize(red.grid, params.bits)
@@ -178,15 +263,14 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         res.append(red.resolution)
         level_err.append(red.level_errors)
         cum_err.append(red.cumulative_error)
-        if progress is not None:
-            progress(R0 * R0)
     sv = None
     ts = time.perf_counter()
-    if self_visibility is not None:
-        sv = np.asarray(self_visibility(v, np.asarray(mesh.vertex_normals), [mesh],
-                                        params.order), dtype=np.float32)
+    if self_visibility is not None and mesh is not None:
+        sv = np.asarray(self_visibility(np.asarray(mesh.vertices, dtype=np.float64),
+                                        np.asarray(mesh.vertex_normals), [mesh], params.order),
+                        dtype=np.float32)
     t_sv = time.perf_counter() - ts
-    n_boundary = len(boundary_edges(mesh))
+    n_boundary = len(boundary_edges(mesh)) if mesh is not None else 0
     attrs = {
         "quadrature": f"latlong {params.map_size}x{params.map_size} cell-centred, exact cell "
                       "solid angles",
@@ -207,8 +291,8 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         attrs["leak_note"] = (f"open mesh ({n_boundary} boundary edges): rays leak through the "
                               "holes, so samples inside see light through them")
     fld = ShadowField(
-        center=center, bounding_radius=vr, shell_radii=radii,
-        resolution=np.asarray(res, dtype=np.int64), ocv=ocv,
+        center=sampled.center, bounding_radius=sampled.bounding_radius,
+        shell_radii=sampled.radii, resolution=np.asarray(res, dtype=np.int64), ocv=ocv,
         offset=np.stack(offs), step=np.stack(steps), log_ocv=log_q,
         log_offset=np.stack(log_offs), log_step=np.stack(log_steps), order=params.order,
         self_visibility=sv,
@@ -216,8 +300,8 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         level_error=np.asarray([e[-1] if e else 0.0 for e in level_err]),
         attrs=attrs,
     )
-    report = FieldReport(res, level_err, cum_err, rays=stats["rays"],
-                         rays_uncull=params.shells * R0 * R0 * dirs.shape[0],
-                         seconds={"total": time.perf_counter() - t0, "cast": t_cast,
+    report = FieldReport(res, level_err, cum_err, rays=sampled.rays,
+                         rays_uncull=sampled.rays_uncull,
+                         seconds={"total": sampled.seconds, "cast": sampled.seconds,
                                   "log": t_log, "self_visibility": t_sv})
     return fld, report

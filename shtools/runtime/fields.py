@@ -123,15 +123,24 @@ def interpolate_grid(grid, theta, phi) -> np.ndarray:
     return np.einsum("pk,pkc->pc", weight, flat[index])
 
 
-def _flatten(shells: list, K: int) -> tuple[np.ndarray, np.ndarray]:
+def _flatten(shells: list, offset, step, K: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every shell's samples, dequantized, in one float32 table ``(sum R_c^2, K)``.
+
+    Dequantizing once at load (not per lookup) is exact: within a shell the
+    bilinear weights sum to 1, so interpolating then dequantizing gives the same
+    value, and between shells the values must be dequantized first anyway.
+    """
     base = np.zeros(len(shells), dtype=np.int64)
     total = 0
     for c, q in enumerate(shells):
         base[c] = total
         total += q.shape[0] * q.shape[1]
-    flat = np.empty((total, K), dtype=np.uint8)
+    flat = np.empty((total, K), dtype=np.float32)
+    off = np.asarray(offset, np.float32)
+    st = np.asarray(step, np.float32)
     for c, q in enumerate(shells):
-        flat[base[c]:base[c] + q.shape[0] * q.shape[1]] = np.asarray(q).reshape(-1, K)
+        rows = np.asarray(q).reshape(-1, K).astype(np.float32)
+        flat[base[c]:base[c] + rows.shape[0]] = off[c] + rows * st[c]
     return flat, base
 
 
@@ -164,12 +173,10 @@ class FieldTable:
         C = self.radii.shape[0]
         self.fade = float(self.radii[-1] - self.radii[-2]) if C > 1 else float(self.radii[0])
         self.fade_end = float(self.radii[-1] + self.fade)
-        self._data = {}
-        for space, shells, off, step in (("ocv", fld.ocv, fld.offset, fld.step),
-                                         ("log", fld.log_ocv, fld.log_offset, fld.log_step)):
-            flat, base = _flatten(shells, K)
-            self._data[space] = (flat, base, np.asarray(off, np.float32),
-                                 np.asarray(step, np.float32))
+        self._data = {
+            "ocv": _flatten(fld.ocv, fld.offset, fld.step, K),
+            "log": _flatten(fld.log_ocv, fld.log_offset, fld.log_step, K),
+        }
 
     def lookup(self, points, space: str = "ocv") -> np.ndarray:
         """Field value at object-frame points (no rotation), shape ``(P, n*n)`` float32.
@@ -189,31 +196,34 @@ class FieldTable:
         return out
 
     def _lookup_chunk(self, p, space):
-        flat, base, off, step = self._data[space]
-        rel = p - self.center
+        flat, base = self._data[space]
+        rel = (p - self.center).astype(np.float32)
         d = np.sqrt(np.einsum("pi,pi->p", rel, rel))
-        safe = np.where(d > 0, d, 1.0)
-        theta = np.arccos(np.clip(rel[:, 2] / safe, -1.0, 1.0)).astype(np.float32)
-        phi = np.arctan2(rel[:, 1], rel[:, 0]).astype(np.float32)
+        safe = np.where(d > 0, d, np.float32(1))
+        theta = np.arccos(np.clip(rel[:, 2] / safe, -1, 1))
+        phi = np.arctan2(rel[:, 1], rel[:, 0])
         C = self.radii.shape[0]
+        d64 = d.astype(np.float64)
         if C > 1:
-            c1 = np.clip(np.searchsorted(self.radii, d, side="right") - 1, 0, C - 2)
-            w = np.clip((d - self.radii[c1]) / (self.radii[c1 + 1] - self.radii[c1]), 0, 1)
+            c1 = np.clip(np.searchsorted(self.radii, d64, side="right") - 1, 0, C - 2)
+            w = np.clip((d64 - self.radii[c1]) / (self.radii[c1 + 1] - self.radii[c1]), 0, 1)
             shells = ((c1, 1 - w), (c1 + 1, w))
         else:
             shells = ((np.zeros(p.shape[0], np.int64), np.ones(p.shape[0])),)
-        out = np.zeros((p.shape[0], flat.shape[1]), dtype=np.float32)
+        # the corners of both shells in one gather: (P, 8) rows and weights
+        index, weight = [], []
         for c, wc in shells:
-            index, weight = shell_bilinear(theta, phi, self.res[c])
-            q = flat[base[c][:, None] + index].astype(np.float32)  # (P, 4, K)
-            acc = np.einsum("pk,pkc->pc", weight, q)
-            out += wc.astype(np.float32)[:, None] * (off[c] + step[c] * acc)
+            idx, wb = shell_bilinear(theta, phi, self.res[c])
+            index.append(idx + base[c][:, None])
+            weight.append(wb * wc.astype(np.float32)[:, None])
+        index = np.concatenate(index, axis=1)
+        weight = np.concatenate(weight, axis=1)
         # beyond the last shell: fade to unoccluded over one shell spacing
-        fade = np.clip((d - self.radii[-1]) / self.fade, 0, 1).astype(np.float32)
-        if np.any(fade > 0):
-            out *= (1 - fade)[:, None]
-            if space == "ocv":
-                out[:, 0] += fade * np.float32(SQRT_4PI)
+        fade = np.clip((d64 - self.radii[-1]) / self.fade, 0, 1).astype(np.float32)
+        weight *= (1 - fade)[:, None]
+        out = np.einsum("pk,pkc->pc", weight, np.take(flat, index, axis=0))
+        if space == "ocv":
+            out[:, 0] += fade * np.float32(SQRT_4PI)
         return out
 
 
@@ -341,10 +351,12 @@ def field_log_visibility(points, normals, blockers, order: int, out_order: int |
     if out is None:
         out = np.zeros((p.shape[0], m * m), dtype=np.float32)
     K = order * order
+    acc = np.zeros((p.shape[0], K), dtype=np.float32)  # contiguous: cheaper row updates
     for b in blockers:
         rows = b.active_rows(p, normals)
         if rows.size:
-            out[rows, :K] += b.world_vectors(p[rows], "log")
+            acc[rows] += b.world_vectors(p[rows], "log")
+    out[:, :K] += acc
     return out
 
 
