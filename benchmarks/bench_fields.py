@@ -390,30 +390,38 @@ def part_scene(quick: bool) -> None:
         return out
 
     frames = 3 if quick else 6
-    print("| combination | processes | frame wall (ms), median | visibility+exp wall (ms) | "
-          "shading (ms) | vs Tamura CPU 1-3 fps (333-1000 ms) |")
-    print("|---|---|---|---|---|---|")
-    for space in ("log", "product"):
-        for processes in (1, None):
-            st = ShadowSettings(order=4, field_space=space, processes=processes)
+    print("| combination | accumulation order | processes | frame wall (ms), median | "
+          "visibility+exp wall (ms) | shading (ms) | frame CPU of the calling process (ms) | "
+          "vs Tamura CPU 1-3 fps (333-1000 ms), wall |")
+    print("|---|---|---|---|---|---|---|---|")
+    for space, acc, processes in (("log", None, 1), ("log", None, None), ("log", 4, 1),
+                                  ("log", 4, None), ("product", None, 1),
+                                  ("product", None, None), ("product", 4, 1)):
+        if True:
+            st = ShadowSettings(order=4, field_space=space, processes=processes, acc_order=acc)
             with ShadowRuntime(st) as rt:
                 g = rt.visibility(v, nrm, frame(0.0))  # warm-up: workers, tables
                 rt.shade(g, v, nrm, env)
-                walls, vis_t, sh_t = [], [], []
+                walls, vis_t, sh_t, cpus = [], [], [], []
                 for f in range(frames):
                     blockers = frame(0.1 * (f + 1))
+                    c0 = time.process_time()
                     w0 = time.perf_counter()
                     g = rt.visibility(v, nrm, blockers)
                     w1 = time.perf_counter()
                     rt.shade(g, v, nrm, env)
                     w2 = time.perf_counter()
                     walls.append(w2 - w0)
+                    cpus.append(time.process_time() - c0)
                     vis_t.append(w1 - w0)
                     sh_t.append(w2 - w1)
                 used = rt.last_stats.get("processes", 1)
+                acc_used = rt.acc_order
             ms = 1000 * float(np.median(walls))
-            print(f"| {space} | {used} | **{ms:.0f}** | {1000 * np.median(vis_t):.0f} | "
-                  f"{1000 * np.median(sh_t):.0f} | {333 / ms:.1f}-{1000 / ms:.1f}x |")
+            print(f"| {space} | {acc_used} | {used} | **{ms:.0f}** | "
+                  f"{1000 * np.median(vis_t):.0f} | {1000 * np.median(sh_t):.0f} | "
+                  f"{1000 * np.median(cpus):.0f} | {333 / ms:.1f}-{1000 / ms:.1f}x |")
+    print(f"\nafter: {machine()}")
 
 
 PARTS = {"sizes": part_sizes, "speed": part_speed, "accuracy": part_accuracy,

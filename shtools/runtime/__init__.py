@@ -29,6 +29,11 @@ Pipeline per frame (SHEXP sections 6–7):
 4. shade white Lambertian receivers with environment lighting and spherical
    lights, windowed (:mod:`~shtools.runtime.shading`).
 
+Small spherical lights: :mod:`~shtools.runtime.ssoc` (the soft shadow
+occlusion camera, Mo et al.; NumPy rasterised shadow and distortion maps) gives
+the visible fraction ``S`` of a light per receiver, shaded as ``S`` times
+:func:`~shtools.runtime.shading.sphere_light_unshadowed` (``docs/ssoc.md``).
+
 Defaults and costs (``benchmarks/bench_runtime.py``, issue 4): the log is
 accumulated at ``n_acc = min(n + 2, 6)`` and exponentiated there with PS*-2
 (HYB when ``n_acc <= 4``), then truncated to ``n``.  Accumulating at 6 for
@@ -67,11 +72,13 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
     Parameters (:mod:`~shtools.runtime.settings`); ``acc_order=None`` means
     ``min(n + 2, 6)``.
 ``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``
+``LogBlocker`` — protocol: any object with ``log_visibility(points (V,3), normals (V,3),
+order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 ``SphereLight(position (3,), radius, color (3,))``
 ``FieldBlocker(table, rotation (3,3), translation (3,), scale=1.0, skip_rows=None)``
     A rigid object's shadow field (``read_field`` of a ``field`` asset) posed
-    for the frame; ``FieldBlocker.from_matrix(field, M (4,4))`` refuses
-    non-uniform scale and shear.  Pass it in ``blockers`` with sphere blockers;
+    for the frame (a ``LogBlocker``); ``FieldBlocker.from_matrix(field, M (4,4))``
+    refuses non-uniform scale and shear.  Pass it in ``blockers`` with the others;
     ``settings.field_space`` ("log" default, or "product") says how it combines
     (:mod:`~shtools.runtime.fields`).
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
@@ -86,10 +93,16 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
 ``accumulate_log(points, normals, centers, radii, table, weights=None, ...)``
 ``apply_self_shadow_rules(dx, dy, dz, radius, nx, ny, nz)``
 ``CapLogTable(tables, order)``
+``ScalingTable(read_scaling(path))`` — SH scaling (Wang et al.): ``.values_at(k)``,
+    ``.matrix(k) -> (V, n*n, n*n)``, ``.apply(f, k, axes) = D^T M(k) D f``
+    (:mod:`~shtools.runtime.scaling`)
+``midrange_lighting(env_sh, points, center, radius, table, out_order=None)``
+    ``-> (V, n*n, 3)`` per-vertex environment inside a finite sphere; pass it as
+    ``env_sh`` to ``shade``.
 """
 
 from shtools.runtime.accumulate import accumulate_log
-from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
@@ -100,6 +113,7 @@ from shtools.runtime.fields import (
     field_product_visibility,
 )
 from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.scaling import ScalingTable, midrange_lighting
 from shtools.runtime.self_shadow import apply_self_shadow_rules
 from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
@@ -108,7 +122,9 @@ __all__ = [
     "CapLogTable",
     "FieldBlocker",
     "FieldTable",
+    "LogBlocker",
     "ReceiverClusters",
+    "ScalingTable",
     "ShadowRuntime",
     "ShadowSettings",
     "SphereBlocker",
@@ -120,6 +136,7 @@ __all__ = [
     "field_log_visibility",
     "field_product_visibility",
     "lloyd_clusters",
+    "midrange_lighting",
     "shade",
     "sphere_light_sh",
 ]

@@ -1,4 +1,4 @@
-"""The per-frame evaluator: :class:`ShadowRuntime` (CONTRACTS.md section D)."""
+"""The per-frame evaluator: :class:`ShadowRuntime` (see ``docs/architecture.md``, runtime)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 
 from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
-from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
@@ -108,21 +108,15 @@ class ShadowRuntime:
         """Accumulated log visibility at the accumulation order, shape ``(V, n_acc^2)`` float32.
 
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
-        Shadow fields add their SH logs (order ``n``, zero above).
         """
         pts, nrm = _check_receivers(vertices, normals)
-        spheres, fields = _check_blockers(blockers)
-        if spheres:
-            work = self._frame_work(pts, spheres, clusters)
-            t1 = time.process_time()
-            f = self._accumulate(work.task(pts, nrm), self.last_stats)
-        else:
-            self.last_stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0,
-                               "seconds": {}, "processes": 1}
-            t1 = time.process_time()
-            f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
-        if fields:
-            field_log_visibility(pts, nrm, fields, self.order, self.acc_order, out=f)
+        spheres, others = self._blockers(blockers)
+        work = self._frame_work(pts, spheres, clusters)
+        t1 = time.process_time()
+        f = self._accumulate(work.task(pts, nrm), self.last_stats)
+        extra = self._other_logs(pts, nrm, others)
+        if extra is not None:
+            f += extra
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
         return f
 
@@ -136,9 +130,10 @@ class ShadowRuntime:
             Receiver positions this frame.
         normals : array_like, shape (V, 3)
             Unit receiver normals this frame.
-        blockers : list of SphereBlocker or FieldBlocker
-            Blocker spheres this frame (trees are refit from their leaves) and
-            posed shadow fields, combined as ``settings.field_space`` says.
+        blockers : list of SphereBlocker or LogBlocker
+            Blockers this frame: sphere sets (trees are refit from their
+            leaves) and blockers that give their own log visibility, added to
+            the spheres' log sum before the exp.
         clusters : ReceiverClusters, optional
             From :meth:`clusters`; with ``hierarchy`` on and none given, clusters
             are computed on the first call and reused while the vertex count
@@ -157,18 +152,23 @@ class ShadowRuntime:
         (:mod:`shtools.runtime.parallel`); :meth:`close` stops them.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        spheres, fields = _check_blockers(blockers)
+        spheres, others = self._blockers(blockers)
+        fields = [b for b in others if isinstance(b, FieldBlocker)]
         if fields:
-            return self._visibility_with_fields(pts, nrm, spheres, fields, clusters)
+            rest = [b for b in others if not isinstance(b, FieldBlocker)]
+            return self._visibility_with_fields(pts, nrm, spheres + rest, fields, clusters)
         work = self._frame_work(pts, spheres, clusters)
         stats = self.last_stats
+        extra = self._other_logs(pts, nrm, others)
         if self.processes > 1 and stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
-            g = self._parallel_visibility(work, pts, nrm)
+            g = self._parallel_visibility(work, pts, nrm, extra)
             stats["seconds"]["accumulate_exp_wall"] = time.perf_counter() - w0
             return g
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), stats)
+        if extra is not None:
+            f += extra
         t2 = time.process_time()
         g = self.exponentiate(f)
         stats["seconds"]["accumulate"] = t2 - t1
@@ -179,23 +179,40 @@ class ShadowRuntime:
         """Visibility ``(V', n*n)`` and evaluated pairs of one part of a frame.
 
         ``task`` comes from :meth:`FrameWork.task` (also what a worker process
-        runs; see :mod:`shtools.runtime.parallel`).
+        runs; see :mod:`shtools.runtime.parallel`), or is ``("with_log", task,
+        extra)`` with the part's rows of the other blockers' log sum.
         """
         if task[0] == "fields":
             return self._field_part(task), 0
+        extra = None
+        if task[0] == "with_log":
+            _, task, extra = task
         stats = {"pairs_evaluated": 0}
-        g = self.exponentiate(self._accumulate(task, stats))
-        return g, stats["pairs_evaluated"]
+        f = self._accumulate(task, stats)
+        if extra is not None:
+            f += extra
+        return self.exponentiate(f), stats["pairs_evaluated"]
 
-    def _visibility_with_fields(self, pts, nrm, spheres, fields, clusters) -> np.ndarray:
-        """Visibility of a frame with shadow fields (sphere logs first, then the fields).
+    def _blockers(self, blockers) -> tuple[list[SphereBlocker], list]:
+        """:func:`_check_blockers`, and shadow fields must have the shading order."""
+        spheres, others = _check_blockers(blockers)
+        for b in others:
+            if isinstance(b, FieldBlocker) and b.table.order != self.order:
+                raise InputError(f"a shadow field has SH order {b.table.order} but the runtime "
+                                 f"shades at order {self.order}; resample it with "
+                                 f"`shtools field sample --order {self.order}`")
+        return spheres, others
 
-        The sphere blockers' log sum is accumulated in this process; the field
-        lookups and the exp (log space) or products (product space) are split by
-        receiver rows over this process and the workers.
+    def _visibility_with_fields(self, pts, nrm, others, fields, clusters) -> np.ndarray:
+        """Visibility of a frame with shadow fields.
+
+        The other blockers' log sum (spheres, other log blockers) is made in this
+        process; the field lookups and the exp (``field_space = "log"``) or the
+        exp and the products (``"product"``) are split by receiver rows over this
+        process and the workers when the frame has enough (receiver, field) pairs.
         """
-        if spheres:
-            f = self.log_visibility(pts, nrm, spheres, clusters)
+        if others:
+            f = self.log_visibility(pts, nrm, others, clusters)
         else:
             self.last_stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0,
                                "seconds": {}, "processes": 1}
@@ -228,8 +245,8 @@ class ShadowRuntime:
         return g
 
     def _field_part(self, task) -> np.ndarray:
-        """Visibility ``(V', n*n)`` of one ``"fields"`` part: add field logs and exp, or
-        exp the sphere logs and multiply the fields' OCVs in."""
+        """Visibility ``(V', n*n)`` of one ``"fields"`` part: add the field logs and exp,
+        or exp the other blockers' logs and multiply the fields' OCVs in."""
         _, space, pts, nrm, f, fields = task
         if space == "log":
             if f is None:
@@ -241,6 +258,22 @@ class ShadowRuntime:
         base = None if f is None else self.exponentiate(f)
         g = field_product_visibility(pts, nrm, fields, self.order, self.acc_order, base=base)
         return g.astype(np.float32)
+
+    def _other_logs(self, pts, nrm, others: list) -> np.ndarray | None:
+        """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None."""
+        if not others:
+            return None
+        t0 = time.process_time()
+        total = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+        for b in others:
+            f = np.asarray(b.log_visibility(pts, nrm, self.acc_order))
+            if f.shape != total.shape or not np.isfinite(f).all():
+                raise InputError(
+                    f"{type(b).__name__}.log_visibility returned shape {f.shape} (or "
+                    f"non-finite values); expected finite values of shape {total.shape}")
+            total += f
+        self.last_stats["seconds"]["other_blockers"] = time.process_time() - t0
+        return total
 
     def close(self) -> None:
         """Stop the worker processes, if any were started (the runtime stays usable)."""
@@ -277,7 +310,8 @@ class ShadowRuntime:
         forest = build_forest(blockers)
         cl_centers, cl_radii = clusters.bounds(pts)
         cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
-        weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
+        weights = ratio_weights(forest, cuts, cl_centers, self.table,
+                                s.resolved_theta_min())
         sizes = cuts.in_cut.sum(axis=1)
         s_max = max(1, int(sizes.max(initial=0)))
         # each cluster's cut nodes first (stable), padded with radius 0
@@ -312,11 +346,13 @@ class ShadowRuntime:
                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
                                    kernels=self._kernels, stats=stats)
 
-    def _parallel_visibility(self, work: FrameWork, pts, nrm) -> np.ndarray:
+    def _parallel_visibility(self, work: FrameWork, pts, nrm, extra=None) -> np.ndarray:
         """Visibility with the frame split over this process and the workers."""
         if self._workers is None:
             self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables)
         parts = work.split(pts, nrm, self.processes)
+        if extra is not None:
+            parts = [(rows, ("with_log", task, extra[rows])) for rows, task in parts]
         try:
             futures = [self._workers.submit(task) for _, task in parts[1:]]
             g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
@@ -352,15 +388,18 @@ class ShadowRuntime:
     def shade(self, visibility, vertices, normals, env_sh=None,
               sphere_lights: tuple[SphereLight, ...] | list = (), *,
               local_visibility=None, form: str = "tabulated") -> np.ndarray:
-        """White Lambertian outgoing radiance (DESIGN.md "Radiance"), shape ``(V, 3)``.
+        """White Lambertian outgoing radiance, shape ``(V, 3)``.
+
+        Radiance as defined in ``docs/conventions.md`` ("Light and radiance").
 
         Parameters
         ----------
         visibility : array_like, shape (V, n*n)
             From :meth:`visibility`.
         vertices, normals : array_like, shape (V, 3)
-        env_sh : array_like, shape (n'*n', 3), optional
-            RGB environment lighting in SH (truncated/padded to ``n``).
+        env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+            RGB environment lighting in SH (truncated/padded to ``n``), shared
+            or per vertex (mid-range lighting).
         sphere_lights : sequence of SphereLight
         local_visibility : array_like, shape (V, n*n), optional
             Baked visibility of static local occluders (Sec. 7).
@@ -371,7 +410,8 @@ class ShadowRuntime:
         pts, nrm = _check_receivers(vertices, normals)
         transfer, changed = self._cosine_transfer(nrm)
         env_transfer = None
-        if env_sh is not None and local_visibility is None and form == "tabulated":
+        if (env_sh is not None and local_visibility is None and form == "tabulated"
+                and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
             env_transfer = self._lit_transfer(env_sh, transfer, changed)
         return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                       window_kind=s.resolved_window(), window_h=s.window_h,
@@ -510,18 +550,18 @@ def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
     return pts, nrm
 
 
-def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[FieldBlocker]]:
-    """The frame's sphere blockers and shadow-field blockers, in their given order."""
-    spheres, fields = [], []
+def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
+    """Split blockers into sphere sets and blockers with their own log visibility."""
+    spheres, others = [], []
     for b in blockers:
         if isinstance(b, SphereBlocker):
             spheres.append(b)
-        elif isinstance(b, FieldBlocker):
-            fields.append(b)
+        elif isinstance(b, LogBlocker):
+            others.append(b)
         else:
-            raise InputError("blockers must be SphereBlocker or FieldBlocker objects, got "
-                             f"{type(b).__name__}")
-    return spheres, fields
+            raise InputError(f"blockers must be SphereBlocker objects or have "
+                             f"log_visibility(points, normals, order), got {type(b).__name__}")
+    return spheres, others
 
 
 def _field_rows(fields: list[FieldBlocker], a: int, b: int) -> list[FieldBlocker]:

@@ -310,6 +310,21 @@ class FieldBlocker:
             active[np.asarray(self.skip_rows)] = False
         return np.flatnonzero(active)
 
+    def log_visibility(self, points, normals, order: int) -> np.ndarray:
+        """The runtime's log-blocker protocol: this field's SH log at the receivers.
+
+        Parameters
+        ----------
+        points, normals : ndarray, shape (V, 3)
+        order : int
+            The accumulation order (``>=`` the field's order; zero above it).
+
+        Returns
+        -------
+        ndarray, shape (V, order*order) float32
+        """
+        return field_log_visibility(points, normals, [self], self.table.order, order)
+
     def world_vectors(self, points, space: str = "ocv") -> np.ndarray:
         """Field value at world points, rotated to the world, shape ``(P, n*n)`` float32."""
         local = self.table.lookup(self.local_points(points), space)

@@ -1,4 +1,4 @@
-r"""Shading of white Lambertian receivers (SHEXP Sec. 7, DESIGN.md "Radiance").
+r"""Shading of white Lambertian receivers (SHEXP Sec. 7, docs/conventions.md "Light and radiance").
 
 Outgoing radiance of an albedo-1 diffuse receiver with unit normal ``N`` under
 distant lighting ``L`` and visibility ``g`` is the triple product
@@ -217,6 +217,50 @@ def _sphere_light_zonal(light: SphereLight, points, order: int):
     return zh, axis
 
 
+def sphere_light_unshadowed(light: SphereLight, points, normals) -> np.ndarray:
+    r"""Unshadowed radiance per unit colour of a spherical light, closed form, shape ``(V,)``.
+
+    :math:`E/\pi` with :math:`E = \int_{cap} \max(0, N\cdot s)\,ds` the cosine-weighted
+    solid angle of the light's cap: :math:`\pi\sin^2\sigma\cos\theta` while the whole
+    cap is above the horizon (:math:`\cos\theta > \sin\sigma`), and the exact
+    horizon-clipped form factor of a sphere (Snyder 1996, as written in Lagarde & de
+    Rousiers 2014, "Moving Frostbite to PBR", eq. 15 listing) otherwise.  The
+    small-light paths (occlusion camera, ray tracing) multiply it by the visible
+    fraction; it is not SH-truncated.
+
+    Parameters
+    ----------
+    light : SphereLight
+    points, normals : array_like, shape (V, 3)
+
+    Returns
+    -------
+    ndarray, shape (V,) float64
+        1 for a receiver inside the light (the whole hemisphere at unit radiance).
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    delta = light.position[None, :] - p
+    dist = np.linalg.norm(delta, axis=1)
+    inside = dist <= light.radius
+    safe = np.where(inside, 1.0, dist)
+    cos_t = np.clip(np.einsum("ij,ij->i", nrm, delta) / safe, -1.0, 1.0)
+    sin2 = np.minimum((light.radius / safe) ** 2, 1.0)
+    full = cos_t * cos_t > sin2
+    e = np.pi * sin2 * np.maximum(cos_t, 0.0)
+    part = ~full & ~inside
+    if part.any():
+        ct, s2 = cos_t[part], sin2[part]
+        st = np.sqrt(np.maximum(1.0 - ct * ct, 1e-300))
+        x = np.sqrt(np.maximum(1.0 / s2 - 1.0, 0.0))
+        y = np.clip(-x * ct / st, -1.0, 1.0)
+        sty = st * np.sqrt(np.maximum(1.0 - y * y, 0.0))
+        with np.errstate(divide="ignore"):
+            e[part] = (ct * np.arccos(y) - x * sty) * s2 + np.arctan2(sty, x)
+    e = np.where(inside, np.pi, np.maximum(e, 0.0))
+    return e / np.pi
+
+
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,
           window_kind: str | None = "cosine", window_h: float | None = None,
           local_visibility=None, form: str = "tabulated", transfer=None,
@@ -229,8 +273,10 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         Visibility ``g`` per vertex.
     points, normals : array_like, shape (V, 3)
         Receiver positions (for spherical lights) and unit normals.
-    env_sh : array_like, shape (n'*n', 3), optional
-        RGB environment radiance; truncated or zero-padded to order ``n``.
+    env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+        RGB environment radiance, shared or per vertex (mid-range lighting,
+        :func:`shtools.runtime.scaling.midrange_lighting`); truncated or
+        zero-padded to order ``n``.
     sphere_lights : sequence of SphereLight
     order : int
         Shading order ``n``.
@@ -264,6 +310,8 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
     out = np.zeros((g.shape[0], 3))
     if env_transfer is not None:
         out += lit_transfer_radiance(env_transfer, g_w)
+    elif env_sh is not None and np.ndim(env_sh) == 3:  # per vertex (mid-range lighting)
+        out += per_vertex_environment_radiance(transfer, env_sh, g_w, win)
     elif env_sh is not None:
         mats = environment_matrices(env_sh, order, window_kind, window_h)
         fn = tabulated_radiance if form == "tabulated" else on_the_fly_radiance
@@ -272,6 +320,30 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         out += sphere_lights_radiance(sphere_lights, np.asarray(points), transfer, g_w, order,
                                       win)
     return out
+
+
+def per_vertex_environment_radiance(transfer, env_sh, visibility, win) -> np.ndarray:
+    """Radiance under a per-vertex environment: ``(H(N) * g) . L_v``, shape ``(V, 3)``.
+
+    Parameters
+    ----------
+    transfer : ndarray, shape (V, n*n)
+        ``H(N)`` (or ``H(N) * g_p``).
+    env_sh : array_like, shape (V, n'*n', 3)
+        RGB radiance per vertex; truncated or zero-padded to order ``n``.
+    visibility : ndarray, shape (V, n*n)
+        Windowed visibility.
+    win : ndarray, shape (n*n,)
+        Window factors of the lighting.
+    """
+    size = transfer.shape[1]
+    order = round(math.sqrt(size))
+    env = np.asarray(env_sh, dtype=np.float32)
+    env_n = np.zeros((env.shape[0], size, env.shape[2]), np.float32)
+    env_n[:, :min(size, env.shape[1])] = env[:, :size]
+    shadowed = QuadratureProducts(order, np.float32).product(
+        np.asarray(transfer, np.float32), np.asarray(visibility, np.float32))
+    return np.einsum("vs,vsc->vc", shadowed * win.astype(np.float32), env_n).astype(np.float64)
 
 
 def environment_matrices(env_sh, order: int, window_kind: str | None = "cosine",
