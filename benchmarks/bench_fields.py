@@ -204,16 +204,23 @@ def part_speed(quick: bool) -> None:
         out = Path(tmp) / "teapot.field.h5"
         env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
         load0 = machine()
+        c0 = os.times()
         w0 = time.perf_counter()
         done = subprocess.run([sys.executable, "-m", "shtools.cli.main", "field", "sample",
                                str(DATA / "meshes" / "teapot.obj"), "-o", str(out), "--json"],
                               capture_output=True, text=True, env=env)
         wall = time.perf_counter() - w0
+        c1 = os.times()
+    cpu = (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
     import json
 
-    summary = json.loads(done.stdout) if done.returncode == 0 else {"error": done.stderr}
+    if done.returncode != 0:
+        print(f"\n`shtools field sample teapot.obj` failed: {done.stderr.strip()}")
+        return
+    summary = json.loads(done.stdout)
     print(f"\nDefault `shtools field sample teapot.obj` (32 shells, R 64, 64x64 map, order 4, "
-          f"O_v included): **{wall:.1f} s wall** (stage times {summary.get('seconds')}; "
+          f"O_v included): **{wall:.1f} s wall**, {cpu:.1f} s CPU (stage times "
+          f"{summary.get('seconds')}; "
           f"{summary.get('rays', 0):,} rays of {summary.get('rays_without_cull', 0):,} without "
           f"the cone cull); before: {load0}; after: {machine()}")
 
