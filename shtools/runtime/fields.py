@@ -173,6 +173,10 @@ class FieldTable:
         C = self.radii.shape[0]
         self.fade = float(self.radii[-1] - self.radii[-2]) if C > 1 else float(self.radii[0])
         self.fade_end = float(self.radii[-1] + self.fade)
+        steps = np.diff(self.radii)
+        self._step = float(steps[0]) if C > 1 else 1.0
+        #: equally spaced shells (the default): the shell index is arithmetic, no search
+        self._uniform = C > 1 and bool(np.allclose(steps, self._step, rtol=1e-9, atol=0))
         self._data = {
             "ocv": _flatten(fld.ocv, fld.offset, fld.step, K),
             "log": _flatten(fld.log_ocv, fld.log_offset, fld.log_step, K),
@@ -203,24 +207,30 @@ class FieldTable:
         theta = np.arccos(np.clip(rel[:, 2] / safe, -1, 1))
         phi = np.arctan2(rel[:, 1], rel[:, 0])
         C = self.radii.shape[0]
-        d64 = d.astype(np.float64)
+        P = p.shape[0]
         if C > 1:
-            c1 = np.clip(np.searchsorted(self.radii, d64, side="right") - 1, 0, C - 2)
-            w = np.clip((d64 - self.radii[c1]) / (self.radii[c1 + 1] - self.radii[c1]), 0, 1)
+            if self._uniform:  # r_c = r_0 + c dr (the default shells): no search
+                x = np.clip((d - np.float32(self.radii[0])) / np.float32(self._step), 0, C - 1)
+                c1 = np.minimum(x.astype(np.int64), C - 2)
+                w = x - c1
+            else:
+                d64 = d.astype(np.float64)
+                c1 = np.clip(np.searchsorted(self.radii, d64, side="right") - 1, 0, C - 2)
+                w = np.clip((d64 - self.radii[c1]) / (self.radii[c1 + 1] - self.radii[c1]),
+                            0, 1).astype(np.float32)
             shells = ((c1, 1 - w), (c1 + 1, w))
         else:
-            shells = ((np.zeros(p.shape[0], np.int64), np.ones(p.shape[0])),)
-        # the corners of both shells in one gather: (P, 8) rows and weights
-        index, weight = [], []
-        for c, wc in shells:
-            idx, wb = shell_bilinear(theta, phi, self.res[c])
-            index.append(idx + base[c][:, None])
-            weight.append(wb * wc.astype(np.float32)[:, None])
-        index = np.concatenate(index, axis=1)
-        weight = np.concatenate(weight, axis=1)
+            shells = ((np.zeros(P, np.int64), np.ones(P, np.float32)),)
+        # the corners of both shells in one gather: (P, 4 * shells) rows and weights
+        index = np.empty((P, 4 * len(shells)), dtype=np.int64)
+        weight = np.empty((P, 4 * len(shells)), dtype=np.float32)
         # beyond the last shell: fade to unoccluded over one shell spacing
-        fade = np.clip((d64 - self.radii[-1]) / self.fade, 0, 1).astype(np.float32)
-        weight *= (1 - fade)[:, None]
+        fade = np.clip((d - np.float32(self.radii[-1])) / np.float32(self.fade), 0, 1)
+        keep = 1 - fade
+        for k, (c, wc) in enumerate(shells):
+            idx, wb = shell_bilinear(theta, phi, self.res[c])
+            index[:, 4 * k:4 * k + 4] = idx + base[c][:, None]
+            weight[:, 4 * k:4 * k + 4] = wb * (wc * keep)[:, None]
         out = np.einsum("pk,pkc->pc", weight, np.take(flat, index, axis=0))
         if space == "ocv":
             out[:, 0] += fade * np.float32(SQRT_4PI)
