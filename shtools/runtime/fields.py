@@ -182,6 +182,12 @@ class FieldTable:
             "log": _flatten(fld.log_ocv, fld.log_offset, fld.log_step, K),
         }
 
+    def __getstate__(self):
+        # worker processes get the lookup tables only, not the stored (quantized) field
+        state = dict(self.__dict__)
+        state["field"] = None
+        return state
+
     def lookup(self, points, space: str = "ocv") -> np.ndarray:
         """Field value at object-frame points (no rotation), shape ``(P, n*n)`` float32.
 

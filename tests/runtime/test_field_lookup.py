@@ -209,3 +209,24 @@ def test_exp_of_interpolated_logs_is_as_accurate_as_interpolated_visibility(box,
     # measured: mean 0.011 (visibility) vs 0.012 (logs); a geometric mean between
     # samples differs from the arithmetic one by second-order terms
     assert e_log.mean() < 1.5 * e_vis.mean() + 0.005
+
+
+@pytest.mark.skipif(not __import__("shtools.runtime.parallel", fromlist=["x"]).fork_supported(),
+                    reason="this platform cannot fork, so the runtime runs in one process "
+                    "(nothing to compare)")
+@pytest.mark.parametrize("space", ["log", "product"])
+def test_two_processes_give_the_one_process_result(box_field, space):
+    rng = np.random.default_rng(4)
+    v = rng.uniform(-3, 3, (60000, 3))  # 60k x 4 fields >= MIN_PARALLEL_PAIRS: split
+    v[:, 1] = -0.5
+    n = np.tile([0.0, 1.0, 0.0], (len(v), 1))
+    blockers = [FieldBlocker(box_field, random_rotation(k), [k * 0.7 - 1, 0.2, 0.0],
+                             skip_rows=np.arange(k * 100, k * 100 + 50)) for k in range(4)]
+    out = {}
+    for processes in (1, 2):
+        with ShadowRuntime(ShadowSettings(order=4, processes=processes,
+                                          field_space=space)) as rt:
+            out[processes] = rt.visibility(v, n, blockers)
+            used = rt.last_stats["processes"]
+        assert used == processes
+    assert np.allclose(out[1], out[2], atol=1e-5)  # float32 arithmetic, same rows
