@@ -23,7 +23,7 @@ def light():
 @click.option("--window", type=setting_type("window"),
               default="none", show_default=True,
               help="Per-band window against ringing (cosine: the paper's filter).")
-@click.option("--window-h", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--window-h", type=setting_type("window_h"), default=None,
               help="Window width in bands (default: 2n for cosine, n otherwise).")
 @click.option("--rotate-y", type=float, default=0.0, show_default=True, metavar="DEG",
               help="Rotate the environment about +y (right-hand rule; +90 turns the image "
@@ -40,16 +40,12 @@ def project(image, order, output, window, window_h, rotate_y, mirror, exposure, 
     image centre towards -z in the Y-up world (docs/conventions.md).  Every
     basis function is integrated exactly over every pixel.
     """
-    from shtools.data_formats.light import write_light
-    from shtools.lighting import project_environment
+    from shtools.lighting.environment import project_environment_to_file
 
     start = time.perf_counter()
-    coeffs, info = project_environment(
-        image, order, window=window, window_h=window_h, rotate_y=rotate_y,
-        exposure=exposure, mirror=mirror,
-    )
-    write_light(output, coeffs, source="image", inputs={"image": image},
-                parameters={"order": order, **info})
+    coeffs, info = project_environment_to_file(image, order, output, window=window,
+                                               window_h=window_h, rotate_y=rotate_y,
+                                               exposure=exposure, mirror=mirror)
     seconds = time.perf_counter() - start
     mean = coeffs[0] / np.sqrt(4.0 * np.pi)  # average radiance over the sphere
     summary = {"output": output, "image": image, "order": order, **info,

@@ -41,15 +41,13 @@ def log_cmd(order, output, samples, plot_path, as_json):
     The asset holds cap visibility (vis_zh) and its log by eigen-inversion
     (log_zh) over theta in (0, pi/2], and the OL tables ol_norm, ol_a, ol_b.
     """
-    from shtools.data_formats.tables import read_tables, write_tables
-    from shtools.sh.tables import build_log_tables
+    from shtools.data_formats.tables import read_tables, write_log_tables
 
     if plot_path and order < 2:
         raise InputError("order 1 has no band above DC, so there are no OL curves to plot; "
                          "use --order 2 or more with --plot", plot_path)
     start = time.perf_counter()
-    built = build_log_tables(order, samples=samples)
-    write_tables(output, built, order, parameters={"samples": samples})
+    built = write_log_tables(output, order, samples=samples)
     seconds = time.perf_counter() - start
     summary = {
         "output": output,

@@ -15,7 +15,7 @@ import contextlib
 import hashlib
 import json
 import os
-import tempfile
+import secrets
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -172,6 +172,24 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+def _create_temporary(directory: Path, name: str) -> Path:
+    """Create an empty, new ``.<name>.<random>.tmp`` in ``directory`` and return its path.
+
+    The file is created with mode 0666, which the kernel masks by the process
+    umask -- the mode any output gets -- without reading (or changing) the
+    process-wide umask, which other threads of an embedding program may rely on.
+    """
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        path = directory / f".{name}.{secrets.token_hex(4)}.tmp"
+        try:
+            os.close(os.open(path, flags, 0o666))
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(f"could not create a temporary file for {name} in {directory}")
+
+
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``target``; rename it into place on success.
@@ -183,13 +201,7 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise AssetError("output folder does not exist; create it first", target)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
-    os.close(fd)
-    # mkstemp makes the file 0600; give outputs the usual umask-governed mode
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    tmp_path = Path(tmp)
+    tmp_path = _create_temporary(directory, target.name)
     try:
         yield tmp_path
         os.replace(tmp_path, target)
