@@ -82,6 +82,10 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
     refuses non-uniform scale and shear.  Pass it in ``blockers`` with the others;
     ``settings.field_space`` ("log" default, or "product") says how it combines
     (:mod:`~shtools.runtime.fields`).
+``SelfVisibility(log (R, n_acc^2), rows, rotation=None, blocker=None)``
+    An object's precomputed self-visibility (``transfer`` asset) on its own
+    receiver rows, added in log space in place of its own spheres
+    (``visibility(..., self_visibility=[...])``).
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;
     ``.visibility(vertices, normals, blockers, clusters=None) -> (V, n*n)``;
@@ -103,7 +107,7 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 """
 
 from shtools.runtime.accumulate import accumulate_log
-from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
@@ -126,6 +130,7 @@ __all__ = [
     "LogBlocker",
     "ReceiverClusters",
     "ScalingTable",
+    "SelfVisibility",
     "ShadowRuntime",
     "ShadowSettings",
     "SphereBlocker",

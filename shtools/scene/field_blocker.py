@@ -7,8 +7,9 @@ and poses a :class:`shtools.runtime.FieldBlocker` per frame from the object's
 world matrix.  The runtime combines it as ``settings.field_space`` says (log
 space by default, or product space).  The baker gives the posed blocker the
 object's own receiver rows (``skip_rows``: a surface point lies inside the
-field's innermost shells) and multiplies the stored self-visibility O_v into
-them (:func:`shtools.scene.bake.pose_frame`).
+field's innermost shells) and, unless the scene computes the object's
+self-visibility itself (``self_visibility``), adds the log of the O_v stored in
+the asset on those rows (:func:`shtools.scene.pose.pose_frame`).
 """
 
 from __future__ import annotations
@@ -53,7 +54,17 @@ class FieldKind(BlockerKind):
             raise AssetError(f"field holds self-visibility for {len(fld.self_visibility)} "
                              f"vertices but '{prep.spec.name}' has {len(prep.vertices)}; "
                              "resample it from this mesh", spec.path)
-        prep.blocker_data = FieldTable(fld)
+        table = FieldTable(fld)
+        if fld.self_visibility is not None and prep.spec.receives:
+            # the stored O_v as a self-visibility log at the accumulation order (zero above
+            # the field's order), used when the scene does not compute its own
+            from shtools.fields.self_visibility import self_visibility_log
+
+            acc = ctx.settings.resolved_acc_order()
+            log = np.zeros((len(prep.vertices), acc * acc), dtype=np.float32)
+            log[:, :order * order] = self_visibility_log(fld.self_visibility)
+            table.self_log = log
+        prep.blocker_data = table
         ctx.inputs[f"{prep.spec.name}.field"] = spec.path
 
     def pose(self, prep, world, joints):

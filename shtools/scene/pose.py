@@ -27,8 +27,7 @@ class FrameState:
     lights: list  # list[shtools.runtime.SphereLight]
     blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
     light_shadows: list = field(default_factory=list)  # the way of each light (by name)
-    #: (receiver rows, world-frame O_v (rows, n*n)) of shadow-field objects that receive
-    self_visibility: list = field(default_factory=list)
+    self_visibility: list = field(default_factory=list)  # list[shtools.runtime.SelfVisibility]
 
 
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
@@ -36,11 +35,12 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
     """
-    from shtools.runtime import SphereLight
+    from shtools.runtime import SelfVisibility, SphereLight
+    from shtools.scene.transfer import posed_local_log, rotation_of
 
     kinds = blocker_kinds()
     worlds = world_matrices(prepared.scene.objects, t)
-    verts, norms, blockers, meshes, self_vis = [], [], [], [], []
+    verts, norms, blockers, meshes, selfs = [], [], [], [], []
     n_rows = 0
     for o in prepared.objects:
         m = worlds[o.spec.name]
@@ -52,16 +52,24 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             joints = None
             local_v, local_n = o.vertices, o.normals
         world_v = transform_points(m, local_v)
-        rows = None
+        rotation = rotation_of(m) if o.self_log is not None else None
+        if rotation is not None:
+            # exact self-shadowing: its own spheres (appended next) are skipped on its rows
+            selfs.append(SelfVisibility(o.self_log, slice(n_rows, n_rows + len(world_v)),
+                                        rotation=rotation, blocker=len(blockers)))
+        if o.local_log is not None and joints is not None:
+            selfs.append(SelfVisibility(
+                posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m),
+                slice(n_rows, n_rows + len(world_v))))
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
-            rows = np.arange(n_rows, n_rows + len(world_v))
             n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
-            if rows is not None and hasattr(blockers[-1], "skip_rows"):
-                _own_rows(blockers[-1], rows, self_vis)
+            if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
+                _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
+                                selfs)
             if with_meshes:
                 meshes.append((world_v, o.faces))
     lights = []
@@ -70,27 +78,19 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
-                      [spec.shadows for spec in prepared.scene.lights], self_vis)
+                      [spec.shadows for spec in prepared.scene.lights], selfs)
 
 
-def _own_rows(blocker, rows: np.ndarray, self_vis: list) -> None:
-    """A shadow field never shades its own object (its surface is inside the innermost
-    shells): give it the object's receiver rows, and queue its stored O_v for them."""
-    from shtools.sh import rotate
+def _field_own_rows(o, blocker, world, rows, selfs: list) -> None:
+    """A shadow field never shades its own object (its surface lies inside the innermost
+    shells): the posed field skips the object's receiver rows, and the object's
+    self-shadowing comes from ``self_visibility`` when that is on for it, else from the
+    O_v stored in the field asset (its log, rotated with the object)."""
+    from shtools.runtime import SelfVisibility
+    from shtools.scene.transfer import rotation_of
 
     blocker.skip_rows = rows
-    sv = blocker.table.field.self_visibility
-    if sv is not None:
-        self_vis.append((rows, rotate(np.asarray(sv, np.float64), blocker.rotation)))
-
-
-def apply_self_visibility(vis: np.ndarray, state: FrameState, order: int) -> np.ndarray:
-    """Multiply the field objects' own O_v into their receiver rows (truncated product)."""
-    if not state.self_visibility:
-        return vis
-    from shtools.sh import product
-
-    vis = np.array(vis, dtype=np.float64)
-    for rows, sv in state.self_visibility:
-        vis[rows] = product(vis[rows], sv, order)
-    return vis
+    own_log = getattr(o.blocker_data, "self_log", None)
+    if o.self_log is None and own_log is not None:
+        selfs.append(SelfVisibility(own_log, slice(int(rows[0]), int(rows[-1]) + 1),
+                                    rotation=rotation_of(world)))
