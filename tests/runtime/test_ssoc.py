@@ -262,7 +262,6 @@ def _mesh_case(parts, c, r, settings, grid=72):
     return S[above], ref.fraction[above]
 
 
-@pytest.mark.slow
 def test_bunny_like_self_shadowing_matches_ray_tracing():
     S, ref = _mesh_case(_bunny_like(), np.array([0.5, 3.0, 0.4]), 0.2, SSOCSettings())
     pen = (ref > 0.02) & (ref < 0.98)
@@ -274,7 +273,6 @@ def test_bunny_like_self_shadowing_matches_ray_tracing():
     assert np.mean(err > 0.5) <= 0.01
 
 
-@pytest.mark.slow
 def test_cow_like_points_hidden_after_distortion_are_shadowed():
     parts = _cow_like()
     c, r = np.array([0.2, 3.0, 0.3]), 0.25
