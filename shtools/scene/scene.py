@@ -62,9 +62,9 @@ class Settings(ShadowSettings):
                                   doc="log tables asset (.h5) of the accumulation order")
     method: str = setting("default", "choice", choices=bake_method_names,
                           doc="visibility method (shtools.scene.shadows)")
-    self_visibility: bool = setting(False, "bool",
+    self_visibility: bool = setting(True, "bool",
                                     doc="exact self-shadowing of rigid role-\"both\" objects")
-    local_visibility: bool = setting(False, "bool",
+    local_visibility: bool = setting(True, "bool",
                                      doc="local visibility g_p of skinned role-\"both\" objects")
 
 
