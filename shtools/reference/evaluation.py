@@ -5,17 +5,27 @@ A *method spec* is a name with an optional ``@N`` accumulation order:
 (``hyb``, ``ps*``, ``ps``, ``ol``, ``exact``, ``volterra``), or ``product``
 (product-space accumulation, the baseline).  ``hyb@4`` accumulates at order
 4, ``product@6`` multiplies at order 6; both are truncated to the shading order.
+Without ``@N`` every method uses the same accumulation order (the runtime's
+default, or ``--acc-order``), so baselines are compared at equal order.
 
 Every method is shaded identically (:meth:`shtools.runtime.ShadowRuntime.shade`)
 and compared with ray tracing of the real meshes and of the sphere set (after
 the self-shadow rules), by relative RMSE of per-vertex radiance.
+
+:func:`error_split` splits a method's error per receiver object into where it
+comes from (issue 16): the **sphere approximation** (sphere union vs real mesh,
+both ray traced), **SHEXP** (the method vs the sphere union it approximates),
+**truncation** (order-``n`` windowed shading of the real visibility vs the
+exact integral of the binary visibility against the same windowed order-``n``
+environment, environment only) and **ringing** (the norm of the negative radiance the
+method leaves, relative to the reference).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,10 +35,15 @@ from shtools.reference.metrics import relative_rmse
 from shtools.reference.product_space import product_space_visibility
 from shtools.reference.raytrace import (
     DEFAULT_DIRECTIONS,
-    raytrace_visibility,
     sphere_union_visibility,
 )
-from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker
+from shtools.runtime import (
+    FieldBlocker,
+    ShadowRuntime,
+    ShadowSettings,
+    SphereBlocker,
+    field_product_visibility,
+)
 from shtools.runtime.hierarchy import leaf_spheres
 from shtools.runtime.settings import RUNTIME_EXP_METHODS
 
@@ -66,22 +81,27 @@ class EvalInputs:
     lights: list
     settings: dict
     tables: dict | None = None
+    #: name of each receiver group (``groups`` indexes it; one "ground" when None)
+    receiver_names: list = field(default_factory=lambda: ["ground"])
+    #: exact self-shadowing of rigid objects (runtime SelfVisibility), for the methods
+    self_visibility: list = field(default_factory=list)
 
 
 def eval_settings(inputs: EvalInputs, *, order: int | None = None,
                   acc_order: int | None = None, window: bool = True,
-                  hierarchy: bool = True) -> ShadowSettings:
+                  hierarchy: bool = True, field_space: str | None = None) -> ShadowSettings:
     """The runtime settings of an evaluation: the scene's, overridden by the caller's.
 
     One process (the method times compare with single-process references).
     """
     base = inputs.settings
     kwargs = {"order": base.get("order", order or 4)}
-    for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster"):
+    for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster", "deringing"):
         if base.get(key) is not None:
             kwargs[key] = base[key]
     kwargs["window"] = base.get("window", "cosine") if window else None
     kwargs["hierarchy"] = base.get("hierarchy", True) if hierarchy else False
+    kwargs["field_space"] = field_space or base.get("field_space", "log")
     if acc_order is not None:
         kwargs["acc_order"] = acc_order
     elif base.get("acc_order") is not None:
@@ -146,7 +166,7 @@ class MethodResult:
 
     method: str
     rmse_mesh: float
-    rmse_spheres: float
+    rmse_spheres: float | None  # None without sphere blockers
     seconds: float
     radiance: np.ndarray
 
@@ -175,13 +195,17 @@ def parse_methods(text: str) -> list[tuple[str, str, int | None]]:
 
 def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, lights,
              settings: ShadowSettings, methods: str, *, clusters=None,
-             tables: dict | None = None, n_dirs: int = DEFAULT_DIRECTIONS) -> dict:
+             tables: dict | None = None, n_dirs: int = DEFAULT_DIRECTIONS,
+             self_visibility=(), groups=None) -> dict:
     """Run the methods and the two ray-traced references on one frame.
 
     Parameters
     ----------
     vertices, normals : ndarray, shape (V, 3)
-    blockers : list of SphereBlocker
+    blockers : list of SphereBlocker or FieldBlocker
+        Shadow fields combine as ``settings.field_space`` says (runtime
+        methods) or by products (``product``); the sphere-set reference is
+        only computed when there are sphere blockers.
     meshes : list of trimesh.Trimesh
         Actual blocker geometry.
     env_sh : ndarray, shape (n*n, 3) or None
@@ -196,35 +220,54 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
         Log tables (used when their order matches a method's accumulation order).
     n_dirs : int
         Ray-tracing directions per vertex.
+    self_visibility : sequence of SelfVisibility
+        Exact self-shadowing of rigid objects, used by the runtime methods.
+    groups : ndarray of int, shape (V,), optional
+        Receiver object of each vertex, for the per-receiver :func:`error_split`
+        (default: one receiver).
 
     Returns
     -------
     dict
         ``references``: {"mesh": seconds, "spheres": (rmse vs mesh, seconds)},
-        ``results``: list of :class:`MethodResult`, and the radiance arrays of the
-        references (``mesh_radiance``, ``spheres_radiance``).
+        ``results``: list of :class:`MethodResult`, the radiance arrays of the
+        references (``mesh_radiance``, ``spheres_radiance``) and ``split``: the
+        first method's :func:`error_split` per receiver.
     """
     specs = parse_methods(methods)
     order = settings.order
-    shader = ShadowRuntime(dataclasses.replace(settings, acc_order=order, exp_method="ol"))
+    # references shaded raw (their negative lobes are part of order-n shading);
+    # methods with the settings' de-ringing
+    plain = dataclasses.replace(settings, acc_order=order, exp_method="ol")
+    ref_shader = ShadowRuntime(dataclasses.replace(plain, deringing="none"))
+    shader = ShadowRuntime(plain)
 
-    def shade(g):
-        return shader.shade(g, vertices, normals, env_sh, lights)
+    def shade(g, runtime=shader):
+        return runtime.shade(g, vertices, normals, env_sh, lights)
 
     t0 = time.perf_counter()
-    g_mesh = raytrace_visibility(vertices, normals, meshes, order, n_dirs)
+    g_mesh, binary, dirs, weights = _raytrace_binary(vertices, normals, meshes, order, n_dirs)
     t_mesh = time.perf_counter() - t0
-    centers, radii = leaf_spheres(blockers)
+    spheres = [b for b in blockers if isinstance(b, SphereBlocker)]
+    fields = [b for b in blockers if isinstance(b, FieldBlocker)]
+    centers, radii = leaf_spheres(spheres) if spheres else (np.zeros((0, 3)), np.zeros(0))
     t0 = time.perf_counter()
-    g_sph = sphere_union_visibility(vertices, normals, centers, radii, order, n_dirs)
+    g_sph = sphere_union_visibility(vertices, normals, centers, radii, order, n_dirs) \
+        if spheres else None
     t_sph = time.perf_counter() - t0
-    r_mesh, r_sph = shade(g_mesh), shade(g_sph)
+    r_mesh = shade(g_mesh, ref_shader)
+    r_sph = shade(g_sph, ref_shader) if g_sph is not None else None
     results = []
     for label, name, acc in specs:
         if name == "product":
             t0 = time.perf_counter()
-            g = product_space_visibility(vertices, normals, (centers, radii), order,
-                                         acc if acc is not None else order)
+            # without @N: the runtime's accumulation order, like the SHEXP rows
+            acc_p = acc if acc is not None else settings.resolved_acc_order()
+            g = None
+            if spheres or not fields:
+                g = product_space_visibility(vertices, normals, (centers, radii), order, acc_p)
+            if fields:
+                g = field_product_visibility(vertices, normals, fields, order, acc_p, base=g)
             seconds = time.perf_counter() - t0
         else:
             s = dataclasses.replace(settings, exp_method=name,
@@ -233,17 +276,139 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
             use_tables = tables if tables is not None and np.asarray(
                 tables["log_zh"]).shape[-1] == acc_order else None
             rt = ShadowRuntime(s, tables=use_tables)
-            rt.visibility(vertices, normals, blockers, clusters)  # warm-up (tables, buffers)
+            sv = () if acc_order != settings.resolved_acc_order() else self_visibility
+            rt.visibility(vertices, normals, blockers, clusters,
+                          self_visibility=sv)  # warm-up (tables, buffers)
             t0 = time.perf_counter()
-            g = rt.visibility(vertices, normals, blockers, clusters)
+            g = rt.visibility(vertices, normals, blockers, clusters, self_visibility=sv)
             seconds = time.perf_counter() - t0
         rad = shade(g)
-        results.append(MethodResult(label, relative_rmse(rad, r_mesh), relative_rmse(rad, r_sph),
+        results.append(MethodResult(label, relative_rmse(rad, r_mesh),
+                                    relative_rmse(rad, r_sph) if r_sph is not None else None,
                                     seconds, rad))
+    exact = None
+    if env_sh is not None:
+        env_only = ref_shader.shade(g_mesh, vertices, normals, env_sh)
+        exact = (env_only, _exact_environment(binary, dirs, weights, normals, env_sh, settings))
+    groups = np.zeros(len(vertices), dtype=np.int64) if groups is None else np.asarray(groups)
     return {
         "references": {"mesh_seconds": t_mesh, "spheres_seconds": t_sph,
-                       "spheres_rmse_mesh": relative_rmse(r_sph, r_mesh)},
+                       "spheres_rmse_mesh": relative_rmse(r_sph, r_mesh)
+                       if r_sph is not None else None},
         "results": results,
         "mesh_radiance": r_mesh,
         "spheres_radiance": r_sph,
+        "split": error_split(results[0].radiance, r_mesh, r_sph, groups, exact),
     }
+
+
+def error_split(radiance, mesh_radiance, spheres_radiance, groups, exact=None) -> list[dict]:
+    """Where a method's error comes from, per receiver group (relative RMSEs).
+
+    Parameters
+    ----------
+    radiance : ndarray, shape (V, 3)
+        The method's radiance.
+    mesh_radiance, spheres_radiance : ndarray, shape (V, 3)
+        Ray-traced references of the real meshes and of the sphere union
+        (with the self-shadow rules), shaded raw at order ``n``;
+        ``spheres_radiance`` is None without sphere blockers.
+    groups : ndarray of int, shape (V,)
+        Receiver group of each vertex.
+    exact : tuple of ndarray (V, 3), optional
+        ``(order-n environment-only radiance of the real visibility, exact
+        integral of the binary visibility against the same environment)``.
+
+    Returns
+    -------
+    list of dict
+        Per group: ``group``, ``vertices``, ``total`` (vs mesh),
+        ``sphere_approximation`` (spheres vs mesh), ``shexp`` (method vs
+        spheres), ``truncation`` (None without ``exact``), ``ringing``
+        (``||min(radiance, 0)|| / ||mesh||``) and ``negative_vertices``.
+    """
+    rows = []
+    for g in np.unique(groups):
+        m = groups == g
+        ref = mesh_radiance[m]
+        norm = float(np.linalg.norm(ref)) or 1.0
+        rows.append({
+            "group": int(g), "vertices": int(m.sum()),
+            "total": relative_rmse(radiance[m], ref),
+            # without sphere blockers (shadow fields only) there is no sphere reference
+            "sphere_approximation": (None if spheres_radiance is None
+                                     else relative_rmse(spheres_radiance[m], ref)),
+            "shexp": (None if spheres_radiance is None
+                      else relative_rmse(radiance[m], spheres_radiance[m])),
+            "truncation": (None if exact is None
+                           else relative_rmse(exact[0][m], exact[1][m])),
+            "ringing": float(np.linalg.norm(np.minimum(radiance[m], 0.0))) / norm,
+            "negative_vertices": int((radiance[m].min(axis=1) < 0).sum()),
+        })
+    return rows
+
+
+def _raytrace_binary(vertices, normals, meshes, order, n_dirs):
+    """Ray-traced binary visibility ``(V, Q)`` on the reference's rule, and its projection."""
+    from shtools.geometry.raycast import RayCaster
+    from shtools.reference.raytrace import RAY_OFFSET, quadrature_for
+    from shtools.sh import project
+
+    dirs, w = quadrature_for(n_dirs)
+    p = np.asarray(vertices, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    if not meshes:
+        vis = np.ones((p.shape[0], dirs.shape[0]), dtype=bool)
+    else:
+        caster = RayCaster.from_meshes(list(meshes))
+        vis = caster.visibility(p, dirs, normals=nrm, offset=RAY_OFFSET * caster.diagonal)
+    g = project(vis.astype(np.float64), dirs, w, order)
+    return g, vis, dirs, w
+
+
+def _exact_environment(binary, dirs, weights, normals, env_sh, settings) -> np.ndarray:
+    """``(1/pi) sum_q w_q L(s_q) V(s_q) max(0, N.s_q)``: no truncation of V or H, ``(V, 3)``.
+
+    ``L`` is the order-n environment with the settings' window, as shaded.
+    """
+    from shtools.runtime.shading import band_window
+    from shtools.sh import basis
+
+    order = settings.order
+    env = np.zeros((order * order, 3))
+    e = np.asarray(env_sh, dtype=np.float64)[: order * order]
+    env[: e.shape[0]] = e
+    env *= band_window(order, settings.resolved_window(), settings.window_h)[:, None]
+    radiance_dirs = basis(dirs, order) @ env  # (Q, 3)
+    cos = np.maximum(np.asarray(normals, dtype=np.float64) @ dirs.T, 0.0)  # (V, Q)
+    return ((binary * cos) * weights[None, :]) @ radiance_dirs / np.pi
+
+
+def field_eval_inputs(mesh_path, field_path, light_path=None, *, grid: int = 64,
+                      gap: float = 0.0, order: int | None = None) -> EvalInputs:
+    """The built-in evaluation scene with a shadow-field blocker (no sphere set).
+
+    Parameters are those of :func:`mesh_eval_inputs`, with ``field_path`` (a
+    ``field`` asset of the mesh) instead of the sphere set; ``order`` must be the
+    field's when given.
+    """
+    from shtools.data_formats.field import read_field
+    from shtools.geometry.mesh import load_mesh
+    from shtools.reference.scenes import mesh_scene
+    from shtools.runtime import FieldBlocker
+
+    mesh = load_mesh(mesh_path)
+    fld = read_field(field_path)
+    if order is not None and order != fld.order:
+        raise InputError(f"the field is SH order {fld.order} but --order is {order}; resample "
+                         f"it with `shtools field sample --order {order}`", field_path)
+    env = None
+    if light_path is not None:
+        from shtools.data_formats.light import read_light
+
+        env, _ = read_light(light_path)
+    sc = mesh_scene(mesh, np.zeros((0, 3)), np.zeros(0), grid=grid, order=fld.order,
+                    env_sh=env, gap=gap)
+    return EvalInputs(Path(mesh_path).name, sc.vertices, sc.normals, None,
+                      [FieldBlocker(fld)], sc.meshes, sc.env_sh, [],
+                      {"order": fld.order, "hierarchy": False})

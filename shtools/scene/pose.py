@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +28,7 @@ class FrameState:
     lights: list  # list[shtools.runtime.SphereLight]
     blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
     light_shadows: list = field(default_factory=list)  # the way of each light (by name)
+    self_visibility: list = field(default_factory=list)  # list[shtools.runtime.SelfVisibility]
 
 
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
@@ -34,11 +36,13 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
     """
-    from shtools.runtime import SphereLight
+    from shtools.runtime import SelfVisibility, SphereLight
+    from shtools.scene.transfer import posed_local_log, rotation_of
 
     kinds = blocker_kinds()
     worlds = world_matrices(prepared.scene.objects, t)
-    verts, norms, blockers, meshes = [], [], [], []
+    verts, norms, blockers, meshes, selfs = [], [], [], [], []
+    n_rows = 0
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -49,11 +53,24 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             joints = None
             local_v, local_n = o.vertices, o.normals
         world_v = transform_points(m, local_v)
+        rotation = rotation_of(m) if o.self_log is not None else None
+        if rotation is not None:
+            # exact self-shadowing: its own spheres (appended next) are skipped on its rows
+            selfs.append(SelfVisibility(o.self_log, slice(n_rows, n_rows + len(world_v)),
+                                        rotation=rotation, blocker=len(blockers)))
+        if o.local_log is not None and joints is not None:
+            selfs.append(SelfVisibility(
+                posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m),
+                slice(n_rows, n_rows + len(world_v))))
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
+            n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
+            if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
+                _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
+                                selfs, len(blockers) - 1)
             if with_meshes:
                 meshes.append((world_v, o.faces))
     lights = []
@@ -62,4 +79,23 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
-                      [spec.shadows for spec in prepared.scene.lights])
+                      [spec.shadows for spec in prepared.scene.lights], selfs)
+
+
+def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:
+    """A shadow field never shades its own object (its surface lies inside the innermost
+    shells): the posed field skips the object's receiver rows, and the object's
+    self-shadowing comes from ``self_visibility`` when that is on for it, else from the
+    O_v stored in the field asset (its log, rotated with the object)."""
+    from shtools.runtime import SelfVisibility
+    from shtools.scene.transfer import rotation_of
+
+    blocker.skip_rows = rows
+    # the field already skips these rows: its self-visibility names no sphere blocker
+    for k, sv in enumerate(selfs):
+        if sv.blocker == index:
+            selfs[k] = dataclasses.replace(sv, blocker=None)
+    own_log = getattr(o.blocker_data, "self_log", None)
+    if o.self_log is None and own_log is not None:
+        selfs.append(SelfVisibility(own_log, slice(int(rows[0]), int(rows[-1]) + 1),
+                                    rotation=rotation_of(world)))

@@ -62,6 +62,10 @@ class Settings(ShadowSettings):
                                   doc="log tables asset (.h5) of the accumulation order")
     method: str = setting("default", "choice", choices=bake_method_names,
                           doc="visibility method (shtools.scene.shadows)")
+    self_visibility: bool = setting(True, "bool",
+                                    doc="exact self-shadowing of rigid role-\"both\" objects")
+    local_visibility: bool = setting(True, "bool",
+                                     doc="local visibility g_p of skinned role-\"both\" objects")
 
 
 @dataclass
@@ -106,6 +110,8 @@ class ObjectSpec:
     loop: bool = False
     blocker: BlockerSpec | None = None
     skin: SkinSpec | None = None
+    #: exact self-shadowing: None (the settings' default), False, True or a transfer asset
+    self_visibility: bool | Path | None = None
 
     @property
     def receives(self) -> bool:
@@ -125,6 +131,11 @@ class EnvironmentSpec:
     coeffs: np.ndarray | None = None
     intensity: float = 1.0
     rotate: float = 0.0  # radians about +Y
+    #: mid-range lighting: the environment lies on a sphere of this radius about
+    #: ``center`` (None: at infinity); ``scaling`` an optional midrange table asset
+    radius: float | None = None
+    center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scaling: Path | None = None
 
 
 @dataclass
@@ -337,12 +348,33 @@ def _object(t: schema.Object, index: int, data: dict, settings: Settings, ctx: _
         else:
             raise ctx.error("a blocker needs a representation: add blocker = { fit = 32 } "
                             "or blocker = { spheres = \"file.h5\" }")
+    if t.self_visibility is not None:
+        value, vctx = t.self_visibility, ctx.sub("self_visibility")
+        if obj.role != "both":
+            raise vctx.error("self-shadowing from the real mesh is for objects with "
+                             "role = \"both\"")
+        if isinstance(value, bool):
+            obj.self_visibility = value
+        elif isinstance(value, str) and obj.skin is not None:
+            raise vctx.error("a skinned object deforms: its transfer cannot be precomputed; "
+                             "use true (local visibility) or false")
+        elif isinstance(value, str):
+            obj.self_visibility = _file(value, base, vctx, (".h5",))
+        else:
+            raise vctx.error("must be true, false or a transfer asset "
+                             "('shtools transfer MESH -o x.transfer.h5')")
     return obj
 
 
 def _environment(t: schema.Environment, settings: Settings, ctx: _Ctx,
                  base: Path) -> EnvironmentSpec:
     env = EnvironmentSpec(intensity=float(t.intensity), rotate=math.radians(t.rotate_deg))
+    if t.radius is not None:
+        env.radius = float(t.radius)
+        if t.center is not None:
+            env.center = np.asarray(t.center, dtype=float)
+        if t.scaling is not None:
+            env.scaling = _file(t.scaling, base, ctx.sub("scaling"), (".h5",))
     if t.light is not None:
         env.kind, env.path = "light", _file(t.light, base, ctx.sub("light"), (".h5",))
     elif t.image is not None:

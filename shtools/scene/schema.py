@@ -126,7 +126,8 @@ def vector(n: int, *, positive=False, nonnegative=False, scalar_ok=False):
         if (not isinstance(value, list) or len(value) != n
                 or not all(isinstance(x, int | float) and not isinstance(x, bool)
                            for x in value)):
-            raise fail(f"must be a list of {n} numbers, got {value!r}")
+            what = f"a number or a list of {n} numbers" if scalar_ok else f"a list of {n} numbers"
+            raise fail(f"must be {what}, got {value!r}")
         if not all(math.isfinite(x) for x in value):
             raise fail(f"must be finite, got {value!r}")
         if positive and any(x <= 0 for x in value):
@@ -283,6 +284,8 @@ class Object(Transform):
     loop: StrictBool = False
     blocker: Any = None  # validated against the blocker-kind registry (blocker_model())
     skin: Skin | None = None
+    #: true, false or a transfer asset; checked in the semantic pass (shtools.scene.scene)
+    self_visibility: Any = None
 
     @model_validator(mode="before")
     @classmethod
@@ -313,11 +316,18 @@ class Environment(Table):
     coeffs: list[vector(3)] | None = None
     intensity: Annotated[Number, Field(ge=0)] = 1.0
     rotate_deg: Number = 0.0
+    # mid-range lighting (Wang et al. Sec. 3.2): the environment on a finite sphere
+    radius: Annotated[Number, Field(gt=0)] | None = None
+    center: vector(3) | None = None
+    scaling: FilePath | None = None
 
     @model_validator(mode="before")
     @classmethod
     def _known_keys(cls, data):
         data = Table._known_keys.__func__(cls, data)
+        for key in ("center", "scaling"):
+            if key in data and "radius" not in data:
+                raise fail("only applies with 'radius' (a finite environment sphere)", key)
         if sum(k in data for k in ("light", "image", "coeffs")) > 1:
             raise fail("give only one of 'light' (a light asset), 'image' (an HDR "
                        "lat-long map) or 'coeffs' (inline SH)")

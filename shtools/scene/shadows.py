@@ -72,6 +72,14 @@ class VisibilityMethod:
         """The exp method the runtime is set up with for this method."""
         return settings.exp_method
 
+    def acc_order(self, settings) -> int | None:
+        """Order the method accumulates blockers at (None: it projects at the shading order).
+
+        Methods compared with each other accumulate at the same order (issue 16:
+        a baseline at a lower order than SHEXP looked twice as bad as it is).
+        """
+        return None
+
     def visibility(self, run: BakeRun, state) -> np.ndarray:
         """SH visibility of the posed frame ``state`` (FrameState), shape ``(V, n*n)``."""
         raise NotImplementedError
@@ -88,6 +96,9 @@ class RuntimeVisibility(VisibilityMethod):
     def exp_method(self, settings) -> str:
         return self._exp or settings.exp_method
 
+    def acc_order(self, settings) -> int:
+        return settings.resolved_acc_order()
+
     def visibility(self, run, state):
         import time
 
@@ -97,7 +108,8 @@ class RuntimeVisibility(VisibilityMethod):
             clusters = run.cache["clusters"] = receiver_clusters(run.prepared, state.vertices)
             run.cache["setup_seconds"] = time.perf_counter() - start
         return run.runtime.visibility(state.vertices, state.normals, state.blockers,
-                                      clusters=clusters)
+                                      clusters=clusters,
+                                      self_visibility=state.self_visibility)
 
 
 class ProductVisibility(VisibilityMethod):
@@ -105,12 +117,26 @@ class ProductVisibility(VisibilityMethod):
 
     name = "product"
 
+    def acc_order(self, settings) -> int:
+        # the same order as the SHEXP default, so the baseline is compared fairly
+        return settings.resolved_acc_order()
+
     def visibility(self, run, state):
         from shtools.reference import product_space_visibility
+        from shtools.runtime import FieldBlocker, field_product_visibility
 
         st = run.settings
-        return product_space_visibility(state.vertices, state.normals, state.blockers,
-                                        st.order, acc_order=st.acc_order)
+        # shadow fields are multiplied in after the sphere caps (nearest first)
+        fields = [b for b in state.blockers if isinstance(b, FieldBlocker)]
+        spheres = [b for b in state.blockers if not isinstance(b, FieldBlocker)]
+        vis = None
+        if spheres or not fields:
+            vis = product_space_visibility(state.vertices, state.normals, spheres,
+                                           st.order, acc_order=self.acc_order(st))
+        if fields:
+            vis = field_product_visibility(state.vertices, state.normals, fields, st.order,
+                                           acc_order=self.acc_order(st), base=vis)
+        return vis
 
 
 class RaytraceVisibility(VisibilityMethod):
@@ -135,7 +161,7 @@ class RaytraceVisibility(VisibilityMethod):
 
 
 def receiver_clusters(prepared, vertices: np.ndarray):
-    """Receiver clusters from the first baked frame, reused for every frame.
+    """Receiver clusters of posed receivers (the baker uses frame 0), reused every frame.
 
     Clusters never mix objects, and the runtime recomputes each cluster's bound
     from the current positions, so rigidly moving and skinned receivers keep
@@ -232,8 +258,11 @@ def shade_frame(run: BakeRun, state, visibility: np.ndarray) -> np.ndarray:
         groups.setdefault(way, []).append(light)
     joined = [light for way, group in groups.items() if LIGHT_SHADOWS[way].joins_environment
               for light in group]
-    radiance = run.runtime.shade(visibility, state.vertices, state.normals,
-                                 run.prepared.env_sh, sphere_lights=joined)
+    env = run.prepared.env_sh
+    if run.prepared.midrange is not None:  # a finite environment sphere: per-vertex SH
+        env = run.prepared.midrange.radiance_sh(state.vertices)
+    radiance = run.runtime.shade(visibility, state.vertices, state.normals, env,
+                                 sphere_lights=joined)
     for way, group in groups.items():
         if not LIGHT_SHADOWS[way].joins_environment:
             radiance = radiance + LIGHT_SHADOWS[way].radiance(run, state, visibility, group)
