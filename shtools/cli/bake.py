@@ -30,10 +30,13 @@ def bake(scene, output, frames_text, method, store_visibility, processes, as_jso
     Frames are written as they are computed; the file appears only when every
     frame is done (an error or Ctrl-C leaves nothing behind).
     """
-    from shtools.scene.bake import bake_to_file, parse_frames
+    from shtools.cli._outputs import guard_outputs
+    from shtools.scene.bake import bake_to_file, parse_frames, scene_files
     from shtools.scene.scene import load_scene
 
+    guard_outputs({"-o": output}, [scene])
     parsed = load_scene(scene)
+    guard_outputs({"-o": output}, scene_files(parsed))
     frames = parse_frames(frames_text, parsed.settings.frames, scene)
     with progress(total=len(frames), desc="bake") as bar:
         summary = bake_to_file(parsed, output, frames=frames, method=method,

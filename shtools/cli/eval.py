@@ -63,7 +63,11 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
 
     parse_methods(methods)  # fail early on a typo
     if png_path is not None:
+        from shtools.cli._outputs import guard_outputs
+
         _check_png_path(png_path)
+        guard_outputs({"--png": png_path},
+                      [scene, mesh, spheres_path, tree_path, light_path])
     if scene is not None:
         if mesh or spheres_path:
             raise InputError("give either a scene file or --mesh/--spheres, not both", scene)

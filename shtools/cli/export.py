@@ -40,11 +40,13 @@ def export(baked, output, frame, frames_text, exposure, fixed_exposure, curve, s
     """Export a baked frame as PLY/GLB (vertex colours) or a PNG preview; a frame
     range as a PNG contact sheet or an animated GIF.
     """
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.bake import read_bake
     from shtools.errors import InputError
     from shtools.export.png import View
     from shtools.export.writer import export_bake
 
+    guard_outputs({"-o": output}, [baked])
     suffix = Path(output).suffix.lower()
     if suffix not in FORMATS:
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "

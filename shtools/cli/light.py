@@ -39,9 +39,11 @@ def project(image, order, output, window, window_h, rotate_y, mirror, exposure, 
     image centre towards -z in the Y-up world (docs/conventions.md).  Every
     basis function is integrated exactly over every pixel.
     """
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.light import write_light
     from shtools.lighting import project_environment
 
+    guard_outputs({"-o": output}, [image])
     start = time.perf_counter()
     coeffs, info = project_environment(
         image, order, window=window, window_h=window_h, rotate_y=rotate_y,

@@ -4,6 +4,12 @@ Every command is thin: parse options, call the library, report.  Errors a user
 can fix (:class:`shtools.errors.ShtoolsError`, click usage errors) become one
 line ``error: <file>: <what to do>`` on stderr with exit status 2 (usage) or 1;
 anything else is a bug and prints a traceback only with ``--debug``.
+
+Ctrl-C (SIGINT), SIGTERM and SIGHUP stop a command the same way: the signal
+becomes an exception, so atomic writers remove their temporary files and worker
+processes are stopped, and the command prints one line and exits 128 + signal
+(130, 143, 129).  A full disk, an exceeded quota or a read-only file system
+(``ENOSPC``, ``EDQUOT``, ``EROFS``, ``EFBIG``) is a one-line error, exit 1.
 """
 
 from __future__ import annotations
@@ -11,12 +17,15 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import os
+import signal
 import sys
+import threading
+import warnings
 
 import click
 
 from shtools import __version__
-from shtools.errors import ShtoolsError
+from shtools.errors import ShtoolsError, disk_error_reason
 
 # One BLAS thread unless the user asked for more, set before NumPy loads (commands
 # import it lazily): shtools parallelises above BLAS (worker processes, passes over
@@ -78,13 +87,46 @@ def cli(ctx, debug):
     ctx.obj["debug"] = debug
 
 
+class Terminated(BaseException):
+    """Raised in the main thread when SIGTERM or SIGHUP arrives (see :func:`main`)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_terminated(signum, _frame):
+    raise Terminated(signum)
+
+
 def main(argv=None) -> int:
     """Entry point of the ``shtools`` console script."""
     argv = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in argv
+    handlers = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            handlers[sig] = signal.signal(sig, _raise_terminated)
+    try:
+        with warnings.catch_warnings():
+            if not debug:
+                # numeric warnings of NumPy/SciPy are not messages for a user: a
+                # real problem is checked and reported as one line where it matters
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return _run(argv, debug)
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+
+
+def _run(argv: list[str], debug: bool) -> int:
     try:
         # standalone_mode=False returns ctx.exit(n)'s code instead of raising it
         rv = cli.main(args=argv, prog_name="shtools", standalone_mode=False)
+    except Terminated as exc:
+        name = signal.Signals(exc.signum).name
+        click.echo(f"error: stopped by {name}; no output was written", err=True)
+        return 128 + exc.signum
     except ShtoolsError as exc:
         if debug:
             raise
@@ -106,6 +148,12 @@ def main(argv=None) -> int:
     except Exception as exc:  # a bug: one line unless --debug
         if debug:
             raise
+        reason = disk_error_reason(exc)
+        if reason is not None:  # outside an atomic writer, which names its output itself
+            where = getattr(exc, "filename", None)
+            prefix = f"{where}: " if where else ""
+            click.echo(f"error: {prefix}{reason}; free space or write elsewhere", err=True)
+            return 1
         click.echo(
             f"error: internal error ({type(exc).__name__}: {exc}); rerun with --debug "
             "and report it",

@@ -43,6 +43,7 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
     Writes a 'spheres' asset with centers, radii and outside_volume_ratio
     E = sum_i V(S_i - T) / V(T).
     """
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.spheres import write_spheres
     from shtools.errors import InputError
     from shtools.geometry.mesh import load_mesh
@@ -52,6 +53,7 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
         raise InputError(f"-n must be >= 1 (got {count})")
     if thickness is not None and not thickness > 0:
         raise InputError(f"--thickness must be > 0 (got {thickness})")
+    guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
     bar = progress(total=iterations, desc="fit")
 
@@ -95,9 +97,11 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
 @json_option
 def import_cmd(sph_path, output, level, mesh_path, as_json):
     """Convert a spheretree .sph file into a 'spheres' asset."""
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.spheres import write_spheres
     from shtools.geometry.sph_format import read_sph
 
+    guard_outputs({"-o": output}, [sph_path, mesh_path])
     result = read_sph(sph_path, level=level)
     inputs = {"sph": sph_path}
     if mesh_path is not None:
@@ -122,9 +126,11 @@ def import_cmd(sph_path, output, level, mesh_path, as_json):
 @json_option
 def export_cmd(spheres_path, output, as_json):
     """Write a 'spheres' asset as a two-level spheretree .sph file."""
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.spheres import read_spheres
     from shtools.geometry.sph_format import write_sph
 
+    guard_outputs({"-o": output}, [spheres_path])
     result = read_spheres(spheres_path)
     write_sph(output, result)
     report({"output": output, "spheres": len(result)}, as_json,

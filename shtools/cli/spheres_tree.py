@@ -12,6 +12,7 @@ import click
 import numpy as np
 
 from shtools.cli._common import json_option, output_option, report
+from shtools.cli._outputs import guard_outputs
 from shtools.errors import InputError
 
 
@@ -41,6 +42,7 @@ def tree(spheres_path, output, branching, seed, as_json):
     from shtools.data_formats.tree import write_tree
     from shtools.geometry.sphere_tree import build_tree, tree_statistics
 
+    guard_outputs({"-o": output}, [spheres_path])
     centers, radii = _read_sphere_set(spheres_path)
     result = build_tree(centers, radii, branching=branching, seed=seed)
     write_tree(
@@ -96,6 +98,7 @@ def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_a
     )
     from shtools.geometry.skin import load_skinned_gltf
 
+    guard_outputs({"-o": output}, [spheres_path, rig_path])
     centers, radii = _read_sphere_set(spheres_path)
     model = load_skinned_gltf(rig_path)
     try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import click
@@ -40,15 +41,24 @@ def log_cmd(order, output, samples, plot_path, as_json):
     The asset holds cap visibility (vis_zh) and its log by eigen-inversion
     (log_zh) over theta in (0, pi/2], and the OL tables ol_norm, ol_a, ol_b.
     """
-    from shtools.data_formats.tables import read_tables, write_tables
+    from shtools.cli._outputs import guard_outputs
+    from shtools.data_formats import atomic_path
+    from shtools.data_formats.tables import TABLE_KEYS, write_tables
     from shtools.sh.tables import build_log_tables
 
+    guard_outputs({"-o": output, "--plot": plot_path})
     if plot_path and order < 2:
         raise InputError("order 1 has no band above DC, so there are no OL curves to plot; "
                          "use --order 2 or more with --plot", plot_path)
     start = time.perf_counter()
     built = build_log_tables(order, samples=samples)
-    write_tables(output, built, order, parameters={"samples": samples})
+    # both outputs or neither: the plot is drawn into its temporary file first and
+    # renamed into place only after the asset was written
+    with (atomic_path(plot_path) if plot_path else contextlib.nullcontext()) as plot_tmp:
+        if plot_path:
+            plot_ol_curves({**{k: built[k] for k in TABLE_KEYS}, "order": order}, plot_tmp,
+                           atomic=False)
+        write_tables(output, built, order, parameters={"samples": samples})
     seconds = time.perf_counter() - start
     summary = {
         "output": output,
@@ -60,7 +70,6 @@ def log_cmd(order, output, samples, plot_path, as_json):
         "seconds": round(seconds, 3),
     }
     if plot_path:
-        plot_ol_curves(read_tables(output), plot_path)
         summary["plot"] = plot_path
     human = (
         f"wrote {output}: order {order}, {summary['theta_count']} cap radii, "
@@ -106,12 +115,12 @@ def cap_ol_points(tab: dict):
     return norm, a, b
 
 
-def plot_ol_curves(tab: dict, path) -> None:
+def plot_ol_curves(tab: dict, path, *, atomic: bool = True) -> None:
     """Draw the OL coefficients a and b against ||f_hat|| (cf. Ren et al. 2006, Fig. 3).
 
     Lines are the tabulated ``ol_a``/``ol_b``; dots are eq. 24 evaluated on each
-    cap of the cap tables, with the cap radius on a secondary axis.  Written
-    atomically as a PNG.
+    cap of the cap tables, with the cap radius on a secondary axis.  Written as a
+    PNG, atomically unless ``atomic=False`` (``path`` is then already a temporary).
     """
     import matplotlib
 
@@ -153,6 +162,8 @@ def plot_ol_curves(tab: dict, path) -> None:
     )
     ax_theta.grid(alpha=0.3)
     ax_theta.set_xlim(0, xmax * 1.02)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
+    try:
+        with atomic_path(path) if atomic else contextlib.nullcontext(path) as tmp:
+            fig.savefig(tmp, dpi=130, format="png")
+    finally:
+        plt.close(fig)

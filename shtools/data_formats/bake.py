@@ -48,6 +48,7 @@ from shtools.data_formats._base import (
     generator_string,
     read_asset,
     register,
+    reserve_space,
     sha256_file,
 )
 from shtools.errors import AssetError
@@ -56,11 +57,35 @@ VERSION = 1
 
 
 def _check(f: h5py.File, ctx: dict) -> None:
-    dims, path = ctx["dims"], ctx["path"]
+    """Everything a reader (``export``, the runtime) relies on beyond shapes and dtypes."""
+    dims, path, attrs = ctx["dims"], ctx["path"], ctx["attrs"]
+    if dims["T"] == 0 or dims["V"] == 0:
+        raise AssetError(f"the bake holds {dims['T']} frame(s) of {dims['V']} vertices; "
+                         "an empty bake cannot be exported, rebake it", path)
+    n_objects = 1
     if "object_offsets" in f:
         offsets = f["object_offsets"][()]
-        if offsets[0] != 0 or offsets[-1] != dims["V"] or np.any(np.diff(offsets) < 0):
+        if (offsets.size < 2 or offsets[0] != 0 or offsets[-1] != dims["V"]
+                or np.any(np.diff(offsets) < 0)):
             raise AssetError("dataset 'object_offsets' does not partition the vertices", path)
+        n_objects = offsets.size - 1
+    if "object_names" in attrs:
+        try:
+            names = json.loads(attrs["object_names"])
+        except (TypeError, json.JSONDecodeError):
+            names = None
+        if (not isinstance(names, list) or not all(isinstance(n, str) for n in names)
+                or len(names) != n_objects):
+            raise AssetError(f"attribute 'object_names' must be a JSON list of {n_objects} "
+                             "name(s), one per receiver object; rebake it", path)
+    if "fps" in attrs:
+        fps = attrs["fps"]
+        if isinstance(fps, bool) or not isinstance(fps, int | float) or not 0 < fps < np.inf:
+            raise AssetError(f"attribute 'fps' is {fps!r}, expected a positive number", path)
+    if "visibility" in f and f["visibility"].shape[2] != int(attrs["sh_order"]) ** 2:
+        raise AssetError(f"dataset 'visibility' has {f['visibility'].shape[2]} coefficients "
+                         f"but sh_order {attrs['sh_order']} needs {int(attrs['sh_order']) ** 2}",
+                         path)
     faces = f["faces"][()]
     if faces.size and (faces.min() < 0 or faces.max() >= dims["V"]):
         raise AssetError("dataset 'faces' indexes vertices that do not exist; rebuild it", path)
@@ -283,6 +308,15 @@ class BakeWriter:
         self._stack: contextlib.ExitStack | None = None
         self._file: h5py.File | None = None
 
+    def size_bound(self) -> int:
+        """Bytes the file can take at most: every dataset uncompressed, plus 1% and 1 MiB."""
+        T, V = self.n_frames, self.n_vertices
+        per_frame = V * 3 * 4 * (1 if self.static else 3) + V * 4 * (self.visibility_size or 0)
+        fixed = (self.faces.nbytes + T * 12 + self.object_offsets.nbytes
+                 + (0 if self.albedo is None else self.albedo.nbytes)
+                 + (V * 24 if self.static else 0))
+        return int(1.01 * (T * per_frame + fixed)) + (1 << 20)
+
     # -- context management -------------------------------------------------
     def __enter__(self) -> BakeWriter:
         from shtools.sh.basis import SH_CONVENTION
@@ -292,6 +326,8 @@ class BakeWriter:
             tmp = stack.enter_context(atomic_path(self.path))
             f = h5py.File(tmp, "w", track_order=True)
             stack.callback(f.close)
+            # a full disk must fail here, before HDF5 streams frames (see reserve_space)
+            reserve_space(tmp, self.size_bound(), self.path)
         except BaseException:
             stack.close()
             raise

@@ -265,6 +265,8 @@ def _file(value, base: Path, ctx: _Ctx, suffixes=None) -> Path:
     path = (base / value) if not os.path.isabs(value) else Path(value)
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise ctx.error(f"'{value}' has an unsupported extension; use one of {', '.join(suffixes)}")
+    if path.is_dir():
+        raise ctx.error(f"'{value}' is a folder; name a file")
     if not path.is_file():
         raise ctx.error(f"file '{value}' not found (paths are relative to the scene file)")
     return path
