@@ -147,7 +147,7 @@ def test_two_writes_are_byte_identical(run_cli, tmp_path):
 
     Whole-file equality holds because write_asset stores no timestamps
     (track_times=False), writes attributes in sorted order and nothing
-    time-dependent; it is stricter than the dataset equality DESIGN.md asks for.
+    time-dependent; it is stricter than the dataset equality docs/formats.md asks for.
     """
     a, b = tmp_path / "a.h5", tmp_path / "b.h5"
     for path in (a, b):

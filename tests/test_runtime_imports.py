@@ -1,4 +1,7 @@
-"""The runtime's import rule (DESIGN.md): numpy, h5py, shtools.sh, shtools.data_formats only."""
+"""The runtime's import rule (docs/architecture.md "Layers").
+
+numpy, h5py, shtools.sh, shtools.data_formats only.
+"""
 
 from __future__ import annotations
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
-from shtools.scene.scene import BAKE_METHODS
+from shtools.cli._common import json_option, output_option, progress, report, setting_type
+from shtools.scene.shadows import bake_method_names
 
 
 @click.command("bake")
@@ -14,13 +14,13 @@ from shtools.scene.scene import BAKE_METHODS
 @click.option("--frames", "frames_text", metavar="A:B",
               help="Frames to bake, half-open like Python (A:B, A:, :B or one frame A); "
                    "default all.")
-@click.option("--method", type=click.Choice(BAKE_METHODS), default=None,
+@click.option("--method", type=click.Choice(bake_method_names()), default=None,
               help="Visibility method: the runtime (default = the scene's exp method, or an "
                    "exp method by name), product-space accumulation, or ray tracing of the "
                    "posed meshes (ground truth).  Default: settings.method of the scene.")
 @click.option("--store-visibility", is_flag=True,
               help="Also store the per-vertex visibility SH vectors (T, V, n*n).")
-@click.option("--processes", type=click.IntRange(1, 64), default=None,
+@click.option("--processes", type=setting_type("processes"), default=None,
               help="Processes sharing each frame's shadow evaluation (default: one per "
                    "core; 1 = this process only).")
 @json_option

@@ -20,7 +20,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, report
+from shtools.cli._common import json_option, report, setting_type
 from shtools.errors import InputError
 
 DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
@@ -44,9 +44,9 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
 @click.option("--methods", default=DEFAULT_METHODS, show_default=True,
               help="Comma-separated: auto, hyb, ps*, ps, ol, exact, volterra, product; "
                    "append @N for the accumulation order.")
-@click.option("--order", default=None, type=click.IntRange(1, 8),
+@click.option("--order", default=None, type=setting_type("order"),
               help="Shading SH order (default 4, or the scene's).")
-@click.option("--acc-order", default=None, type=click.IntRange(1, 10),
+@click.option("--acc-order", default=None, type=setting_type("acc_order"),
               help="Accumulation order of methods without @N (default: the runtime's).")
 @click.option("--no-hierarchy", is_flag=True, help="Accumulate all leaf spheres everywhere.")
 @click.option("--no-window", is_flag=True, help="Shade without windowing.")

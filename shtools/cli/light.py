@@ -7,7 +7,7 @@ import time
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, output_option, report
+from shtools.cli._common import json_option, output_option, report, setting_type
 
 
 @click.group()
@@ -17,9 +17,10 @@ def light():
 
 @light.command("project")
 @click.argument("image", type=click.Path(dir_okay=False))
-@click.option("--order", "-n", type=click.IntRange(1, 32), required=True, help="SH order n.")
+@click.option("--order", "-n", type=setting_type("order"), required=True,
+              help="SH order n (the scene's settings.order).")
 @output_option
-@click.option("--window", type=click.Choice(["none", "cosine", "hann", "lanczos"]),
+@click.option("--window", type=setting_type("window"),
               default="none", show_default=True,
               help="Per-band window against ringing (cosine: the paper's filter).")
 @click.option("--window-h", type=click.FloatRange(min=0, min_open=True), default=None,

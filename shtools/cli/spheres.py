@@ -10,6 +10,7 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import json_option, output_option, progress, report
+from shtools.geometry.fit_methods import FIT_METHODS
 
 
 @click.group()
@@ -22,7 +23,7 @@ def spheres():
 @click.option("-n", "--count", "count", type=int, required=True,
               help="Number of spheres N (>= 1).")
 @output_option
-@click.option("--method", type=click.Choice(["variational", "octree", "kmeans"]),
+@click.option("--method", type=click.Choice(FIT_METHODS),
               default="variational", show_default=True,
               help="variational (Wang et al. 2006, minimal outside volume) or a baseline.")
 @click.option("--seed", type=int, default=0, show_default=True,

@@ -30,7 +30,7 @@ from shtools.errors import AssetError, disk_error_reason
 
 FORMAT_PREFIX = "shtools/"
 
-#: Root attributes every asset carries (DESIGN.md, "Asset files").
+#: Root attributes every asset carries (docs/formats.md, "Root attributes").
 PROVENANCE_ATTRS = ("generator", "inputs", "parameters")
 
 
@@ -128,7 +128,7 @@ def register(schema: Schema) -> Schema:
     return schema
 
 
-#: Every asset kind of DESIGN.md; each has a module ``shtools.data_formats.<kind>``
+#: Every asset kind (docs/formats.md); each has a module ``shtools.data_formats.<kind>``
 #: that registers its :class:`Schema` on import.
 KINDS = ("spheres", "tree", "bound", "tables", "scaling", "field", "light", "bake")
 

@@ -1,6 +1,6 @@
 """The ``bake`` asset: per-frame, per-vertex outgoing radiance of the receivers.
 
-Layout (DESIGN.md "Asset files"; all frames ``T``, receiver vertices ``V``):
+Layout (``docs/formats.md``; all frames ``T``, receiver vertices ``V``):
 
 =====================  =================  ==============================================
 dataset                shape / dtype      meaning
@@ -51,7 +51,7 @@ from shtools.data_formats._base import (
     reserve_space,
     sha256_file,
 )
-from shtools.errors import AssetError
+from shtools.errors import AssetError, InputError
 
 VERSION = 1
 
@@ -453,3 +453,29 @@ def write_bake(
                 visibility=None if visibility is None else visibility[t],
             )
     return Path(path)
+
+
+def parse_frames(text: str | None, n_frames: int, path=None) -> range:
+    """``"A:B"`` (half-open, like Python), ``"A:"``, ``":B"`` or ``"A"`` -> range of frames.
+
+    Raises
+    ------
+    InputError
+        Not of that form, empty, or outside ``0..n_frames-1``.
+    """
+    if text is None or text == "":
+        return range(n_frames)
+    try:
+        if ":" in text:
+            a, b = text.split(":", 1)
+            start = int(a) if a.strip() else 0
+            stop = int(b) if b.strip() else n_frames
+        else:
+            start = int(text)
+            stop = start + 1
+    except ValueError:
+        raise InputError(f"--frames '{text}' is not A:B, A: or A (frame numbers)", path) from None
+    if not 0 <= start < stop <= n_frames:
+        raise InputError(f"--frames {text} is outside the scene's frames 0..{n_frames - 1} "
+                         "(or empty); A:B is half-open like Python", path)
+    return range(start, stop)

@@ -1,7 +1,7 @@
 """The ``light`` asset: an environment light as RGB radiance SH coefficients.
 
 Dataset ``coeffs (n*n, 3) f8``: coefficient ``i`` (flat index ``l*l + l + m``,
-DESIGN.md convention, Y-up world) of the radiance ``L(s)`` for the R, G, B
+docs/conventions.md, Y-up world) of the radiance ``L(s)`` for the R, G, B
 channels, i.e. ``L(s) = coeffs.T @ basis(s, n)``.  Root attribute ``sh_order`` is
 ``n``; ``source`` says where it came from (``"image"`` or ``"inline"``).  How the
 coefficients were made (window, rotation, exposure, mapping) is in ``parameters``.

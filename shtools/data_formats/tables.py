@@ -1,6 +1,6 @@
 """The ``tables`` asset: circle (cap) log tables and the OL exponential tables.
 
-Datasets (DESIGN.md, "Asset files"; details in ``docs/formats.md``):
+Datasets (``docs/formats.md``):
 
 ========== ========= ====== ===============================================
 name       shape     dtype  meaning

@@ -1,9 +1,9 @@
 """A CPU rasteriser in vectorised NumPy: pinhole camera, z-buffer, Gouraud colours.
 
-No GPU or display.  Triangles are expanded into candidate pixels of their
-screen bounding boxes in bounded batches (``np.repeat`` over per-triangle pixel
-counts), tested with barycentric edge functions, and resolved per pixel by a
-depth sort against the running z-buffer.  Vertex colours are interpolated
+No GPU or display.  Triangles are expanded into covered pixels by
+:func:`shtools.runtime.raster.triangle_fragments` (shared with the runtime's
+shadow maps) and resolved per pixel by a depth sort against the running
+z-buffer.  Vertex colours are interpolated
 perspective-correctly.  Rendering at ``supersample`` times the size and box
 filtering down gives anti-aliased edges.
 """
@@ -14,10 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Candidate pixels expanded per batch (bounds memory to ~ a few hundred MB).
-FRAGMENT_BUDGET = 4_000_000
-#: Barycentric slack so that pixels on a shared edge are not lost to rounding.
-EDGE_EPS = 1e-7
+from shtools.runtime.raster import EDGE_EPS, FRAGMENT_BUDGET, triangle_fragments
+
+__all__ = ["EDGE_EPS", "FRAGMENT_BUDGET", "Camera", "fit_camera", "rasterize"]
 
 
 @dataclass
@@ -144,61 +143,13 @@ def rasterize(
     faces = np.asarray(faces, dtype=np.int64)
     # drop triangles touching the near plane (a fitted camera has none)
     faces = faces[np.all(z[faces] > near, axis=1)]
-    x3, y3 = sx[faces], sy[faces]
-    xmin = np.clip(np.ceil(x3.min(1) - 0.5), 0, W).astype(np.int64)
-    xmax = np.clip(np.floor(x3.max(1) - 0.5), -1, W - 1).astype(np.int64)
-    ymin = np.clip(np.ceil(y3.min(1) - 0.5), 0, H).astype(np.int64)
-    ymax = np.clip(np.floor(y3.max(1) - 0.5), -1, H - 1).astype(np.int64)
-    bw, bh = xmax - xmin + 1, ymax - ymin + 1
-    # signed doubled area; degenerate or off-screen triangles are skipped
-    area = (x3[:, 1] - x3[:, 0]) * (y3[:, 2] - y3[:, 0]) - (x3[:, 2] - x3[:, 0]) * (
-        y3[:, 1] - y3[:, 0])
-    keep = (bw > 0) & (bh > 0) & (np.abs(area) > 1e-12)
-    tri = np.flatnonzero(keep)
-    counts = (bw * bh)[tri]
-    # barycentrics as affine functions of the pixel centre: l_k = a_k x + b_k y + c_k
-    with np.errstate(divide="ignore"):
-        inv_area = np.where(np.abs(area) > 1e-12, 1.0 / area, 0.0)
-    x0, y0 = x3[:, 0], y3[:, 0]
-    ex2, ey2 = x3[:, 2] - x0, y3[:, 2] - y0
-    ex1, ey1 = x3[:, 1] - x0, y3[:, 1] - y0
-    coef = np.stack([
-        ey2 * inv_area, -ex2 * inv_area, (ex2 * y0 - ey2 * x0) * inv_area,
-        -ey1 * inv_area, ex1 * inv_area, (ey1 * x0 - ex1 * y0) * inv_area,
-    ], axis=1)
-
     zbuf = np.full(W * H, np.inf)
     win_tri = np.full(W * H, -1, dtype=np.int64)
     win_bary = np.zeros((W * H, 3))
     inv_z = 1.0 / z[faces]  # (F, 3) for perspective-correct interpolation
 
-    order = np.argsort(counts, kind="stable")
-    tri, counts = tri[order], counts[order]
-    csum = np.cumsum(counts)
-    start = 0
-    while start < len(tri):
-        base = csum[start - 1] if start else 0
-        stop = int(np.searchsorted(csum, base + FRAGMENT_BUDGET, side="right"))
-        stop = max(stop, start + 1)
-        t = tri[start:stop]
-        cnt = counts[start:stop]
-        start = stop
-        frag_tri = np.repeat(t, cnt)
-        local = np.arange(frag_tri.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        w_t = np.repeat(bw[t], cnt)
-        py, px = np.divmod(local, w_t)
-        px += np.repeat(xmin[t], cnt)
-        py += np.repeat(ymin[t], cnt)
-        cx, cy = px + 0.5, py + 0.5
-        c = np.repeat(coef[t], cnt, axis=0)
-        l1 = c[:, 0] * cx + c[:, 1] * cy + c[:, 2]
-        l2 = c[:, 3] * cx + c[:, 4] * cy + c[:, 5]
-        l0 = 1.0 - l1 - l2
-        inside = (l0 >= -EDGE_EPS) & (l1 >= -EDGE_EPS) & (l2 >= -EDGE_EPS)
-        if not inside.any():
-            continue
-        frag_tri, px, py = frag_tri[inside], px[inside], py[inside]
-        bary = np.stack([l0[inside], l1[inside], l2[inside]], axis=1)
+    for frag_tri, px, py, bary in triangle_fragments(sx[faces], sy[faces], W, H,
+                                                     budget=FRAGMENT_BUDGET):
         # screen-space barycentrics interpolate 1/z linearly; depth = 1 / that
         iz = np.einsum("ij,ij->i", bary, inv_z[frag_tri])
         depth = 1.0 / iz

@@ -30,7 +30,7 @@ def _positions(bake: Bake, frame: int | None, frames_text: str | None) -> list[i
     if frames_text is not None:
         if frame is not None:
             raise InputError("give --frame or --frames, not both")
-        from shtools.scene.bake import parse_frames
+        from shtools.data_formats.bake import parse_frames
 
         lo = int(bake.frame_index.min())
         hi = int(bake.frame_index.max()) + 1

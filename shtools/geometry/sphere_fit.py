@@ -54,10 +54,11 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from shtools.errors import InputError
+from shtools.geometry.fit_methods import FIT_METHODS
 from shtools.geometry.outside_volume import FOUR_PI, FluxSamples, OutsideVolume
 from shtools.geometry.sphere_set import SphereSet, hull_vertices, minimal_bounding_sphere
 
-METHODS = ("variational", "octree", "kmeans")
+METHODS = FIT_METHODS
 
 #: Points per sphere for the discretisation (surface and interior each), clipped
 #: to [MIN_POINTS, MAX_POINTS]: enough for every cluster to have a shape, few

@@ -15,10 +15,10 @@ from shtools.lighting.frames import rotation_about_y
 from shtools.lighting.images import load_hdr_image
 from shtools.lighting.latlong import project_latlong
 from shtools.sh.basis import check_order
-from shtools.sh.zonal import apply_window
+from shtools.sh.zonal import WINDOW_KINDS, apply_window
 
 #: Window kinds accepted by the projection (None/"none" leaves the coefficients as is).
-WINDOWS = ("none", "cosine", "hann", "lanczos")
+WINDOWS = ("none", *WINDOW_KINDS)
 
 #: Reflection x -> -x: the same image mirrored left-right.
 MIRROR_X = np.diag([-1.0, 1.0, 1.0])

@@ -67,6 +67,8 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
     Parameters (:mod:`~shtools.runtime.settings`); ``acc_order=None`` means
     ``min(n + 2, 6)``.
 ``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``
+``LogBlocker`` — protocol: any object with ``log_visibility(points (V,3), normals (V,3),
+order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 ``SphereLight(position (3,), radius, color (3,))``
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;
@@ -80,21 +82,30 @@ vertices_per_cluster=400, threads=1, processes=None, ...)``
 ``accumulate_log(points, normals, centers, radii, table, weights=None, ...)``
 ``apply_self_shadow_rules(dx, dy, dz, radius, nx, ny, nz)``
 ``CapLogTable(tables, order)``
+``ScalingTable(read_scaling(path))`` — SH scaling (Wang et al.): ``.values_at(k)``,
+    ``.matrix(k) -> (V, n*n, n*n)``, ``.apply(f, k, axes) = D^T M(k) D f``
+    (:mod:`~shtools.runtime.scaling`)
+``midrange_lighting(env_sh, points, center, radius, table, out_order=None)``
+    ``-> (V, n*n, 3)`` per-vertex environment inside a finite sphere; pass it as
+    ``env_sh`` to ``shade``.
 """
 
 from shtools.runtime.accumulate import accumulate_log
-from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
 from shtools.runtime.log_table import CapLogTable
+from shtools.runtime.scaling import ScalingTable, midrange_lighting
 from shtools.runtime.self_shadow import apply_self_shadow_rules
 from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
 
 __all__ = [
     "CapLogTable",
+    "LogBlocker",
     "ReceiverClusters",
+    "ScalingTable",
     "ShadowRuntime",
     "ShadowSettings",
     "SphereBlocker",
@@ -104,6 +115,7 @@ __all__ = [
     "cosine_transfer",
     "fast_exp",
     "lloyd_clusters",
+    "midrange_lighting",
     "shade",
     "sphere_light_sh",
 ]

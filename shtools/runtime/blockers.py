@@ -1,9 +1,20 @@
-"""Inputs of the runtime: sphere blockers (optionally with a hierarchy) and spherical lights."""
+"""Inputs of the runtime: blockers and spherical lights.
+
+Two kinds of blocker reach :meth:`shtools.runtime.ShadowRuntime.visibility`:
+
+* :class:`SphereBlocker` — a sphere set, optionally with a tree; accumulated by
+  the runtime's own cap-log kernels (hierarchy, tiles, worker processes);
+* any :class:`LogBlocker` — an object with ``log_visibility(points, normals,
+  order)`` that returns its own SH log visibility at the receivers (a shadow
+  field lookup, a deformable field, exact self-visibility).  The runtime adds
+  these to the spheres' log sum before the one exp, so all blockers combine in
+  log space.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -71,6 +82,33 @@ class SphereBlocker:
     def n_spheres(self) -> int:
         """Number of leaf spheres ``N``."""
         return int(self.centers.shape[0])
+
+
+@runtime_checkable
+class LogBlocker(Protocol):
+    """A blocker that gives its own log visibility (the runtime's blocker protocol).
+
+    Implement ``log_visibility``; the runtime calls it once per frame in the
+    calling process and adds the result to the log sum of the sphere blockers.
+    """
+
+    def log_visibility(self, points: np.ndarray, normals: np.ndarray,
+                       order: int) -> np.ndarray:
+        """SH log visibility at the receivers.
+
+        Parameters
+        ----------
+        points, normals : ndarray, shape (V, 3)
+            Receivers this frame (world space; unit normals).
+        order : int
+            The accumulation order ``n_acc``.
+
+        Returns
+        -------
+        ndarray, shape (V, order*order)
+            Log visibility (zero rows where the blocker casts no shadow).
+        """
+        ...
 
 
 @dataclass

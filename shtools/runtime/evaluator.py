@@ -1,4 +1,4 @@
-"""The per-frame evaluator: :class:`ShadowRuntime` (CONTRACTS.md section D)."""
+"""The per-frame evaluator: :class:`ShadowRuntime` (see ``docs/architecture.md``, runtime)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
-from shtools.runtime.blockers import SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
@@ -109,9 +109,13 @@ class ShadowRuntime:
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        work = self._frame_work(pts, _check_blockers(blockers), clusters)
+        spheres, others = _check_blockers(blockers)
+        work = self._frame_work(pts, spheres, clusters)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
+        extra = self._other_logs(pts, nrm, others)
+        if extra is not None:
+            f += extra
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
         return f
 
@@ -125,8 +129,10 @@ class ShadowRuntime:
             Receiver positions this frame.
         normals : array_like, shape (V, 3)
             Unit receiver normals this frame.
-        blockers : list of SphereBlocker
-            Blocker spheres this frame (trees are refit from their leaves).
+        blockers : list of SphereBlocker or LogBlocker
+            Blockers this frame: sphere sets (trees are refit from their
+            leaves) and blockers that give their own log visibility, added to
+            the spheres' log sum before the exp.
         clusters : ReceiverClusters, optional
             From :meth:`clusters`; with ``hierarchy`` on and none given, clusters
             are computed on the first call and reused while the vertex count
@@ -147,15 +153,19 @@ class ShadowRuntime:
         count, so the result is the same bytes with any number of processes.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        work = self._frame_work(pts, _check_blockers(blockers), clusters)
+        spheres, others = _check_blockers(blockers)
+        work = self._frame_work(pts, spheres, clusters)
         stats = self.last_stats
+        extra = self._other_logs(pts, nrm, others)
         if stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
-            g = self._split_visibility(work, pts, nrm)
+            g = self._split_visibility(work, pts, nrm, extra)
             stats["seconds"]["accumulate_exp_wall"] = time.perf_counter() - w0
             return g
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), stats)
+        if extra is not None:
+            f += extra
         t2 = time.process_time()
         g = self.exponentiate(f)
         stats["seconds"]["accumulate"] = t2 - t1
@@ -166,11 +176,33 @@ class ShadowRuntime:
         """Visibility ``(V', n*n)`` and evaluated pairs of one part of a frame.
 
         ``task`` comes from :meth:`FrameWork.task` (also what a worker process
-        runs; see :mod:`shtools.runtime.parallel`).
+        runs; see :mod:`shtools.runtime.parallel`), or is ``("with_log", task,
+        extra)`` with the part's rows of the other blockers' log sum.
         """
+        extra = None
+        if task[0] == "with_log":
+            _, task, extra = task
         stats = {"pairs_evaluated": 0}
-        g = self.exponentiate(self._accumulate(task, stats))
-        return g, stats["pairs_evaluated"]
+        f = self._accumulate(task, stats)
+        if extra is not None:
+            f += extra
+        return self.exponentiate(f), stats["pairs_evaluated"]
+
+    def _other_logs(self, pts, nrm, others: list) -> np.ndarray | None:
+        """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None."""
+        if not others:
+            return None
+        t0 = time.process_time()
+        total = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+        for b in others:
+            f = np.asarray(b.log_visibility(pts, nrm, self.acc_order))
+            if f.shape != total.shape or not np.isfinite(f).all():
+                raise InputError(
+                    f"{type(b).__name__}.log_visibility returned shape {f.shape} (or "
+                    f"non-finite values); expected finite values of shape {total.shape}")
+            total += f
+        self.last_stats["seconds"]["other_blockers"] = time.process_time() - t0
+        return total
 
     def close(self, *, kill: bool = False) -> None:
         """Stop the worker processes, if any were started (the runtime stays usable).
@@ -211,7 +243,8 @@ class ShadowRuntime:
         forest = build_forest(blockers)
         cl_centers, cl_radii = clusters.bounds(pts)
         cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
-        weights = ratio_weights(forest, cuts, cl_centers, self.table, s.theta_min)
+        weights = ratio_weights(forest, cuts, cl_centers, self.table,
+                                s.resolved_theta_min())
         sizes = cuts.in_cut.sum(axis=1)
         s_max = max(1, int(sizes.max(initial=0)))
         # each cluster's cut nodes first (stable), padded with radius 0
@@ -246,7 +279,7 @@ class ShadowRuntime:
                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
                                    kernels=self._kernels, stats=stats)
 
-    def _split_visibility(self, work: FrameWork, pts, nrm) -> np.ndarray:
+    def _split_visibility(self, work: FrameWork, pts, nrm, extra=None) -> np.ndarray:
         """Visibility of a frame evaluated as ``FRAME_PARTS`` independent parts.
 
         Each part's bytes depend only on the part (its receivers, cuts and
@@ -255,6 +288,8 @@ class ShadowRuntime:
         parts no worker has started yet, from the end of the queue.
         """
         parts = work.split(pts, nrm, FRAME_PARTS)
+        if extra is not None:  # the other blockers' log sum, rows of each part
+            parts = [(rows, ("with_log", task, extra[rows])) for rows, task in parts]
         g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
         evaluated = 0
         processes = 1
@@ -310,15 +345,18 @@ class ShadowRuntime:
     def shade(self, visibility, vertices, normals, env_sh=None,
               sphere_lights: tuple[SphereLight, ...] | list = (), *,
               local_visibility=None, form: str = "tabulated") -> np.ndarray:
-        """White Lambertian outgoing radiance (DESIGN.md "Radiance"), shape ``(V, 3)``.
+        """White Lambertian outgoing radiance, shape ``(V, 3)``.
+
+        Radiance as defined in ``docs/conventions.md`` ("Light and radiance").
 
         Parameters
         ----------
         visibility : array_like, shape (V, n*n)
             From :meth:`visibility`.
         vertices, normals : array_like, shape (V, 3)
-        env_sh : array_like, shape (n'*n', 3), optional
-            RGB environment lighting in SH (truncated/padded to ``n``).
+        env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+            RGB environment lighting in SH (truncated/padded to ``n``), shared
+            or per vertex (mid-range lighting).
         sphere_lights : sequence of SphereLight
         local_visibility : array_like, shape (V, n*n), optional
             Baked visibility of static local occluders (Sec. 7).
@@ -329,7 +367,8 @@ class ShadowRuntime:
         pts, nrm = _check_receivers(vertices, normals)
         transfer, changed = self._cosine_transfer(nrm)
         env_transfer = None
-        if env_sh is not None and local_visibility is None and form == "tabulated":
+        if (env_sh is not None and local_visibility is None and form == "tabulated"
+                and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
             env_transfer = self._lit_transfer(env_sh, transfer, changed)
         return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                       window_kind=s.resolved_window(), window_h=s.window_h,
@@ -468,9 +507,15 @@ def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
     return pts, nrm
 
 
-def _check_blockers(blockers) -> list[SphereBlocker]:
-    blockers = list(blockers)
+def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
+    """Split blockers into sphere sets and blockers with their own log visibility."""
+    spheres, others = [], []
     for b in blockers:
-        if not isinstance(b, SphereBlocker):
-            raise InputError(f"blockers must be SphereBlocker objects, got {type(b).__name__}")
-    return blockers
+        if isinstance(b, SphereBlocker):
+            spheres.append(b)
+        elif isinstance(b, LogBlocker):
+            others.append(b)
+        else:
+            raise InputError(f"blockers must be SphereBlocker objects or have "
+                             f"log_visibility(points, normals, order), got {type(b).__name__}")
+    return spheres, others

@@ -1,14 +1,39 @@
-"""Settings of the shadow runtime (:class:`ShadowSettings`) and their validation."""
+"""The settings schema: every setting of the shadow runtime, its default and its limits.
+
+:class:`ShadowSettings` is the one place a runtime setting is declared.  Each
+field is made by :func:`setting`, which records the default, the allowed range
+(integer or real, open or closed ends, or a list of choices), whether ``None``
+is allowed and what it means, the scene-file key and a one-line doc.  From that
+one declaration come
+
+* the check of every value (:meth:`ShadowSettings.validate`: type, finite,
+  range, cross-field bounds such as ``order <= acc_order``), one loop here;
+* the ``[settings]`` table of scene files (:mod:`shtools.scene.schema` builds
+  its pydantic model from :func:`scene_fields`);
+* the command-line choices and ranges (:func:`shtools.cli._common.setting_option`).
+
+Adding a setting is one ``setting(...)`` field here plus its line in
+``docs/scenes.md`` (see ``docs/architecture.md``).  Subclasses add their own
+fields the same way (the baker's :class:`shtools.scene.scene.Settings`).
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import MISSING, dataclass, field, fields
+from enum import StrEnum
+from typing import Any
 
 from shtools.errors import InputError
+from shtools.sh.exponential import ExpMethod
+from shtools.sh.zonal import WindowKind
 
-#: exp methods the runtime accepts ("auto" picks one from the accumulation order).
-RUNTIME_EXP_METHODS = ("auto", "hyb", "ps*", "ps", "ol", "exact", "volterra")
+#: Shading SH orders the runtime supports (tables, products and the cap log
+#: table are exercised up to here by the test suite).
+MAX_ORDER = 8
+#: Accumulation orders the runtime supports (the exp at n_acc costs ~ n_acc^4).
+MAX_ACC_ORDER = 10
 
 #: Accumulation order used when ``acc_order`` is None: ``n + 2`` (at most 6).
 #: From ``benchmarks/bench_runtime.py`` (accuracy vs order on a procedural scene,
@@ -19,39 +44,227 @@ RUNTIME_EXP_METHODS = ("auto", "hyb", "ps*", "ps", "ol", "exact", "volterra")
 DEFAULT_EXTRA_ACC_ORDERS = 2
 #: Above this accumulation order the default stops growing (cost ~ n_acc^2 per pair).
 MAX_DEFAULT_ACC_ORDER = 6
-
 #: "auto" exp: HYB up to this order (OL is an order-4 model, Sec. 4.2), PS*-p above.
 HYB_MAX_ORDER = 4
+#: ``theta_min`` when left None (eq. 37 leaf cut-off).
+DEFAULT_THETA_MIN = math.radians(1.0)
+
+#: exp methods a setting accepts: "auto" (picked from the accumulation order) or one of
+#: :class:`shtools.sh.ExpMethod`.
+EXP_CHOICES = ("auto", *(m.value for m in ExpMethod))
+#: windows a setting accepts: one of :class:`shtools.sh.WindowKind` or "none".
+WINDOW_CHOICES = (*(k.value for k in WindowKind), "none")
+#: kept for callers of the previous name
+RUNTIME_EXP_METHODS = EXP_CHOICES
+
+
+class Unit(StrEnum):
+    """How a setting is written in scene files."""
+
+    PLAIN = "plain"
+    #: stored in radians, written in degrees under ``<name>_deg``
+    DEGREES = "deg"
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Declared limits of one setting (the ``metadata["limits"]`` of its field).
+
+    Attributes
+    ----------
+    kind : {"int", "float", "bool", "choice", "path"}
+    lo, hi : float or None
+        Range ends (None: unbounded); ``lo_open``/``hi_open`` exclude them.
+    lo_field, hi_field : str or None
+        Another setting that bounds this one (e.g. ``acc_order >= order``).
+    choices : tuple of str or callable returning one, optional
+        Allowed values of a ``"choice"`` setting.
+    nullable : bool
+        ``None`` is allowed; ``none_means`` says what it stands for.
+    scene : bool
+        Settable in a scene's ``[settings]`` table.
+    unit : Unit
+        ``DEGREES``: the scene key is ``<name>_deg`` and converted to radians.
+    doc : str
+        One line for ``--help`` and error messages.
+    """
+
+    kind: str
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    lo_field: str | None = None
+    hi_field: str | None = None
+    choices: tuple[str, ...] | Callable[[], tuple[str, ...]] | None = None
+    nullable: bool = False
+    none_means: str = ""
+    scene: bool = True
+    unit: Unit = Unit.PLAIN
+    doc: str = ""
+
+    def choice_values(self) -> tuple[str, ...]:
+        """The allowed values of a choice setting."""
+        c = self.choices
+        return tuple(c() if callable(c) else (c or ()))
+
+    def range_text(self, resolved: dict[str, Any] | None = None) -> str:
+        """The range in words, e.g. ``"an integer in 1..8"`` or ``"a number > 0"``."""
+        if self.kind == "bool":
+            return "true or false"
+        if self.kind == "choice":
+            return "one of " + ", ".join(self.choice_values())
+        if self.kind == "path":
+            return "a file path"
+        noun = "an integer" if self.kind == "int" else "a number"
+        lo = self.lo if self.lo_field is None else (resolved or {}).get(self.lo_field,
+                                                                          self.lo_field)
+        hi = self.hi if self.hi_field is None else (resolved or {}).get(self.hi_field,
+                                                                          self.hi_field)
+        if self.lo_field is not None and resolved:
+            lo = f"{self.lo_field} ({lo})"
+        if self.hi_field is not None and resolved:
+            hi = f"{self.hi_field} ({hi})"
+        if lo is not None and hi is not None:
+            if self.kind == "int" and not (self.lo_open or self.hi_open):
+                return f"{noun} in {lo}..{hi}"
+            return (f"{noun} in {'(' if self.lo_open else '['}{lo}, {hi}"
+                    f"{')' if self.hi_open else ']'}")
+        if lo is not None:
+            return f"{noun} {'>' if self.lo_open else '>='} {lo}"
+        if hi is not None:
+            return f"{noun} {'<' if self.hi_open else '<='} {hi}"
+        return noun
+
+    def scene_key(self, name: str) -> str:
+        """The key of this setting in a scene's ``[settings]`` table."""
+        return f"{name}_deg" if self.unit is Unit.DEGREES else name
+
+
+def setting(default: Any, kind: str, *, doc: str, lo=None, hi=None, lo_open=False,
+            hi_open=False, lo_field=None, hi_field=None, choices=None, none_means="",
+            scene=True, unit: Unit = Unit.PLAIN) -> Any:
+    """A dataclass field declaring one setting (see :class:`Limits`).
+
+    ``None`` is allowed exactly when ``none_means`` says what it stands for.
+    """
+    limits = Limits(kind, lo, hi, lo_open, hi_open, lo_field, hi_field, choices,
+                    nullable=bool(none_means), none_means=none_means, scene=scene, unit=unit,
+                    doc=doc)
+    return field(default=default, metadata={"limits": limits})
+
+
+def limits_of(cls_or_obj, name: str) -> Limits:
+    """The :class:`Limits` of setting ``name`` of a settings class or instance."""
+    for f in fields(cls_or_obj):
+        if f.name == name:
+            return f.metadata["limits"]
+    raise KeyError(name)
+
+
+def setting_fields(cls_or_obj) -> Iterator[tuple[str, Limits, Any]]:
+    """``(name, limits, default)`` of every declared setting, in declaration order."""
+    for f in fields(cls_or_obj):
+        if "limits" in f.metadata:
+            yield f.name, f.metadata["limits"], (None if f.default is MISSING else f.default)
+
+
+def scene_fields(cls_or_obj) -> Iterator[tuple[str, str, Limits, Any]]:
+    """``(scene key, name, limits, default)`` of the settings a scene file may set."""
+    for name, limits, default in setting_fields(cls_or_obj):
+        if limits.scene:
+            yield limits.scene_key(name), name, limits, default
+
+
+def check_setting(name: str, value: Any, limits: Limits, resolved: dict[str, Any]) -> Any:
+    """Check one value against its limits; return it normalised (choices as plain str).
+
+    Raises
+    ------
+    InputError
+        ``"<name> must be <range>, got <value>"``.
+    """
+    def bad(what: str | None = None) -> InputError:
+        what = what or f"must be {limits.range_text(resolved)}"
+        if limits.nullable:
+            what += f" (or None: {limits.none_means})"
+        return InputError(f"{name} {what}, got {value!r}")
+
+    if value is None:
+        if limits.nullable:
+            return None
+        raise bad()
+    if limits.kind == "bool":
+        if not isinstance(value, bool):
+            raise bad()
+        return value
+    if limits.kind == "choice":
+        if not isinstance(value, str) or value not in limits.choice_values():
+            raise bad()
+        return str(value.value if isinstance(value, StrEnum) else value)
+    if limits.kind == "path":
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise bad()
+    if not math.isfinite(value):
+        raise bad("must be finite")
+    if limits.kind == "int" and int(value) != value:
+        raise bad()
+    lo = resolved.get(limits.lo_field) if limits.lo_field else limits.lo
+    hi = resolved.get(limits.hi_field) if limits.hi_field else limits.hi
+    if limits.lo_field and limits.lo is not None:
+        lo = max(lo, limits.lo) if lo is not None else limits.lo
+    if limits.hi_field and limits.hi is not None:
+        hi = min(hi, limits.hi) if hi is not None else limits.hi
+    if lo is not None and (value <= lo if limits.lo_open else value < lo):
+        raise bad()
+    if hi is not None and (value >= hi if limits.hi_open else value > hi):
+        raise bad()
+    return int(value) if limits.kind == "int" else value
+
+
+def validate_settings(obj) -> None:
+    """Check (and normalise in place) every declared setting of a settings dataclass."""
+    resolved: dict[str, Any] = {}
+    for name, limits, _ in setting_fields(obj):
+        value = check_setting(name, getattr(obj, name), limits, resolved)
+        if value is not getattr(obj, name):
+            object.__setattr__(obj, name, value)
+        resolved[name] = value
 
 
 @dataclass
 class ShadowSettings:
-    """Parameters of the SHEXP runtime.
+    """Parameters of the SHEXP runtime (the settings schema; see the module docstring).
 
-    Parameters
+    Every field is declared with :func:`setting` (default, limits, doc), checked
+    on construction and by :meth:`validate`.  ``None`` stands for a derived
+    default where a field allows it (``acc_order``, ``window_h``, ...).
+
+    Attributes
     ----------
     order : int
         Shading SH order ``n`` (visibility returned with ``n*n`` coefficients).
     acc_order : int or None
         Order ``n_acc >= n`` at which blocker logs are accumulated and
-        exponentiated before truncation to ``n``; None picks
-        ``min(n + 2, 6)`` (or ``n`` when ``n >= 6``), see :meth:`resolved_acc_order`.
+        exponentiated before truncation to ``n``; None: ``min(n + 2, 6)`` (or ``n``
+        when ``n >= 6``), see :meth:`resolved_acc_order`.
     exp_method : str
-        ``"auto"`` (HYB when the accumulation order is <= 4, PS*-p above),
-        ``"hyb"``, ``"ps*"``, ``"ps"``, ``"ol"``, ``"exact"``, ``"volterra"``.
+        ``"auto"`` (HYB when the accumulation order is <= 4, PS*-p above) or a
+        :class:`shtools.sh.ExpMethod`.
     exp_degree : int or None
         Series degree ``p`` of PS-p / PS*-p (None: the library default).
     window : str or None
         Window applied to lighting and visibility when shading (``"cosine"``,
-        ``"hann"``, ``"lanczos"`` or None).
+        ``"hann"``, ``"lanczos"``, ``"none"`` or None).
     window_h : float or None
         Window size ``h`` (None: ``2n``).
     theta_max : float
         Eq. 36 threshold (radians): a tree node is used for a receiver cluster
         when it subtends less than this over the whole cluster.
-    theta_min : float
+    theta_min : float or None
         Leaf spheres subtending less than this at the cluster centre are left out
-        of the detailed sums behind the ratio vectors (eq. 37).
+        of the detailed sums behind the ratio vectors (eq. 37); None: 1 degree.
     hierarchy : bool
         Use receiver clusters, tree cuts and ratio vectors (Sec. 6.3); False
         accumulates every leaf sphere at every vertex.
@@ -77,67 +290,43 @@ class ShadowSettings:
         process.
     """
 
-    order: int = 4
-    acc_order: int | None = None
-    exp_method: str = "auto"
-    exp_degree: int | None = None
-    window: str | None = "cosine"
-    window_h: float | None = None
-    theta_max: float = math.radians(25.0)
-    theta_min: float = math.radians(1.0)
-    hierarchy: bool = True
-    vertices_per_cluster: int = 400
-    self_shadow: bool = True
-    chunk_pairs: int = 1 << 16
-    threads: int = 1
-    processes: int | None = None
+    order: int = setting(4, "int", lo=1, hi=MAX_ORDER, doc="shading SH order n")
+    acc_order: int | None = setting(
+        None, "int", lo_field="order", hi=MAX_ACC_ORDER,
+        none_means="min(order + 2, 6)", doc="order the blocker logs are accumulated and "
+        "exponentiated at, >= order")
+    exp_method: str = setting("auto", "choice", choices=EXP_CHOICES,
+                              doc="SH exponential (auto: HYB at n_acc <= 4, PS*-p above)")
+    exp_degree: int | None = setting(None, "int", lo=1, none_means="the method's default",
+                                     doc="series degree p of PS-p / PS*-p")
+    window: str | None = setting("cosine", "choice", choices=WINDOW_CHOICES,
+                                 none_means="no window", doc="window applied when shading")
+    window_h: float | None = setting(None, "float", lo=0, lo_open=True,
+                                     none_means="2n (cosine) or n", doc="window size h")
+    theta_max: float = setting(math.radians(25.0), "float", lo=0, lo_open=True,
+                               hi=math.pi / 2, hi_open=True, unit=Unit.DEGREES,
+                               doc="eq. 36 cut threshold (radians; scenes: degrees)")
+    theta_min: float | None = setting(
+        None, "float", lo=0, hi_field="theta_max", hi_open=True, unit=Unit.DEGREES,
+        none_means="1 degree", doc="eq. 37 leaf cut-off (radians; scenes: degrees)")
+    hierarchy: bool = setting(True, "bool", doc="receiver clusters, tree cuts, ratio vectors")
+    vertices_per_cluster: int = setting(400, "int", lo=1,
+                                        doc="average receiver-cluster size")
+    self_shadow: bool = setting(True, "bool", doc="self-shadow rules of Sec. 6.2")
+    chunk_pairs: int = setting(1 << 16, "int", lo=256, scene=False,
+                               doc="sphere-vertex pairs per array pass (memory bound)")
+    threads: int = setting(1, "int", lo=1, hi=64, scene=False,
+                           doc="threads accumulating blocks within a process")
+    processes: int | None = setting(None, "int", lo=1, hi=64, scene=False,
+                                    none_means="one per core",
+                                    doc="processes sharing each frame")
 
     def __post_init__(self):
         self.validate()
 
     def validate(self) -> None:
         """Raise :class:`InputError` naming the bad setting and its allowed range."""
-        if not _is_int(self.order) or not 1 <= self.order <= 8:
-            raise InputError(f"order must be an integer 1..8, got {self.order!r}")
-        if self.acc_order is not None and (
-            not _is_int(self.acc_order) or not self.order <= self.acc_order <= 10
-        ):
-            raise InputError(
-                f"acc_order must be an integer between order ({self.order}) and 10, "
-                f"got {self.acc_order!r}"
-            )
-        if self.exp_method not in RUNTIME_EXP_METHODS:
-            raise InputError(
-                f"unknown exp method {self.exp_method!r}; use one of "
-                f"{', '.join(RUNTIME_EXP_METHODS)}"
-            )
-        if self.exp_degree is not None and (not _is_int(self.exp_degree) or self.exp_degree < 1):
-            raise InputError(f"exp_degree must be an integer >= 1, got {self.exp_degree!r}")
-        if self.window not in (None, "none", "cosine", "hann", "lanczos"):
-            raise InputError(
-                f"unknown window {self.window!r}; use cosine, hann, lanczos or none"
-            )
-        if self.window_h is not None and not self.window_h > 0:
-            raise InputError(f"window_h must be > 0, got {self.window_h!r}")
-        if not 0.0 < self.theta_max < math.pi / 2:
-            raise InputError(f"theta_max must be in (0, pi/2) radians, got {self.theta_max!r}")
-        if not 0.0 <= self.theta_min < self.theta_max:
-            raise InputError(
-                f"theta_min must be in [0, theta_max) radians, got {self.theta_min!r}"
-            )
-        if not _is_int(self.vertices_per_cluster) or self.vertices_per_cluster < 1:
-            raise InputError(
-                f"vertices_per_cluster must be an integer >= 1, got {self.vertices_per_cluster!r}"
-            )
-        if not _is_int(self.threads) or not 1 <= self.threads <= 64:
-            raise InputError(f"threads must be an integer 1..64, got {self.threads!r}")
-        if self.processes is not None and (not _is_int(self.processes)
-                                           or not 1 <= self.processes <= 64):
-            raise InputError(
-                f"processes must be an integer 1..64 (or None: one per core), "
-                f"got {self.processes!r}")
-        if not _is_int(self.chunk_pairs) or self.chunk_pairs < 256:
-            raise InputError(f"chunk_pairs must be an integer >= 256, got {self.chunk_pairs!r}")
+        validate_settings(self)
 
     def resolved_acc_order(self) -> int:
         """The accumulation order actually used."""
@@ -155,6 +344,11 @@ class ShadowSettings:
         """Window kind for :func:`shtools.sh.window` (``"none"`` becomes None)."""
         return None if self.window in (None, "none") else self.window
 
+    def resolved_theta_min(self) -> float:
+        """The eq. 37 cut-off actually used (radians)."""
+        return DEFAULT_THETA_MIN if self.theta_min is None else float(self.theta_min)
 
-def _is_int(value) -> bool:
-    return not isinstance(value, bool) and isinstance(value, int | float) and int(value) == value
+    def runtime_only(self) -> ShadowSettings:
+        """These settings as a plain :class:`ShadowSettings` (drops subclass fields)."""
+        names = {f.name for f in fields(ShadowSettings)}
+        return ShadowSettings(**{k: getattr(self, k) for k in names})

@@ -1,4 +1,4 @@
-r"""Shading of white Lambertian receivers (SHEXP Sec. 7, DESIGN.md "Radiance").
+r"""Shading of white Lambertian receivers (SHEXP Sec. 7, docs/conventions.md "Light and radiance").
 
 Outgoing radiance of an albedo-1 diffuse receiver with unit normal ``N`` under
 distant lighting ``L`` and visibility ``g`` is the triple product
@@ -229,8 +229,10 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         Visibility ``g`` per vertex.
     points, normals : array_like, shape (V, 3)
         Receiver positions (for spherical lights) and unit normals.
-    env_sh : array_like, shape (n'*n', 3), optional
-        RGB environment radiance; truncated or zero-padded to order ``n``.
+    env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+        RGB environment radiance, shared or per vertex (mid-range lighting,
+        :func:`shtools.runtime.scaling.midrange_lighting`); truncated or
+        zero-padded to order ``n``.
     sphere_lights : sequence of SphereLight
     order : int
         Shading order ``n``.
@@ -264,6 +266,8 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
     out = np.zeros((g.shape[0], 3))
     if env_transfer is not None:
         out += lit_transfer_radiance(env_transfer, g_w)
+    elif env_sh is not None and np.ndim(env_sh) == 3:  # per vertex (mid-range lighting)
+        out += per_vertex_environment_radiance(transfer, env_sh, g_w, win)
     elif env_sh is not None:
         mats = environment_matrices(env_sh, order, window_kind, window_h)
         fn = tabulated_radiance if form == "tabulated" else on_the_fly_radiance
@@ -272,6 +276,30 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         out += sphere_lights_radiance(sphere_lights, np.asarray(points), transfer, g_w, order,
                                       win)
     return out
+
+
+def per_vertex_environment_radiance(transfer, env_sh, visibility, win) -> np.ndarray:
+    """Radiance under a per-vertex environment: ``(H(N) * g) . L_v``, shape ``(V, 3)``.
+
+    Parameters
+    ----------
+    transfer : ndarray, shape (V, n*n)
+        ``H(N)`` (or ``H(N) * g_p``).
+    env_sh : array_like, shape (V, n'*n', 3)
+        RGB radiance per vertex; truncated or zero-padded to order ``n``.
+    visibility : ndarray, shape (V, n*n)
+        Windowed visibility.
+    win : ndarray, shape (n*n,)
+        Window factors of the lighting.
+    """
+    size = transfer.shape[1]
+    order = round(math.sqrt(size))
+    env = np.asarray(env_sh, dtype=np.float32)
+    env_n = np.zeros((env.shape[0], size, env.shape[2]), np.float32)
+    env_n[:, :min(size, env.shape[1])] = env[:, :size]
+    shadowed = QuadratureProducts(order, np.float32).product(
+        np.asarray(transfer, np.float32), np.asarray(visibility, np.float32))
+    return np.einsum("vs,vsc->vc", shadowed * win.astype(np.float32), env_n).astype(np.float64)
 
 
 def environment_matrices(env_sh, order: int, window_kind: str | None = "cosine",

@@ -9,13 +9,10 @@ and shades it, yielding a :class:`FrameResult` per frame and, given ``output``,
 streaming the frames into a ``bake`` asset that appears only when every frame
 is done.
 
-Methods: ``default`` (the runtime with the scene's exp method), an exp method
-name (``hyb``, ``ps*``, ``ps``, ``ol``, ``exact``, ``volterra``; the runtime with
-that method), ``product`` (product-space accumulation,
-:func:`shtools.reference.product_space_visibility`) and ``raytrace`` (visibility
-ray-traced against the posed blocker meshes,
-:func:`shtools.reference.raytrace_visibility`).  All shade identically with
-:meth:`shtools.runtime.ShadowRuntime.shade`.
+Blockers are prepared and posed by their kind (:mod:`shtools.scene.blockers`);
+the frame's visibility comes from the registered visibility method
+(``default``, an exp method, ``product``, ``raytrace``) and each light is
+shadowed by its registered way (:mod:`shtools.scene.shadows`).
 """
 
 from __future__ import annotations
@@ -24,24 +21,32 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from contextlib import ExitStack
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from shtools.data_formats.bake import parse_frames  # noqa: F401  (re-exported)
 from shtools.errors import AssetError, InputError
 from shtools.scene.animation import (
     SkinnedMotion,
     light_at,
     transform_normals,
     transform_points,
-    transform_spheres,
     vertex_normals,
     world_matrices,
 )
-from shtools.scene.scene import BAKE_METHODS, ObjectSpec, Scene
-
-EXP_NAMES = ("hyb", "ps*", "ps", "ol", "exact", "volterra")
+from shtools.scene.blockers import PrepareContext, blocker_kinds
+from shtools.scene.scene import ObjectSpec, Scene
+from shtools.scene.shadows import (
+    LIGHT_SHADOWS,
+    VISIBILITY_METHODS,
+    BakeRun,
+    bake_method_names,
+    shade_frame,
+)
 
 
 @dataclass
@@ -62,6 +67,8 @@ class PreparedObject:
     bone_index : ndarray, shape (N, K) or None
         Skin binding of the spheres (skinned blockers).
     bone_vectors : ndarray, shape (N, K, 4) or None
+    blocker_data : object
+        What a blocker kind that is not a sphere set prepared (its own type).
     """
 
     spec: ObjectSpec
@@ -74,6 +81,7 @@ class PreparedObject:
     motion: SkinnedMotion | None = None
     bone_index: np.ndarray | None = None
     bone_vectors: np.ndarray | None = None
+    blocker_data: Any = None
 
     @property
     def moves(self) -> bool:
@@ -120,9 +128,10 @@ class FrameState:
 
     vertices: np.ndarray  # (V, 3)
     normals: np.ndarray  # (V, 3)
-    blockers: list  # list[shtools.runtime.SphereBlocker]
+    blockers: list  # runtime blockers (SphereBlocker or LogBlocker), one per blocker object
     lights: list  # list[shtools.runtime.SphereLight]
     blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
+    light_shadows: list = field(default_factory=list)  # the way of each light (by name)
 
 
 @dataclass
@@ -185,60 +194,11 @@ def _object_geometry(obj: ObjectSpec) -> tuple[PreparedObject, object]:
 
 
 def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None:
-    """Fill in the object's blocker spheres, tree and skin binding."""
+    """Prepare the object's blocker with its kind (spheres, tree, skin binding, ...)."""
     spec = prep.spec.blocker
-    if spec is None or spec.kind == "exact":
+    if spec is None:
         return
-    import trimesh
-
-    if spec.kind == "spheres":
-        from shtools.data_formats.spheres import read_spheres
-
-        s = read_spheres(spec.path)
-        prep.centers, prep.radii = s.centers, s.radii
-        inputs[f"{prep.spec.name}.spheres"] = spec.path
-    elif spec.kind == "tree":
-        from shtools.data_formats.tree import read_tree
-
-        t = read_tree(spec.path)
-        leaves = np.flatnonzero(t.leaf >= 0)
-        n = int(t.leaf[leaves].max()) + 1
-        centers, radii = np.empty((n, 3)), np.empty(n)
-        centers[t.leaf[leaves]] = t.centers[leaves]
-        radii[t.leaf[leaves]] = t.radii[leaves]
-        prep.centers, prep.radii = centers, radii
-        prep.tree = (np.asarray(t.parent), np.asarray(t.leaf))
-        inputs[f"{prep.spec.name}.tree"] = spec.path
-    elif spec.kind == "bound":
-        from shtools.data_formats.bound import read_bound
-
-        b = read_bound(spec.path)
-        n_joints = len(model.inverse_bind)
-        if b.joint_count != n_joints:
-            raise AssetError(f"is bound to a rig with {b.joint_count} joints but "
-                             f"'{prep.spec.mesh.name}' has {n_joints}; rebind with "
-                             "'shtools spheres bind'", spec.path)
-        prep.centers, prep.radii = b.centers, b.radii
-        prep.bone_index, prep.bone_vectors = b.bone_index, b.bone_vectors
-        inputs[f"{prep.spec.name}.bound"] = spec.path
-    else:  # fit on the fly
-        from shtools.geometry.sphere_fit import fit_spheres
-
-        mesh = trimesh.Trimesh(prep.vertices, prep.faces, process=False)
-        s = fit_spheres(mesh, spec.count, method=spec.method, seed=spec.seed)
-        prep.centers, prep.radii = s.centers, s.radii
-    if prep.tree is None and settings.hierarchy and len(prep.radii) > 1:
-        from shtools.geometry.sphere_tree import build_tree
-
-        branching = spec.branching if spec.kind == "fit" else 4
-        t = build_tree(prep.centers, prep.radii, branching=branching, seed=0)
-        prep.tree = (np.asarray(t.parent), np.asarray(t.leaf))
-    if model is not None and prep.bone_index is None:
-        from shtools.geometry.binding import bind_spheres
-
-        binding = bind_spheres(prep.centers, model)
-        prep.bone_index = np.asarray(binding.bone_index)
-        prep.bone_vectors = np.asarray(binding.bone_vectors)
+    blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs))
 
 
 def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
@@ -330,9 +290,13 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
 
 # --------------------------------------------------------------------------- posing
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
-    """World-space receivers, blocker spheres, lights (and blocker meshes) at time ``t``."""
-    from shtools.runtime import SphereBlocker, SphereLight
+    """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
 
+    Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
+    """
+    from shtools.runtime import SphereLight
+
+    kinds = blocker_kinds()
     worlds = world_matrices(prepared.scene.objects, t)
     verts, norms, blockers, meshes = [], [], [], []
     for o in prepared.objects:
@@ -349,18 +313,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
         if o.spec.blocks:
-            centers = o.centers
-            if joints is not None:
-                from shtools.runtime.spheres import pose_bound_spheres
-
-                centers = pose_bound_spheres(o.bone_index, o.bone_vectors, joints)
-            c, r = transform_spheres(m, centers, o.radii)
-            tree = o.tree
-            if tree is not None:
-                # the runtime refits inner spheres from the leaves every frame
-                blockers.append(SphereBlocker(c, r, tree=tree))
-            else:
-                blockers.append(SphereBlocker(c, r))
+            blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
             if with_meshes:
                 meshes.append((world_v, o.faces))
     lights = []
@@ -368,54 +321,20 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
         key = light_at(spec, t)
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
-    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes)
+    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
+                      [spec.shadows for spec in prepared.scene.lights])
 
 
 # --------------------------------------------------------------------------- baking
-def parse_frames(text: str | None, n_frames: int, path=None) -> range:
-    """``"A:B"`` (half-open, like Python), ``"A:"``, ``":B"`` or ``"A"`` -> range of frames.
-
-    Raises
-    ------
-    InputError
-        Not of that form, empty, or outside ``0..n_frames-1``.
-    """
-    if text is None or text == "":
-        return range(n_frames)
-    try:
-        if ":" in text:
-            a, b = text.split(":", 1)
-            start = int(a) if a.strip() else 0
-            stop = int(b) if b.strip() else n_frames
-        else:
-            start = int(text)
-            stop = start + 1
-    except ValueError:
-        raise InputError(f"--frames '{text}' is not A:B, A: or A (frame numbers)", path) from None
-    if not 0 <= start < stop <= n_frames:
-        raise InputError(f"--frames {text} is outside the scene's frames 0..{n_frames - 1} "
-                         "(or empty); A:B is half-open like Python", path)
-    return range(start, stop)
-
-
 def runtime_settings(scene: Scene, method: str, processes: int | None = None):
     """The runtime's :class:`~shtools.runtime.ShadowSettings` for a scene and method.
 
     ``processes``: processes sharing each frame (None: one per core).
     """
-    from shtools.runtime import ShadowSettings
-
     st = scene.settings
-    kwargs = dict(
-        order=st.order, acc_order=st.acc_order,
-        exp_method=method if method in EXP_NAMES else st.exp_method,
-        window=st.window, window_h=st.window_h, theta_max=st.theta_max,
-        hierarchy=st.hierarchy, vertices_per_cluster=st.vertices_per_cluster,
-        processes=processes,
-    )
-    if st.theta_min is not None:
-        kwargs["theta_min"] = st.theta_min
-    return ShadowSettings(**kwargs)
+    exp = VISIBILITY_METHODS[method].exp_method(st) if method in VISIBILITY_METHODS \
+        else st.exp_method
+    return replace(st.runtime_only(), exp_method=exp, processes=processes)
 
 
 def bake_scene(
@@ -437,7 +356,8 @@ def bake_scene(
     frames : range, optional
         Scene frame numbers (default all ``settings.frames``).
     method : str, optional
-        One of ``BAKE_METHODS`` (default the scene's ``settings.method``).
+        A registered visibility method (:mod:`shtools.scene.shadows`; default
+        the scene's ``settings.method``).
     store_visibility : bool
         Keep the visibility vectors (V, n*n) in the results and the asset.
     output : path-like, optional
@@ -459,44 +379,33 @@ def bake_scene(
     from shtools.runtime import ShadowRuntime
 
     method = method or scene.settings.method
-    if method not in BAKE_METHODS:
-        raise InputError(f"unknown method '{method}'; use one of {', '.join(BAKE_METHODS)}")
+    names = bake_method_names()
+    if method not in names:
+        raise InputError(f"unknown method '{method}'; use one of {', '.join(names)}")
     frames = range(scene.settings.frames) if frames is None else frames
     if len(frames) == 0 or frames.start < 0 or frames.stop > scene.settings.frames:
         raise InputError(f"frames {frames.start}:{frames.stop} are outside the scene's frames "
                          f"0..{scene.settings.frames - 1}", scene.path)
     prepared = prepared or prepare_scene(scene)
-    st = scene.settings
-    runtime = ShadowRuntime(runtime_settings(scene, method, processes), tables=prepared.tables)
-    moving = prepared.receivers_move()
+    vis_method = VISIBILITY_METHODS[method]
+    with_meshes = vis_method.needs_meshes or any(
+        LIGHT_SHADOWS[spec.shadows].needs_meshes for spec in scene.lights)
     times = scene.frame_times(frames)
-
-    writer = None
-    if output is not None:
-        writer = _writer(prepared, output, frames, times, method, store_visibility, moving)
-        writer.__enter__()
-    try:
-        clusters = None
+    with ExitStack() as stack:
+        runtime = stack.enter_context(
+            ShadowRuntime(runtime_settings(scene, method, processes), tables=prepared.tables))
+        writer = None
+        if output is not None:
+            writer = stack.enter_context(
+                _writer(prepared, output, frames, times, method, store_visibility,
+                        prepared.receivers_move()))
+        run = BakeRun(prepared, runtime, method, raytrace_dirs)
         for k, (frame, t) in enumerate(zip(frames, times, strict=True)):
             start = time.perf_counter()
-            state = pose_frame(prepared, float(t), with_meshes=(method == "raytrace"))
-            setup = 0.0
-            if method == "product":
-                from shtools.reference import product_space_visibility
-
-                vis = product_space_visibility(state.vertices, state.normals, state.blockers,
-                                               st.order, acc_order=st.acc_order)
-            elif method == "raytrace":
-                vis = _raytrace(state, st.order, raytrace_dirs)
-            else:
-                if clusters is None:  # one-time setup, not counted as frame time
-                    setup = time.perf_counter()
-                    clusters = _clusters(prepared, state.vertices)
-                    setup = time.perf_counter() - setup
-                vis = runtime.visibility(state.vertices, state.normals, state.blockers,
-                                         clusters=clusters)
-            radiance = runtime.shade(vis, state.vertices, state.normals, prepared.env_sh,
-                                     sphere_lights=state.lights)
+            state = pose_frame(prepared, float(t), with_meshes=with_meshes)
+            vis = vis_method.visibility(run, state)
+            setup = run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
+            radiance = shade_frame(run, state, vis)
             result = FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
                                  np.asarray(vis) if store_visibility else None,
                                  state.vertices, state.normals,
@@ -506,42 +415,6 @@ def bake_scene(
                                    normals=state.normals,
                                    visibility=vis if store_visibility else None)
             yield result
-    except BaseException as exc:
-        runtime.close()
-        if writer is not None:
-            writer.__exit__(type(exc), exc, exc.__traceback__)
-        raise
-    runtime.close()
-    if writer is not None:
-        writer.__exit__(None, None, None)
-
-
-def _clusters(prepared: PreparedScene, vertices: np.ndarray):
-    """Receiver clusters from the first baked frame, reused for every frame.
-
-    Clusters never mix objects, and the runtime recomputes each cluster's bound
-    from the current positions, so rigidly moving and skinned receivers keep
-    compact clusters without re-clustering every frame.
-    """
-    from shtools.runtime.clusters import lloyd_clusters
-
-    groups = np.concatenate([np.full(len(o.vertices), k)
-                             for k, o in enumerate(prepared.receivers)])
-    return lloyd_clusters(vertices, prepared.scene.settings.vertices_per_cluster, groups=groups)
-
-
-def _raytrace(state: FrameState, order: int, n_dirs: int | None):
-    import trimesh
-
-    from shtools.reference import raytrace_visibility
-
-    if not state.blocker_meshes:  # nothing to hit: visibility is the constant 1
-        vis = np.zeros((len(state.vertices), order * order))
-        vis[:, 0] = math.sqrt(4 * math.pi)
-        return vis
-    meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
-    kwargs = {} if n_dirs is None else {"n_dirs": n_dirs}
-    return raytrace_visibility(state.vertices, state.normals, meshes, order, **kwargs)
 
 
 def _writer(prepared: PreparedScene, output, frames, times, method, store_visibility, moving):
@@ -561,14 +434,14 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         state = pose_frame(prepared, float(times[0]))
         static_v, static_n = state.vertices, state.normals
     resolved = runtime_settings(scene, method)
+    uses_runtime = VISIBILITY_METHODS[method].uses_runtime
     parameters = {
         "method": method,
         "order": st.order,
         # what the runtime actually used (the scene may leave these to it)
-        "acc_order": (resolved.resolved_acc_order() if method not in ("product", "raytrace")
+        "acc_order": (resolved.resolved_acc_order() if uses_runtime
                       else st.acc_order or st.order),
-        "exp_method": (resolved.resolved_exp_method() if method not in ("product", "raytrace")
-                       else None),
+        "exp_method": resolved.resolved_exp_method() if uses_runtime else None,
         "window": st.window,
         "window_h": st.window_h,
         "theta_max": st.theta_max,

@@ -12,12 +12,14 @@ from shtools.sh.basis import (
     order_from_size,
     sh_index,
 )
-from shtools.sh.exponential import EXP_METHODS, exp, squarings
+from shtools.sh.exponential import EXP_METHODS, ExpMethod, exp, squarings
 from shtools.sh.logarithm import LOG_EPS, log
 from shtools.sh.quadrature import project, reconstruct, sphere_quadrature
 from shtools.sh.rotation import rotate, rotation_matrix
 from shtools.sh.triple import TripleTensor, product, product_matrix, square, triple, triple_tensor
 from shtools.sh.zonal import (
+    WINDOW_KINDS,
+    WindowKind,
     apply_window,
     cap,
     cap_zh,
@@ -31,7 +33,10 @@ __all__ = [
     "EXP_METHODS",
     "LOG_EPS",
     "SH_CONVENTION",
+    "WINDOW_KINDS",
+    "ExpMethod",
     "TripleTensor",
+    "WindowKind",
     "apply_window",
     "band_of",
     "basis",

@@ -36,6 +36,7 @@ and squarings at a higher order and truncates only the result (Sec. 4: "errors
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 
 import numpy as np
 
@@ -44,7 +45,20 @@ from shtools.sh.quadrature import project, reconstruct, sphere_quadrature
 from shtools.sh.triple import CHUNK_BYTES, _pad, product, product_matrix, square
 
 SQRT_4PI = math.sqrt(4.0 * math.pi)
-EXP_METHODS = ("hyb", "ps*", "ps", "ol", "exact", "volterra")
+
+
+class ExpMethod(StrEnum):
+    """The SH exponential methods of :func:`exp` (the one list; settings and CLI import it)."""
+
+    HYB = "hyb"
+    PS_STAR = "ps*"
+    PS = "ps"
+    OL = "ol"
+    EXACT = "exact"
+    VOLTERRA = "volterra"
+
+
+EXP_METHODS = tuple(m.value for m in ExpMethod)
 DEFAULT_DEGREE = {"ps": 8, "ps*": 2}
 """Series degree ``p`` of PS-p and PS*-p when not given."""
 

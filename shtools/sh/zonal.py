@@ -34,6 +34,7 @@ paper's cosine filter is :math:`w_l = \cos(\frac{\pi}{2}\frac{l}{h})` with
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 
 import numpy as np
 
@@ -169,7 +170,15 @@ def clamped_cosine_zh(order: int) -> np.ndarray:
     return out
 
 
-WINDOW_KINDS = ("cosine", "hann", "lanczos")
+class WindowKind(StrEnum):
+    """Window kinds of :func:`window` (``None`` or ``"none"``: no window)."""
+
+    COSINE = "cosine"
+    HANN = "hann"
+    LANCZOS = "lanczos"
+
+
+WINDOW_KINDS = tuple(k.value for k in WindowKind)
 
 
 def window(order: int, kind: str | None = "cosine", h: float | None = None) -> np.ndarray:

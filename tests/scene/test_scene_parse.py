@@ -181,3 +181,118 @@ def test_skin_needs_gltf(tmp_path):
     text = MINIMAL + '\n[[objects]]\nname = "c"\nmesh = "m.obj"\nrole = "receiver"\nskin = {}\n'
     with pytest.raises(InputError, match="skinned animation needs a glTF mesh"):
         parse(text, tmp_path)
+
+
+BALL = """
+[[objects]]
+name = "ball"
+primitive = { type = "sphere", radius = 0.5 }
+role = "blocker"
+"""
+
+
+@pytest.mark.parametrize(
+    ("addition", "message"),
+    [
+        # the whole line after the file name is pinned: TOML path, what is wrong, the fix
+        ("[settings]\nacc_order = 1\n", None),
+        ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\ncolor = [1, 1, 1]\ncolour = 1\n',
+         "lights[0]: unknown key 'colour'; did you mean 'color'?"),
+        ('\n[[lights]]\nposition = [0, 1]\nradius = 0.1\ncolor = [1, 1, 1]\n',
+         "lights[0].position: must be a list of 3 numbers, got [0, 1]"),
+        ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\n', "lights[0]: missing key 'color'"),
+        ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\ncolor = [1, 1, 1]\n'
+         'shadows = "shexpp"\n',
+         "lights[0].shadows: must be one of shexp; did you mean 'shexp'? got 'shexpp'"),
+        ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\ncolor = [1, -1, 1]\n',
+         "lights[0].color: must not be negative, got [1, -1, 1]"),
+        ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\ncolor = [1, 1, 1]\n'
+         'intensity = -2\n', "lights[0].intensity: must be >= 0, got -2"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 0 }'),
+         "objects[1] ('ball').blocker.fit: must be >= 1, got 0"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, sed = 1 }'),
+         "objects[1] ('ball').blocker: unknown key 'sed'; did you mean 'seed'?"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { exact = true, '
+                      'seed = 1 }'),
+         "objects[1] ('ball').blocker.seed: only applies with 'fit = ...'"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, '
+                      'method = "kmean" }'),
+         "objects[1] ('ball').blocker.method: must be one of variational, octree, kmeans; "
+         "did you mean 'kmeans'? got 'kmean'"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, exact = true }'),
+         "objects[1] ('ball').blocker: give exactly one of 'spheres', 'tree', 'bound', 'fit', "
+         "'exact' (see docs/scenes.md)"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { exact = false }'),
+         "objects[1] ('ball').blocker.exact: must be true (or leave it out)"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nscale = [1, 0, 1]'),
+         "objects[1] ('ball').scale: must be positive, got [1, 0, 1]"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nrotate = [0, 1, 0]\n'
+                      'quaternion = [0, 0, 0, 1]'),
+         "objects[1] ('ball'): give either 'rotate' (Euler degrees) or 'quaternion', not both"),
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nloop = 1'),
+         "objects[1] ('ball').loop: must be true or false, got 1"),
+        (BALL + "[[objects.keyframes]]\ntime = 0\nframe = 1\n",
+         "objects[1] ('ball').keyframes[0]: give exactly one of 'time' (seconds) or 'frame'"),
+        (BALL + "[[objects.keyframes]]\ntime = 0\n[[objects.keyframes]]\ntime = 0.0\n",
+         "objects[1] ('ball').keyframes: two keyframes have the same time"),
+        (BALL + "[[objects.keyframes]]\ntime = inf\n",
+         "objects[1] ('ball').keyframes[0].time: must be finite, got inf"),
+        (BALL.replace('name = "ball"', 'name = "ground"'),
+         "two objects are named 'ground'; names must be unique"),
+    ],
+)
+def test_more_mistakes_give_one_pinned_line(tmp_path, addition, message):
+    if message is None:  # the settings cross-check: acc_order below order
+        text = MINIMAL.replace("order = 2", "order = 2\nacc_order = 1")
+        message = ("settings: acc_order must be an integer in order (2)..10 (or None: "
+                   "min(order + 2, 6)), got 1")
+    else:
+        text = MINIMAL + addition
+    with pytest.raises(InputError) as info:
+        parse(text, tmp_path)
+    assert info.value.one_line() == f"{tmp_path / 'scene.toml'}: {message}"
+
+
+@pytest.mark.parametrize(("setting", "message"), [
+    ("order = 9", "settings.order: must be <= 8, got 9"),
+    ("order = 2.0", "settings.order: must be an integer, got 2.0"),
+    ("acc_order = 11", "settings.acc_order: must be <= 10, got 11"),
+    ("theta_max_deg = 90", "settings.theta_max_deg: must be < 90, got 90"),
+    ("theta_min_deg = -1", "settings.theta_min_deg: must be >= 0, got -1"),
+    ("fps = nan", "settings.fps: must be finite, got nan"),
+    ("frames = 0", "settings.frames: must be >= 1, got 0"),
+    ("hierarchy = 1", "settings.hierarchy: must be true or false, got 1"),
+    ('exp_method = "ps+"', "settings.exp_method: must be one of auto, hyb, ps*, ps, ol, exact, "
+                           "volterra; did you mean 'ps'? got 'ps+'"),
+    ('window = "han"', "settings.window: must be one of cosine, hann, lanczos, none; did you "
+                       "mean 'hann'? got 'han'"),
+    ('method = "raytrac"', "settings.method: must be one of default, hyb, ps*, ps, ol, exact, "
+                           "volterra, product, raytrace; did you mean 'raytrace'? got 'raytrac'"),
+    ("procesess = 2", "settings: unknown key 'procesess'; allowed: order, acc_order, "
+                      "exp_method, exp_degree, window, window_h, theta_max_deg, theta_min_deg, "
+                      "hierarchy, vertices_per_cluster, self_shadow, frames, fps, tables, method"),
+    ("vertices_per_clustr = 2", "settings: unknown key 'vertices_per_clustr'; did you mean "
+                                "'vertices_per_cluster'?"),
+    ('tables = "t.h5"', "settings.tables: file 't.h5' not found (paths are relative to the "
+                        "scene file)"),
+])
+def test_settings_errors_come_from_the_schema(tmp_path, setting, message):
+    with pytest.raises(InputError) as info:
+        parse(MINIMAL.replace("order = 2", f"order = 2\n{setting}").replace(
+            "order = 2\norder", "order"), tmp_path)
+    assert info.value.one_line() == f"{tmp_path / 'scene.toml'}: {message}"
+
+
+def test_order_limits_agree_with_the_runtime(tmp_path):
+    """A scene accepts exactly the orders the runtime runs (issue 9: order = 10 parsed, then
+    failed late)."""
+    from shtools.runtime.settings import MAX_ACC_ORDER, MAX_ORDER
+
+    text = MINIMAL.replace("order = 2", f"order = {MAX_ORDER}\nacc_order = {MAX_ACC_ORDER}")
+    text = text.replace("coeffs = [[1.0, 1.0, 1.0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]",
+                        "coeffs = [" + ", ".join(["[1.0, 1.0, 1.0]"] * MAX_ORDER ** 2) + "]")
+    scene = parse(text, tmp_path)
+    from shtools.scene.bake import runtime_settings
+
+    rs = runtime_settings(scene, "default")
+    assert (rs.order, rs.resolved_acc_order()) == (MAX_ORDER, MAX_ACC_ORDER)

@@ -49,7 +49,7 @@ def real_gaunt_tensor(order):
     """Γ of the real basis from complex Gaunt coefficients and the real/complex unitary map.
 
     Complex (Condon–Shortley) Y: integral Y1 Y2 Y3 = sqrt((2l1+1)(2l2+1)(2l3+1)/(4 pi))
-    (l1 l2 l3; 0 0 0)(l1 l2 l3; m1 m2 m3).  Real y without the phase (DESIGN.md):
+    (l1 l2 l3; 0 0 0)(l1 l2 l3; m1 m2 m3).  Real y without the phase (docs/conventions.md):
     y_{l,m>0} = ((-1)^m Y^m + Y^-m)/sqrt2, y_{l,-m} = ((-1)^m Y^m - Y^-m)/(i sqrt2).
     """
     lm = [(l, m) for l in range(order) for m in range(-l, l + 1)]

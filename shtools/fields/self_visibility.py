@@ -1,0 +1,169 @@
+r"""Per-vertex self-visibility of a mesh, ray traced once and projected to SH.
+
+The visibility of receiver ``p`` (unit normal ``N``) in direction ``s`` is 0
+when a ray from ``p`` along ``s`` hits the mesh and 1 otherwise.  Directions
+below the tangent plane (``s . N <= 0``) count as **visible**: the convention
+of the ray-traced reference (:mod:`shtools.reference.raytrace`) and of the
+SHEXP self-shadow rules, and harmless for diffuse shading since ``H(N)``
+weighs them by 0.  Keeping the same convention lets a precomputed
+self-visibility replace an object's spheres on its own vertices and still be
+compared one to one with the reference.
+
+Quadrature.  The binary function is sampled on the smallest Gauss–Legendre
+(in ``z``) x uniform (in φ) product rule of :func:`shtools.sh.sphere_quadrature`
+with at least ``n_dirs`` nodes and projected to order ``n`` with its weights,
+``g_i = Σ_q w_q V(s_q) y_i(s_q)``.  The rule is exact for polynomials of degree
+``d`` (``(d/2 + 1)(d + 1) >= n_dirs``), not for the discontinuous visibility,
+so ``n_dirs`` sets the accuracy: shadow boundaries cut the rule's cells.
+Measured on a closed form (a cone of half-angle 45° about +y plus a half
+space, ``tests/fields``): single coefficients within 4.6e-2 at 2,000 nodes,
+2e-2 at 8,000 and 3.7e-3 at 20,000 (``g_0 = 3.54`` for reference).  The
+ray-traced reference uses the same family of rules, so at equal ``n_dirs``
+both carry the same quadrature error.
+
+The log (:func:`self_visibility_log`) goes through :func:`shtools.sh.log`
+(eigen-inversion, Ren et al. 2006 eqs. 30-32).  A vertex whose whole upper
+hemisphere is blocked (deep in a crevice) has a visibility that vanishes on a
+hemisphere, whose log is -inf there; ``floor`` lifts the binary function to
+``max(V, floor)`` before the log (for binary ``V`` that is exactly
+``floor + (1 - floor) g``), so the log stays finite and ``exp`` of it gives
+back at least ``floor`` everywhere.
+
+This module must not import :mod:`shtools.reference`: the reference ray
+tracer stays an independent check of it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from shtools.sh import basis, sphere_quadrature
+from shtools.sh import log as sh_log
+
+#: Default number of quadrature directions (the issue's reference uses >= 3,200).
+DEFAULT_DIRECTIONS = 3200
+#: Ray origin offset along the normal, relative to the mesh's bounding-box diagonal
+#: (against self-hits of the receiver's own triangles; the reference uses the same).
+RAY_OFFSET = 1e-5
+#: Rays cast per progress step (bounds the (V', Q) boolean block to ~16 MB).
+RAYS_PER_STEP = 1 << 24
+#: Default visibility floor of :func:`self_visibility_log`.
+LOG_FLOOR = 0.01
+
+SQRT_4PI = math.sqrt(4.0 * math.pi)
+
+
+def direction_quadrature(n_dirs: int) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest Gauss–Legendre x uniform product rule with at least ``n_dirs`` nodes.
+
+    Returns
+    -------
+    dirs : ndarray, shape (Q, 3)
+        Unit directions.
+    weights : ndarray, shape (Q,)
+        Quadrature weights (sum ``4π``).
+    """
+    if n_dirs < 1:
+        raise ValueError(f"n_dirs must be >= 1, got {n_dirs}")
+    degree = 2
+    while (degree // 2 + 1) * (degree + 1) < n_dirs:
+        degree += 1
+    return sphere_quadrature(degree)
+
+
+def self_visibility(vertices, normals, meshes, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
+                    offset: float | None = None,
+                    progress: Callable[[int, int], None] | None = None,
+                    binary: bool = False) -> np.ndarray:
+    """Binary visibility of triangle meshes at each vertex, projected to SH.
+
+    Parameters
+    ----------
+    vertices : array_like, shape (V, 3)
+        Receiver points (usually the mesh's own vertices).
+    normals : array_like, shape (V, 3)
+        Unit receiver normals (directions with ``s . N <= 0`` count as visible).
+    meshes : trimesh.Trimesh or list of trimesh.Trimesh
+        Geometry that blocks (the object's real mesh).
+    order : int
+        SH order ``n`` of the result.
+    n_dirs : int
+        Minimum number of quadrature directions (:func:`direction_quadrature`).
+    offset : float, optional
+        Ray origin offset along the normal (world units); default
+        ``RAY_OFFSET`` x the meshes' bounding-box diagonal.
+    progress : callable, optional
+        Called as ``progress(vertices_done, vertices_total)`` after every
+        chunk of vertices.
+    binary : bool
+        Also return the binary samples and the quadrature (for tests and
+        diagnostics; memory ``V x Q`` bytes).
+
+    Returns
+    -------
+    ndarray, shape (V, n*n) float64
+        Visibility vectors ``g``; with ``binary=True`` the tuple
+        ``(g, vis (V, Q) bool, dirs (Q, 3), weights (Q,))``.
+    """
+    from shtools.geometry.raycast import RayCaster
+
+    p = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    if nrm.shape != p.shape:
+        raise ValueError(f"vertices {p.shape} and normals {nrm.shape} must have the same shape")
+    dirs, w = direction_quadrature(int(n_dirs))
+    caster = RayCaster.from_meshes(meshes if isinstance(meshes, list | tuple) else [meshes])
+    if offset is None:
+        offset = RAY_OFFSET * caster.diagonal
+    # projection matrix: g = vis @ (w * y(s)) (one BLAS product per chunk)
+    proj = basis(dirs, order) * w[:, None]  # (Q, n*n)
+    out = np.empty((p.shape[0], order * order))
+    keep = np.empty((p.shape[0], dirs.shape[0]), dtype=bool) if binary else None
+    step = max(1, RAYS_PER_STEP // max(1, dirs.shape[0]))
+    total = p.shape[0]
+    for start in range(0, total, step):
+        stop = min(total, start + step)
+        vis = caster.visibility(p[start:stop], dirs, normals=nrm[start:stop], offset=offset)
+        out[start:stop] = vis.astype(np.float64) @ proj
+        if keep is not None:
+            keep[start:stop] = vis
+        if progress is not None:
+            progress(stop, total)
+    if binary:
+        return out, keep, dirs, w
+    return out
+
+
+def self_visibility_log(g, *, floor: float = LOG_FLOOR, eps: float | None = None) -> np.ndarray:
+    """SH log of binary visibility vectors by eigen-inversion, with a visibility floor.
+
+    Parameters
+    ----------
+    g : array_like, shape (V, n*n)
+        Projected binary visibility (:func:`self_visibility`).
+    floor : float
+        Visibility floor in [0, 1): the log is taken of ``floor + (1 - floor) g``,
+        the projection of ``max(V, floor)`` for binary ``V``, so fully blocked
+        directions get ``log(floor)`` rather than -inf.
+    eps : float, optional
+        Eigenvalue floor of :func:`shtools.sh.log` (default its ``LOG_EPS``).
+
+    Returns
+    -------
+    ndarray, shape (V, n*n) float64
+        ``f`` with ``exp(f) ~= floor + (1 - floor) g`` at order ``n``.
+    """
+    if not 0.0 <= floor < 1.0:
+        raise ValueError(f"floor must be in [0, 1), got {floor!r}")
+    g = np.asarray(g, dtype=np.float64)
+    lifted = (1.0 - floor) * g
+    lifted[..., 0] += floor * SQRT_4PI
+    kwargs = {} if eps is None else {"eps": eps}
+    return sh_log(lifted, "eigen", **kwargs)
+
+
+__all__ = ["DEFAULT_DIRECTIONS", "LOG_FLOOR", "direction_quadrature", "self_visibility",
+           "self_visibility_log"]

@@ -1,0 +1,9 @@
+"""Imports every module that registers a blocker kind or a light-shadow way.
+
+The built-in kinds (:mod:`shtools.scene.blockers`) and ways
+(:mod:`shtools.scene.shadows`) register themselves; a kind or way in its own
+module (e.g. shadow fields) is imported here, one line each, so the scene
+schema and the baker see it:
+
+    import shtools.fields.blocker  # noqa: F401  (registers blocker = { field = ... })
+"""

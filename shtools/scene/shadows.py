@@ -1,0 +1,240 @@
+"""Ways to shadow light in a bake: visibility methods and per-light shadow ways (registries).
+
+Two small protocols, each registered by name:
+
+:class:`VisibilityMethod` — how a frame's SH visibility ``(V, n*n)`` is made,
+the ``--method`` of ``shtools bake`` and ``settings.method`` of a scene:
+``default`` and each exp method (the SHEXP runtime), ``product``
+(product-space accumulation) and ``raytrace`` (ray tracing of the posed
+blocker meshes).  The environment is always shaded with this visibility.
+
+:class:`LightShadow` — how one spherical light is shadowed, the ``shadows``
+key of a ``[[lights]]`` table.  ``shexp`` (the default) shades the light
+analytically with the frame's SH visibility, in the same call as the
+environment (:meth:`shtools.runtime.ShadowRuntime.shade`); another way (SSOC,
+ray tracing) returns the light's radiance ``(V, 3)`` itself, which the baker
+adds.
+
+Adding one is a subclass and a ``register_*`` call in its own module, imported
+from :mod:`shtools.scene.kinds` (see ``docs/architecture.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from shtools.sh.exponential import ExpMethod
+
+
+@dataclass
+class BakeRun:
+    """What a method or way may use while baking (one per :func:`bake_scene` call).
+
+    Attributes
+    ----------
+    prepared : shtools.scene.bake.PreparedScene
+    runtime : shtools.runtime.ShadowRuntime
+        Shading (and the SHEXP visibility) at the scene's settings.
+    method : str
+        The visibility method's name.
+    raytrace_dirs : int or None
+        Directions per vertex of ray-traced visibility (None: the reference's default).
+    cache : dict
+        Per-bake state a method keeps between frames (e.g. receiver clusters).
+    """
+
+    prepared: Any
+    runtime: Any
+    method: str
+    raytrace_dirs: int | None = None
+    cache: dict = field(default_factory=dict)
+
+    @property
+    def settings(self):
+        return self.prepared.scene.settings
+
+
+# --------------------------------------------------------------------------- visibility
+class VisibilityMethod:
+    """A way to compute a frame's SH visibility (see the module docstring)."""
+
+    name: ClassVar[str]
+    #: posed blocker meshes are needed in the FrameState
+    needs_meshes: ClassVar[bool] = False
+    #: uses the runtime's accumulation and exp (records them in the asset)
+    uses_runtime: ClassVar[bool] = False
+
+    def exp_method(self, settings) -> str:
+        """The exp method the runtime is set up with for this method."""
+        return settings.exp_method
+
+    def visibility(self, run: BakeRun, state) -> np.ndarray:
+        """SH visibility of the posed frame ``state`` (FrameState), shape ``(V, n*n)``."""
+        raise NotImplementedError
+
+
+class RuntimeVisibility(VisibilityMethod):
+    """The SHEXP runtime with the scene's exp method (``default``) or a named one."""
+
+    uses_runtime = True
+
+    def __init__(self, name: str, exp: str | None = None):
+        self.name, self._exp = name, exp
+
+    def exp_method(self, settings) -> str:
+        return self._exp or settings.exp_method
+
+    def visibility(self, run, state):
+        import time
+
+        clusters = run.cache.get("clusters")
+        if clusters is None:  # one-time setup, not counted as frame time
+            start = time.perf_counter()
+            clusters = run.cache["clusters"] = _clusters(run.prepared, state.vertices)
+            run.cache["setup_seconds"] = time.perf_counter() - start
+        return run.runtime.visibility(state.vertices, state.normals, state.blockers,
+                                      clusters=clusters)
+
+
+class ProductVisibility(VisibilityMethod):
+    """Product-space accumulation (:func:`shtools.reference.product_space_visibility`)."""
+
+    name = "product"
+
+    def visibility(self, run, state):
+        from shtools.reference import product_space_visibility
+
+        st = run.settings
+        return product_space_visibility(state.vertices, state.normals, state.blockers,
+                                        st.order, acc_order=st.acc_order)
+
+
+class RaytraceVisibility(VisibilityMethod):
+    """Ray tracing of the posed blocker meshes (:func:`shtools.reference.raytrace_visibility`)."""
+
+    name = "raytrace"
+    needs_meshes = True
+
+    def visibility(self, run, state):
+        import trimesh
+
+        from shtools.reference import raytrace_visibility
+
+        order = run.settings.order
+        if not state.blocker_meshes:  # nothing to hit: visibility is the constant 1
+            vis = np.zeros((len(state.vertices), order * order))
+            vis[:, 0] = math.sqrt(4 * math.pi)
+            return vis
+        meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
+        kwargs = {} if run.raytrace_dirs is None else {"n_dirs": run.raytrace_dirs}
+        return raytrace_visibility(state.vertices, state.normals, meshes, order, **kwargs)
+
+
+def _clusters(prepared, vertices: np.ndarray):
+    """Receiver clusters from the first baked frame, reused for every frame.
+
+    Clusters never mix objects, and the runtime recomputes each cluster's bound
+    from the current positions, so rigidly moving and skinned receivers keep
+    compact clusters without re-clustering every frame.
+    """
+    from shtools.runtime.clusters import lloyd_clusters
+
+    groups = np.concatenate([np.full(len(o.vertices), k)
+                             for k, o in enumerate(prepared.receivers)])
+    return lloyd_clusters(vertices, prepared.scene.settings.vertices_per_cluster, groups=groups)
+
+
+#: name -> method, in the order ``--help`` lists them
+VISIBILITY_METHODS: dict[str, VisibilityMethod] = {}
+
+
+def register_visibility_method(method: VisibilityMethod) -> VisibilityMethod:
+    """Add a visibility method (a ``bake --method`` / ``settings.method`` value)."""
+    if method.name in VISIBILITY_METHODS:
+        raise ValueError(f"visibility method '{method.name}' is already registered")
+    VISIBILITY_METHODS[method.name] = method
+    return method
+
+
+register_visibility_method(RuntimeVisibility("default"))
+for _exp in ExpMethod:
+    register_visibility_method(RuntimeVisibility(_exp.value, _exp.value))
+register_visibility_method(ProductVisibility())
+register_visibility_method(RaytraceVisibility())
+
+
+def bake_method_names() -> tuple[str, ...]:
+    """The registered visibility methods (choices of ``settings.method`` and ``--method``)."""
+    from shtools.scene.blockers import blocker_kinds
+
+    blocker_kinds()  # imports shtools.scene.kinds, where extra methods register
+    return tuple(VISIBILITY_METHODS)
+
+
+# --------------------------------------------------------------------------- lights
+class LightShadow:
+    """A way to shadow spherical lights (see the module docstring)."""
+
+    name: ClassVar[str]
+    #: shaded with the SH visibility in the environment's shade call
+    joins_environment: ClassVar[bool] = False
+    #: posed blocker meshes are needed in the FrameState
+    needs_meshes: ClassVar[bool] = False
+
+    def radiance(self, run: BakeRun, state, visibility: np.ndarray,
+                 lights: list) -> np.ndarray:
+        """Outgoing radiance ``(V, 3)`` from ``lights`` (SphereLight) at the receivers.
+
+        ``state`` is the posed FrameState, ``visibility`` the frame's SH visibility.
+        """
+        raise NotImplementedError
+
+
+class ShexpLight(LightShadow):
+    """The light's analytic SH, shaded with the frame's SH visibility (SHEXP Sec. 7)."""
+
+    name = "shexp"
+    joins_environment = True
+
+    def radiance(self, run, state, visibility, lights):
+        return run.runtime.shade(visibility, state.vertices, state.normals, None,
+                                 sphere_lights=lights)
+
+
+#: name -> way
+LIGHT_SHADOWS: dict[str, LightShadow] = {}
+
+
+def register_light_shadow(way: LightShadow) -> LightShadow:
+    """Add a light-shadow way (a ``shadows = "<name>"`` value of ``[[lights]]``)."""
+    if way.name in LIGHT_SHADOWS:
+        raise ValueError(f"light-shadow way '{way.name}' is already registered")
+    LIGHT_SHADOWS[way.name] = way
+    return way
+
+
+register_light_shadow(ShexpLight())
+
+
+def shade_frame(run: BakeRun, state, visibility: np.ndarray) -> np.ndarray:
+    """Radiance ``(V, 3)`` of a posed frame: environment and every light, each its own way.
+
+    The environment and the lights whose way joins it are shaded in one
+    :meth:`~shtools.runtime.ShadowRuntime.shade` call; every other way adds
+    its lights' radiance.
+    """
+    groups: dict[str, list] = {}
+    for light, way in zip(state.lights, state.light_shadows, strict=True):
+        groups.setdefault(way, []).append(light)
+    joined = [light for way, group in groups.items() if LIGHT_SHADOWS[way].joins_environment
+              for light in group]
+    radiance = run.runtime.shade(visibility, state.vertices, state.normals,
+                                 run.prepared.env_sh, sphere_lights=joined)
+    for way, group in groups.items():
+        if not LIGHT_SHADOWS[way].joins_environment:
+            radiance = radiance + LIGHT_SHADOWS[way].radiance(run, state, visibility, group)
+    return radiance
