@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 
 import click
@@ -68,3 +69,42 @@ def setting_type(name: str, settings_cls=None) -> click.ParamType:
     if lim.kind == "float":
         return click.FloatRange(lo, hi, min_open=lim.lo_open, max_open=lim.hi_open)
     raise ValueError(f"setting {name!r} ({lim.kind}) has no command-line type")
+
+
+class FiniteRange(click.FloatRange):
+    """A float option in a range that also refuses ``nan`` and ``inf`` (click accepts them)."""
+
+    name = "finite number"
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return rv
+
+
+#: The range of every numeric option that is not a runtime setting (those come from
+#: the settings schema, :func:`setting_type`): one place, one finite check.
+OPTION_TYPES: dict[str, click.ParamType] = {
+    # exposure in stops: 2^60 ~ 1e18 keeps float32 radiance finite
+    "exposure": FiniteRange(-60, 60),
+    "elevation": FiniteRange(-90, 90),
+    "azimuth": FiniteRange(-360, 360),
+    "rotate_y": FiniteRange(-360, 360),
+    "zoom": FiniteRange(0, 1000, min_open=True),
+    "window_h": FiniteRange(0, 1000, min_open=True),
+    "thickness": FiniteRange(0, None, min_open=True),
+    # GIF frame delays are whole hundredths of a second: 100 fps at most
+    "fps": FiniteRange(0.1, 100),
+    "seed": click.IntRange(0, 2**32 - 1),
+    "columns": click.IntRange(1, 1000),
+    # one image side; the pixel count has its own limit (shtools.cli.export)
+    "size": click.IntRange(8, 16384),
+    "count": click.IntRange(1, 100_000),
+    "level": click.IntRange(0, 64),
+}
+
+
+def option_type(name: str) -> click.ParamType:
+    """The click type (range, finite) of the numeric option ``name`` (:data:`OPTION_TYPES`)."""
+    return OPTION_TYPES[name]

@@ -236,7 +236,7 @@ def _dataset_summary(name, ds) -> dict:
 
 
 #: Root attributes that differ between equivalent builds and are never compared.
-IGNORED_ATTRS = ("generator",)
+IGNORED_ATTRS = ("generator", "processes")
 
 
 def _flatten_parameters(params, prefix="parameters."):

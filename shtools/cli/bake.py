@@ -23,8 +23,10 @@ from shtools.scene.shadows import bake_method_names
 @click.option("--processes", type=setting_type("processes"), default=None,
               help="Processes sharing each frame's shadow evaluation (default: one per "
                    "core; 1 = this process only).")
+@click.option("--force", is_flag=True,
+              help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option
-def bake(scene, output, frames_text, method, store_visibility, processes, as_json):
+def bake(scene, output, frames_text, method, store_visibility, processes, force, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.
 
     Frames are written as they are computed; the file appears only when every
@@ -41,7 +43,7 @@ def bake(scene, output, frames_text, method, store_visibility, processes, as_jso
     with progress(total=len(frames), desc="bake") as bar:
         summary = bake_to_file(parsed, output, frames=frames, method=method,
                                store_visibility=store_visibility, processes=processes,
-                               on_frame=lambda _r: bar.update(1))
+                               on_frame=lambda _r: bar.update(1), force=force)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

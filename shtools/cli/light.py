@@ -7,7 +7,7 @@ import time
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, output_option, report, setting_type
+from shtools.cli._common import json_option, option_type, output_option, report, setting_type
 
 
 @click.group()
@@ -23,14 +23,16 @@ def light():
 @click.option("--window", type=setting_type("window"),
               default="none", show_default=True,
               help="Per-band window against ringing (cosine: the paper's filter).")
-@click.option("--window-h", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--window-h", type=option_type("window_h"), default=None,
               help="Window width in bands (default: 2n for cosine, n otherwise).")
-@click.option("--rotate-y", type=float, default=0.0, show_default=True, metavar="DEG",
+@click.option("--rotate-y", type=option_type("rotate_y"), default=0.0, show_default=True,
+              metavar="DEG",
               help="Rotate the environment about +y (right-hand rule; +90 turns the image "
               "centre from -z to -x).")
 @click.option("--mirror", is_flag=True,
               help="Mirror the image left-right first (for maps stored mirrored).")
-@click.option("--exposure", type=float, default=0.0, show_default=True, metavar="EV",
+@click.option("--exposure", type=option_type("exposure"), default=0.0, show_default=True,
+              metavar="EV",
               help="Scale radiance by 2**EV.")
 @json_option
 def project(image, order, output, window, window_h, rotate_y, mirror, exposure, as_json):

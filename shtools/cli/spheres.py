@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
+from shtools.cli._common import json_option, option_type, output_option, progress, report
 from shtools.geometry.fit_methods import FIT_METHODS
 
 
@@ -20,15 +20,15 @@ def spheres():
 
 @spheres.command("fit")
 @click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
-@click.option("-n", "--count", "count", type=int, required=True,
+@click.option("-n", "--count", "count", type=option_type("count"), required=True,
               help="Number of spheres N (>= 1).")
 @output_option
 @click.option("--method", type=click.Choice(FIT_METHODS),
               default="variational", show_default=True,
               help="variational (Wang et al. 2006, minimal outside volume) or a baseline.")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=option_type("seed"), default=0, show_default=True,
               help="Seed of sampling and initialisation (same seed -> identical asset).")
-@click.option("--thickness", type=float, default=None,
+@click.option("--thickness", type=option_type("thickness"), default=None,
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
 @click.option("--iterations", type=click.IntRange(min=1), default=None,
               help="Round budget of the variational fit, counted in rounds at N spheres "
@@ -91,7 +91,7 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
 @spheres.command("import")
 @click.argument("sph_path", metavar="FILE.sph", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--level", type=int, default=None,
+@click.option("--level", type=option_type("level"), default=None,
               help="Tree level to import (0 = root); default the deepest non-empty level.")
 @click.option("--mesh", "mesh_path", type=click.Path(dir_okay=False), default=None,
               help="Mesh the spheres bound: used to compute outside_volume_ratio.")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, output_option, report
+from shtools.cli._common import json_option, option_type, output_option, report
 from shtools.cli._outputs import guard_outputs
 from shtools.errors import InputError
 
@@ -31,7 +31,7 @@ def _read_sphere_set(path: str) -> tuple[np.ndarray, np.ndarray]:
 @output_option
 @click.option("--branching", default=4, show_default=True, type=click.IntRange(min=2),
               help="Target average number of children per inner node.")
-@click.option("--seed", default=0, show_default=True, type=int,
+@click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Seed of the Lloyd clustering (same seed -> identical tree).")
 @json_option
 def tree(spheres_path, output, branching, seed, as_json):

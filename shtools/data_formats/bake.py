@@ -21,7 +21,9 @@ dataset                shape / dtype      meaning
 =====================  =================  ==============================================
 
 Root attributes: the provenance set of every asset plus ``sh_order``,
-``object_names`` (JSON list) and ``fps``.
+``object_names`` (JSON list), ``fps`` and ``processes`` (how many processes
+shared each frame; the datasets are the same bytes for any count, and
+``shtools diff`` ignores it).
 
 :class:`BakeWriter` streams frames into the file as they are computed (memory
 stays bounded by one frame) and renames the temporary file into place only when
@@ -217,6 +219,19 @@ def read_bake(path: str | os.PathLike) -> Bake:
     )
 
 
+def bake_size_bound(frames: int, vertices: int, *, static: bool = False,
+                    visibility_size: int | None = None, fixed: int | None = None) -> int:
+    """Upper bound of a bake asset's bytes: every dataset uncompressed, +1 % and 1 MiB.
+
+    ``fixed``: bytes of the frame-independent datasets (default: two triangles
+    per vertex, i.e. ``24 V``); ``static``: geometry stored once, not per frame.
+    """
+    T, V = int(frames), int(vertices)
+    per_frame = V * 12 * (1 if static else 3) + V * 4 * (visibility_size or 0)
+    fixed = V * 24 if fixed is None else fixed
+    return int(1.01 * (T * per_frame + fixed + V * 36 + T * 12)) + (1 << 20)
+
+
 class BakeWriter:
     """Stream a bake asset frame by frame into a temporary file, rename on success.
 
@@ -270,6 +285,7 @@ class BakeWriter:
         parameters=None,
         inputs=None,
         fps: float | None = None,
+        processes: int | None = None,
         compression: str | None = "gzip",
     ):
         self.path = Path(path)
@@ -303,19 +319,17 @@ class BakeWriter:
             Path(p).name: sha256_file(p) for p in (inputs or {}).values() if p is not None
         }
         self.fps = fps
+        self.processes = processes
         self.compression = compression
         self._written = np.zeros(T, dtype=bool)
         self._stack: contextlib.ExitStack | None = None
         self._file: h5py.File | None = None
 
     def size_bound(self) -> int:
-        """Bytes the file can take at most: every dataset uncompressed, plus 1% and 1 MiB."""
-        T, V = self.n_frames, self.n_vertices
-        per_frame = V * 3 * 4 * (1 if self.static else 3) + V * 4 * (self.visibility_size or 0)
-        fixed = (self.faces.nbytes + T * 12 + self.object_offsets.nbytes
-                 + (0 if self.albedo is None else self.albedo.nbytes)
-                 + (V * 24 if self.static else 0))
-        return int(1.01 * (T * per_frame + fixed)) + (1 << 20)
+        """Bytes the file can take at most (:func:`bake_size_bound`)."""
+        return bake_size_bound(self.n_frames, self.n_vertices, static=self.static,
+                               visibility_size=self.visibility_size,
+                               fixed=self.faces.nbytes + self.object_offsets.nbytes)
 
     # -- context management -------------------------------------------------
     def __enter__(self) -> BakeWriter:
@@ -344,6 +358,8 @@ class BakeWriter:
         }
         if self.fps is not None:
             root["fps"] = float(self.fps)
+        if self.processes is not None:  # provenance only: the bytes do not depend on it
+            root["processes"] = np.int64(self.processes)
         for k in sorted(root):
             f.attrs[k] = root[k]
         T, V = self.n_frames, self.n_vertices

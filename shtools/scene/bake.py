@@ -309,6 +309,10 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             joints = None
             local_v, local_n = o.vertices, o.normals
         world_v = transform_points(m, local_v)
+        if not np.isfinite(world_v).all():
+            raise InputError(f"objects '{o.spec.name}': the posed vertices at t = {t:g} s are "
+                             "not finite (a transform too large for float64?); check its "
+                             "translate/scale and its parents'", prepared.scene.path)
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
@@ -398,7 +402,7 @@ def bake_scene(
         if output is not None:
             writer = stack.enter_context(
                 _writer(prepared, output, frames, times, method, store_visibility,
-                        prepared.receivers_move()))
+                        prepared.receivers_move(), runtime.processes))
         run = BakeRun(prepared, runtime, method, raytrace_dirs)
         for k, (frame, t) in enumerate(zip(frames, times, strict=True)):
             start = time.perf_counter()
@@ -417,7 +421,8 @@ def bake_scene(
             yield result
 
 
-def _writer(prepared: PreparedScene, output, frames, times, method, store_visibility, moving):
+def _writer(prepared: PreparedScene, output, frames, times, method, store_visibility, moving,
+            processes=None):
     from shtools.data_formats.bake import BakeWriter
 
     scene = prepared.scene
@@ -469,6 +474,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         object_names=names,
         parameters=parameters,
         inputs=inputs,
+        processes=processes,
         fps=st.fps,
     )
 
@@ -482,6 +488,7 @@ def bake_to_file(
     store_visibility: bool = False,
     on_frame: Callable[[FrameResult], None] | None = None,
     processes: int | None = None,
+    force: bool = False,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -489,13 +496,19 @@ def bake_to_file(
     ``frame_seconds`` (posing + visibility + shading summed over frames),
     ``setup_seconds`` (loading, fits, tables, clustering, file writes),
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
-    ``output``.  ``processes`` as in :func:`bake_scene`.
+    ``output``, ``processes`` (as given; the bytes do not depend on it).
+    ``processes`` as in :func:`bake_scene`; ``force`` bakes past
+    :func:`check_bake_size`'s limits.
     """
     parent = Path(output).parent
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
         raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
     prepared = prepare_scene(scene)
+    frames = range(scene.settings.frames) if frames is None else frames
+    if not force:
+        check_bake_size(len(frames), prepared.n_vertices, store_visibility,
+                        scene.settings.order, scene.path)
     n = 0
     frame_seconds = 0.0
     for result in bake_scene(scene, frames=frames, method=method,
@@ -516,4 +529,35 @@ def bake_to_file(
         "vertex_frames_per_second": round(n * V / max(frame_seconds, 1e-9), 1),
         "method": method or scene.settings.method,
         "output": os.fspath(output),
+        "processes": processes,
     }
+
+
+#: Most vertex-frames a bake runs without --force: about half an hour at the
+#: 0.5 M vertex-frames/s of a battle-scale frame on 2 cores (README).
+MAX_VERTEX_FRAMES = 1_000_000_000
+#: Largest bake asset written without --force (uncompressed bound).
+MAX_BAKE_BYTES = 16 * 2**30
+
+
+def check_bake_size(frames: int, vertices: int, store_visibility: bool, order: int,
+                    path=None) -> None:
+    """Refuse a bake past :data:`MAX_VERTEX_FRAMES` or :data:`MAX_BAKE_BYTES`, with the estimate.
+
+    Raises
+    ------
+    InputError
+        Naming the scene; ``bake --frames A:B`` or ``--force`` are the ways out.
+    """
+    from shtools.data_formats.bake import bake_size_bound
+
+    work = frames * vertices
+    size = bake_size_bound(frames, vertices, visibility_size=order ** 2 if store_visibility
+                           else None)
+    if work > MAX_VERTEX_FRAMES or size > MAX_BAKE_BYTES:
+        raise InputError(
+            f"the bake would evaluate {work:,} vertex-frames ({frames:,} frames x {vertices:,} "
+            f"vertices, about {work / 5e5 / 3600:,.1f} h at 0.5 M/s) and write up to "
+            f"{size / 2**30:,.1f} GiB, above the limits ({MAX_VERTEX_FRAMES:,} vertex-frames, "
+            f"{MAX_BAKE_BYTES / 2**30:.0f} GiB); bake a range with --frames A:B or pass --force",
+            path)

@@ -55,7 +55,8 @@ class Settings(ShadowSettings):
     ``window = "none"`` is stored as None.
     """
 
-    frames: int = setting(1, "int", lo=1, doc="frames to bake")
+    frames: int = setting(1, "int", lo=1, hi=1_000_000,
+                          doc="frames to bake (at most 1,000,000: 11.6 hours at 24 fps)")
     fps: float = setting(24.0, "float", lo=0, lo_open=True, doc="frames per second")
     tables: Path | None = setting(None, "path", none_means="built at the accumulation order",
                                   doc="log tables asset (.h5) of the accumulation order")
