@@ -342,9 +342,11 @@ class BakeWriter:
             stack.callback(f.close)
             # a full disk must fail here, before HDF5 streams frames (see reserve_space)
             reserve_space(tmp, self.size_bound(), self.path)
-        except BaseException:
-            stack.close()
-            raise
+        except BaseException as exc:
+            # exit the contexts *with* the exception: a plain close() would commit
+            # the (empty) temporary file over an existing output
+            if not stack.__exit__(type(exc), exc, exc.__traceback__):
+                raise
         self._stack, self._file = stack, f
         root = {
             "format": FORMAT_PREFIX + "bake",

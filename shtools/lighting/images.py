@@ -46,7 +46,7 @@ def check_image_size(width: int, height: int, path) -> None:
         gib = width * height * 3 * 4 / 2**30
         raise InputError(f"the header announces {width}x{height} pixels ({gib:.1f} GiB as "
                          f"float RGB), above the limit of {MAX_PIXELS:,} pixels; downsample "
-                         "the map (order <= 32 SH needs no more than 1024x512)", path)
+                         "the map", path)
 
 
 def _read_opencv(path: Path, suffix: str) -> np.ndarray:

@@ -289,6 +289,11 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
 
 
 # --------------------------------------------------------------------------- posing
+#: Largest world coordinate a posed vertex may have: the runtime works in float32,
+#: whose squares overflow above ~1.8e19.
+MAX_COORDINATE = 1e18
+
+
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
     """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
 
@@ -309,10 +314,11 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             joints = None
             local_v, local_n = o.vertices, o.normals
         world_v = transform_points(m, local_v)
-        if not np.isfinite(world_v).all():
-            raise InputError(f"objects '{o.spec.name}': the posed vertices at t = {t:g} s are "
-                             "not finite (a transform too large for float64?); check its "
-                             "translate/scale and its parents'", prepared.scene.path)
+        if not np.all(np.abs(world_v) <= MAX_COORDINATE):
+            raise InputError(f"objects '{o.spec.name}': posed vertices at t = {t:g} s are not "
+                             f"finite or beyond +-{MAX_COORDINATE:g} (the runtime computes in "
+                             "float32); check its translate/scale and its parents'",
+                             prepared.scene.path)
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
