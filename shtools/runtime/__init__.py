@@ -29,6 +29,11 @@ Pipeline per frame (SHEXP sections 6–7):
 4. shade white Lambertian receivers with environment lighting and spherical
    lights, windowed (:mod:`~shtools.runtime.shading`).
 
+Small spherical lights: :mod:`~shtools.runtime.ssoc` (the soft shadow
+occlusion camera, Mo et al.; NumPy rasterised shadow and distortion maps) gives
+the visible fraction ``S`` of a light per receiver, shaded as ``S`` times
+:func:`~shtools.runtime.shading.sphere_light_unshadowed` (``docs/ssoc.md``).
+
 Defaults and costs (``benchmarks/bench_runtime.py``, issue 4): the log is
 accumulated at ``n_acc = min(n + 2, 6)`` and exponentiated there with PS*-2
 (HYB when ``n_acc <= 4``), then truncated to ``n``.  Accumulating at 6 for

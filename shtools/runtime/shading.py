@@ -217,6 +217,50 @@ def _sphere_light_zonal(light: SphereLight, points, order: int):
     return zh, axis
 
 
+def sphere_light_unshadowed(light: SphereLight, points, normals) -> np.ndarray:
+    r"""Unshadowed radiance per unit colour of a spherical light, closed form, shape ``(V,)``.
+
+    :math:`E/\pi` with :math:`E = \int_{cap} \max(0, N\cdot s)\,ds` the cosine-weighted
+    solid angle of the light's cap: :math:`\pi\sin^2\sigma\cos\theta` while the whole
+    cap is above the horizon (:math:`\cos\theta > \sin\sigma`), and the exact
+    horizon-clipped form factor of a sphere (Snyder 1996, as written in Lagarde & de
+    Rousiers 2014, "Moving Frostbite to PBR", eq. 15 listing) otherwise.  The
+    small-light paths (occlusion camera, ray tracing) multiply it by the visible
+    fraction; it is not SH-truncated.
+
+    Parameters
+    ----------
+    light : SphereLight
+    points, normals : array_like, shape (V, 3)
+
+    Returns
+    -------
+    ndarray, shape (V,) float64
+        1 for a receiver inside the light (the whole hemisphere at unit radiance).
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    delta = light.position[None, :] - p
+    dist = np.linalg.norm(delta, axis=1)
+    inside = dist <= light.radius
+    safe = np.where(inside, 1.0, dist)
+    cos_t = np.clip(np.einsum("ij,ij->i", nrm, delta) / safe, -1.0, 1.0)
+    sin2 = np.minimum((light.radius / safe) ** 2, 1.0)
+    full = cos_t * cos_t > sin2
+    e = np.pi * sin2 * np.maximum(cos_t, 0.0)
+    part = ~full & ~inside
+    if part.any():
+        ct, s2 = cos_t[part], sin2[part]
+        st = np.sqrt(np.maximum(1.0 - ct * ct, 1e-300))
+        x = np.sqrt(np.maximum(1.0 / s2 - 1.0, 0.0))
+        y = np.clip(-x * ct / st, -1.0, 1.0)
+        sty = st * np.sqrt(np.maximum(1.0 - y * y, 0.0))
+        with np.errstate(divide="ignore"):
+            e[part] = (ct * np.arccos(y) - x * sty) * s2 + np.arctan2(sty, x)
+    e = np.where(inside, np.pi, np.maximum(e, 0.0))
+    return e / np.pi
+
+
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,
           window_kind: str | None = "cosine", window_h: float | None = None,
           local_visibility=None, form: str = "tabulated", transfer=None,

@@ -463,6 +463,10 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         "frames": [frames.start, frames.stop],
         "scene": scene.path.name,
     }
+    from shtools.scene.light_shadows import light_parameters
+
+    if (lights := light_parameters(scene.lights)) is not None:  # absent: all shexp, as before
+        parameters["light_shadows"] = lights
     inputs = {"scene": scene.path, **prepared.inputs}
     return BakeWriter(
         output,

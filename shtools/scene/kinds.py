@@ -7,3 +7,5 @@ schema and the baker see it:
 
     import shtools.fields.blocker  # noqa: F401  (registers blocker = { field = ... })
 """
+
+import shtools.scene.light_shadows  # noqa: F401  (shadows = "ssoc" | "raytrace" | "auto")

@@ -22,6 +22,7 @@ import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
@@ -144,6 +145,10 @@ class SphereLightSpec:
     loop: bool = False
     #: the registered light-shadow way (:mod:`shtools.scene.shadows`)
     shadows: str = "shexp"
+    #: strata per receiver of ``shadows = "raytrace"`` (:mod:`shtools.scene.light_shadows`)
+    samples: int = 64
+    #: ``SSOCSettings`` of ``shadows = "ssoc"``/``"auto"`` (None: the defaults)
+    ssoc: Any = None
 
 
 @dataclass
@@ -372,7 +377,13 @@ def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx) -> Sphere
     if t.keyframes is not None:
         keys = [key_of(_key_time(k, settings.fps), k, first) for k in t.keyframes]
         keys = _sorted_keys(keys, ctx.sub("keyframes"))
-    return SphereLightSpec(str(name), keys, t.loop, t.shadows)
+    from shtools.scene.light_shadows import ssoc_settings
+
+    try:
+        ssoc = ssoc_settings(t.ssoc)
+    except InputError as exc:
+        raise ctx.sub("ssoc").error(exc.message) from None
+    return SphereLightSpec(str(name), keys, t.loop, t.shadows, t.samples, ssoc)
 
 
 # --------------------------------------------------------------------------- entry points

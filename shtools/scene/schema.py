@@ -377,6 +377,10 @@ class Light(Table):
     keyframes: Annotated[list[LightKeyframe], Field(min_length=1)] | None = None
     loop: StrictBool = False
     shadows: choice(_light_shadow_names) = "shexp"
+    #: strata per receiver of shadows = "raytrace" (shtools.scene.light_shadows)
+    samples: Annotated[int, Field(strict=True, ge=1, le=65536)] = 64
+    #: occlusion-camera settings of shadows = "ssoc" / "auto" (checked by the semantic pass)
+    ssoc: dict | None = None
 
     @model_validator(mode="before")
     @classmethod

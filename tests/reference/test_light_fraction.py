@@ -62,4 +62,4 @@ def test_bad_radius_and_receiver_inside_the_light():
     with pytest.raises(InputError, match="radius > 0"):
         light_visible_fraction(np.zeros((1, 3)), [[0, 1, 0]], [sph], [0, 5, 0], 0.0)
     with pytest.raises(InputError, match="inside the spherical light"):
-        light_visible_fraction(np.zeros((1, 3)) + [0, 5, 0], [[0, 1, 0]], [sph], [0, 5, 0], 1.0)  # noqa: RUF005 (broadcast add)
+        light_visible_fraction([[0.0, 5.0, 0.0]], [[0, 1, 0]], [sph], [0, 5, 0], 1.0)

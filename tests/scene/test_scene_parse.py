@@ -203,7 +203,8 @@ role = "blocker"
         ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\n', "lights[0]: missing key 'color'"),
         ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\ncolor = [1, 1, 1]\n'
          'shadows = "shexpp"\n',
-         "lights[0].shadows: must be one of shexp; did you mean 'shexp'? got 'shexpp'"),
+         "lights[0].shadows: must be one of shexp, ssoc, raytrace, auto; did you mean 'shexp'? "
+         "got 'shexpp'"),
         ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\ncolor = [1, -1, 1]\n',
          "lights[0].color: must not be negative, got [1, -1, 1]"),
         ('\n[[lights]]\nposition = [0, 1, 0]\nradius = 0.1\ncolor = [1, 1, 1]\n'

@@ -1,0 +1,165 @@
+"""Light-shadow ways for small spherical lights: ``shadows = "ssoc" | "raytrace" | "auto"``.
+
+Registered with :func:`shtools.scene.shadows.register_light_shadow` (the
+``shadows`` key of ``[[lights]]``; ``"shexp"``, the default, is built in and
+keeps existing bakes unchanged):
+
+* ``"ssoc"``: the soft shadow occlusion camera (:mod:`shtools.runtime.ssoc`)
+  gives the visible fraction ``S`` per receiver against the posed blocker
+  *meshes*; the light contributes ``color * S * E(N)`` with the closed-form
+  unshadowed term :func:`shtools.runtime.shading.sphere_light_unshadowed`.
+  Settings: the light's ``ssoc = { ... }`` table (:class:`SSOCSettings`).
+* ``"raytrace"``: the visible, cosine-weighted light ray-traced directly
+  (:func:`shtools.reference.light_visible_fraction`, ``samples`` strata per
+  receiver) -- the ground truth, and the slow path.
+* ``"auto"``: ``"ssoc"`` while the light's angular radius seen from the
+  receivers (median over receivers of ``asin(r/D)``) is below
+  :data:`AUTO_THRESHOLD`, ``"shexp"`` above it, decided per frame.
+
+The environment always keeps SHEXP.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+
+import numpy as np
+
+from shtools.errors import InputError
+from shtools.scene.shadows import LightShadow, register_light_shadow
+
+#: Angular radius (radians) below which ``"auto"`` picks the occlusion camera:
+#: the measured crossover of ``benchmarks/bench_ssoc.py`` (bunny over a plane,
+#: radiance error of SSOC vs SHEXP at order 6), see docs/ssoc.md.
+AUTO_THRESHOLD = 0.1
+#: Strata per receiver of ``shadows = "raytrace"``.
+DEFAULT_SAMPLES = 64
+#: Keys of a light's ``ssoc`` table (fields of SSOCSettings a scene may set).
+SSOC_KEYS = ("resolution", "camera", "guard", "max_steps", "falloff", "filter", "corners")
+
+
+def ssoc_settings(table: dict | None):
+    """:class:`~shtools.runtime.ssoc.SSOCSettings` from a light's ``ssoc`` table.
+
+    Raises
+    ------
+    InputError
+        Unknown key (with a did-you-mean hint) or a bad value, in one line.
+    """
+    from shtools.runtime.ssoc import SSOCSettings
+
+    table = dict(table or {})
+    for key in table:
+        if key not in SSOC_KEYS:
+            close = difflib.get_close_matches(key, SSOC_KEYS, n=1, cutoff=0.6)
+            hint = f"did you mean '{close[0]}'?" if close else f"allowed: {', '.join(SSOC_KEYS)}"
+            raise InputError(f"unknown key '{key}'; {hint}")
+    return SSOCSettings(**table)
+
+
+def angular_radius(position, radius: float, points) -> float:
+    """Median over receivers of the light's angular radius ``asin(r / D)`` (radians)."""
+    d = np.linalg.norm(np.asarray(points, dtype=np.float64) - np.asarray(position), axis=1)
+    return float(np.median(np.arcsin(np.minimum(radius / np.maximum(d, 1e-300), 1.0))))
+
+
+def _spec_of(run, state, light):
+    """The scene's spec of a posed light (lights are posed in the scene's order)."""
+    index = next(i for i, lt in enumerate(state.lights) if lt is light)
+    return index, run.prepared.scene.lights[index]
+
+
+def _named(index, spec, run, exc: InputError) -> InputError:
+    return InputError(f"lights[{index}] ('{spec.name}'): {exc.message}", run.prepared.scene.path)
+
+
+class SSOCLight(LightShadow):
+    """The soft shadow occlusion camera against the posed blocker meshes."""
+
+    name = "ssoc"
+    needs_meshes = True
+
+    def radiance(self, run, state, visibility, lights):
+        from shtools.runtime.shading import sphere_light_unshadowed
+        from shtools.runtime.ssoc import OcclusionCamera
+
+        out = np.zeros((len(state.vertices), 3))
+        verts = [v for v, _ in state.blocker_meshes]
+        for light in lights:
+            index, spec = _spec_of(run, state, light)
+            key = ("ssoc", index)
+            if key not in run.cache:  # adjacency once per topology, per light's settings
+                run.cache[key] = OcclusionCamera([f for _, f in state.blocker_meshes],
+                                                 spec.ssoc)
+            S = np.ones(len(state.vertices))
+            if verts:
+                try:
+                    S = run.cache[key].visible_fraction(verts, light.position, light.radius,
+                                                        state.vertices, state.normals)
+                except InputError as exc:
+                    raise _named(index, spec, run, exc) from None
+            lit = S * sphere_light_unshadowed(light, state.vertices, state.normals)
+            out += lit[:, None] * light.color[None, :]
+        return out
+
+
+class RaytraceLight(LightShadow):
+    """The visible light ray-traced per receiver (ground truth, ``samples`` strata)."""
+
+    name = "raytrace"
+    needs_meshes = True
+
+    def radiance(self, run, state, visibility, lights):
+        from shtools.reference.light_fraction import light_visible_fraction
+        from shtools.runtime.shading import sphere_light_unshadowed
+
+        out = np.zeros((len(state.vertices), 3))
+        for light in lights:
+            index, spec = _spec_of(run, state, light)
+            if not state.blocker_meshes:
+                lit = sphere_light_unshadowed(light, state.vertices, state.normals)
+            else:
+                try:
+                    lit = light_visible_fraction(state.vertices, state.normals,
+                                                 state.blocker_meshes, light.position,
+                                                 light.radius, n_samples=spec.samples).radiance
+                except InputError as exc:
+                    raise _named(index, spec, run, exc) from None
+            out += lit[:, None] * light.color[None, :]
+        return out
+
+
+class AutoLight(LightShadow):
+    """``ssoc`` below :data:`AUTO_THRESHOLD` of angular radius, ``shexp`` above (per frame)."""
+
+    name = "auto"
+    needs_meshes = True
+
+    def radiance(self, run, state, visibility, lights):
+        small, large = [], []
+        for light in lights:
+            a = angular_radius(light.position, light.radius, state.vertices)
+            (small if a < AUTO_THRESHOLD else large).append(light)
+        run.cache["auto_ways"] = {id(lt): ("ssoc" if lt in small else "shexp")
+                                  for lt in lights}
+        out = np.zeros((len(state.vertices), 3))
+        if small:
+            out += SSOC.radiance(run, state, visibility, small)
+        if large:  # the light's SH through the frame's visibility, as "shexp" shades it
+            out += run.runtime.shade(visibility, state.vertices, state.normals, None,
+                                     sphere_lights=large)
+        return out
+
+
+SSOC = register_light_shadow(SSOCLight())
+register_light_shadow(RaytraceLight())
+register_light_shadow(AutoLight())
+
+
+def light_parameters(lights) -> list[dict] | None:
+    """What a bake records of its lights' shadows (None when every light uses ``shexp``)."""
+    if all(spec.shadows == "shexp" for spec in lights):
+        return None
+    return [{"name": spec.name, "shadows": spec.shadows, "samples": spec.samples,
+             "ssoc": dataclasses.asdict(spec.ssoc)} for spec in lights]
