@@ -100,8 +100,13 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "columns": click.IntRange(1, 1000),
     # one image side; the pixel count has its own limit (shtools.cli.export)
     "size": click.IntRange(8, 16384),
-    "count": click.IntRange(1, 100_000),
+    # sphere count: the fit itself says when N exceeds what the mesh's samples allow
+    "count": click.IntRange(1, None),
     "level": click.IntRange(0, 64),
+    # tables scaling: cone half-angle (its (0, 90) range is checked by the command,
+    # for the cone only), sampled k
+    "alpha_deg": FiniteRange(None, None),
+    "k": FiniteRange(0, 1e6),
 }
 
 

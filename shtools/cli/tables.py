@@ -7,7 +7,7 @@ import time
 
 import click
 
-from shtools.cli._common import json_option, output_option, report, setting_type
+from shtools.cli._common import json_option, option_type, output_option, report, setting_type
 from shtools.errors import InputError
 
 
@@ -88,13 +88,13 @@ def log_cmd(order, output, samples, plot_path, as_json):
               required=True,
               help="Angular map: 'cone' (deformable shadow fields, k = d/r) or 'midrange' "
               "(environment on a sphere of radius R, k = d/R).")
-@click.option("--alpha", "alpha_deg", type=float, default=45.0, show_default=True,
+@click.option("--alpha", "alpha_deg", type=option_type("alpha_deg"), default=45.0, show_default=True,
               help="Cone half-angle in degrees, in (0, 90) (cone only; the seed prints 45).")
 @click.option("--energy-preserving", is_flag=True,
               help="Energy-preserving scaling (Lambda = sin(phi) phi', keeps the integral).")
 @click.option("--samples", type=click.IntRange(3, 10_000), default=40, show_default=True,
               help="Number K of sampled k.")
-@click.option("--k-range", nargs=2, type=float, default=None, metavar="LO HI",
+@click.option("--k-range", nargs=2, type=option_type("k"), default=None, metavar="LO HI",
               help="Sampled k range [default: 0.125 8 for cone, 0 0.95 for midrange].")
 @click.option("--interpolation", type=click.Choice(["linear", "linear-log-k"]),
               default="linear", show_default=True,
@@ -114,9 +114,11 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
     """
     import math
 
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.scaling import write_scaling
     from shtools.sh.scaling import build_scaling_table
 
+    guard_outputs({"-o": output})
     if function == "cone" and not 0.0 < alpha_deg < 90.0:
         raise InputError(f"--alpha {alpha_deg:g} is outside (0, 90) degrees; give the cone "
                          "half-angle about the radial axis, e.g. 45", output)

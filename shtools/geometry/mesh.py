@@ -156,7 +156,7 @@ def _checked_source(path: Path, ext: str):
             raise InputError(f"line {number}: face index 0 (OBJ indices start at 1); fix the "
                              "exporter or the file", path)
     if not faces:
-        raise InputError("no faces: an OBJ mesh needs 'f' lines (is this an OBJ file?)", path)
+        raise InputError("the OBJ has no faces (no 'f' lines): empty, or not an OBJ mesh", path)
     return io.BytesIO(text.encode("utf-8"))
 
 

@@ -77,6 +77,13 @@ def _read_exr(path: Path) -> np.ndarray:
     import OpenEXR
 
     try:
+        lo, hi = OpenEXR.File(str(path), header_only=True).header()["dataWindow"]
+        size = (int(hi[0]) - int(lo[0]) + 1, int(hi[1]) - int(lo[1]) + 1)
+    except Exception:  # the full read below reports what is wrong
+        size = None
+    if size is not None:
+        check_image_size(*size, path)
+    try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             channels = {name: ch.pixels for name, ch in exr.channels().items()}
     except Exception as exc:  # the bindings raise plain RuntimeError/IOError on bad files
