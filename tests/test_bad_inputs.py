@@ -359,7 +359,8 @@ def test_read_only_output_folder_is_refused_before_work(kit, tmp_path):
     try:
         if os.access(folder, os.W_OK):
             pytest.skip("running as root: a 0555 folder is writable, so nothing to refuse "
-                        "(test_disk_full_* covers a read-only mount when it can mount one)")
+                        "(test_read_only_mount_is_refused_before_work covers a read-only "
+                        "mount where it can mount one)")
         for argv in (["spheres", "fit", kit.root / "mesh.obj", "-n", "2", "-o", folder / "s.h5"],
                      ["bake", kit.root / "scene.toml", "-o", folder / "b.h5"],
                      ["tables", "log", "-n", "2", "-o", folder / "t.h5"]):
@@ -465,6 +466,25 @@ def test_disk_full_on_a_real_tiny_disk(kit, tiny_disk):
         assert out.read_bytes() == b"old"
         filler.unlink()
         out.unlink()
+
+
+def test_read_only_mount_is_refused_before_work(kit, tiny_disk):
+    """A read-only file system (EROFS) is refused up front, for root too."""
+    done = subprocess.run(["mount", "-o", "remount,ro", str(tiny_disk)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot remount the tmpfs read-only: {done.stderr.strip()}")
+    try:
+        for argv in (["spheres", "fit", kit.root / "mesh.obj", "-n", "2", "-o",
+                      tiny_disk / "s.h5"],
+                     ["bake", kit.root / "scene.toml", "-o", tiny_disk / "b.h5"],
+                     ["tables", "log", "-n", "2", "-o", tiny_disk / "t.h5", "--plot",
+                      tiny_disk / "p.png"]):
+            code, out, err = _run(*argv)
+            check_refused(code, out, err, want_code=1, named=["cannot write"],
+                          outputs=[a for a in argv if str(tiny_disk) in str(a)], kit=kit,
+                          folders=[tiny_disk])
+    finally:
+        subprocess.run(["mount", "-o", "remount,rw", str(tiny_disk)], check=False)
 
 
 # ---------------------------------------------------------------------- processes
