@@ -371,6 +371,39 @@ def test_read_only_output_folder_is_refused_before_work(kit, tmp_path):
         folder.chmod(0o755)
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs named pipes (POSIX)")
+def test_non_regular_outputs_are_never_replaced(kit, tmp_path):
+    """``-o /dev/null`` used to replace the device node by a file (as root): a named pipe
+    stands in for any non-regular file here, through the CLI and the library."""
+    from shtools.data_formats import write_asset
+    from shtools.errors import AssetError
+
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    code, out, err = _run("tables", "log", "-n", "2", "-o", pipe)
+    check_refused(code, out, err, want_code=1, named=["pipe", "not a regular file"],
+                  outputs=[], kit=kit, folders=[tmp_path])
+    with pytest.raises(AssetError, match="not a regular file"):
+        write_asset(pipe, "spheres", {"centers": np.zeros((1, 3)), "radii": np.ones(1)})
+    assert pipe.is_fifo() and _temporaries(tmp_path) == []
+    # as an input, a pipe would block the read forever
+    for argv in (["spheres", "fit", pipe, "-n", "2", "-o", tmp_path / "s.h5"],
+                 ["check", pipe], ["spheres", "import", pipe, "-o", tmp_path / "s.h5"]):
+        code, out, err = _run(*argv)
+        check_refused(code, out, err, want_code=1, named=["pipe", "not a regular file"],
+                      outputs=[tmp_path / "s.h5"], kit=kit, folders=[tmp_path])
+
+
+def test_long_output_names_get_short_temporaries(tmp_path):
+    """A 240-byte name plus '.PID@HOST.XXXXXXXX.tmp' would pass the 255-byte limit."""
+    out = tmp_path / ("a" * 240 + ".h5")
+    code, _, err = _run("tables", "log", "-n", "2", "--samples", "8", "-o", out)
+    assert code == 0, err
+    assert out.is_file() and _temporaries(tmp_path) == []
+    code, _, err = _run("tables", "log", "-n", "2", "-o", tmp_path / ("b" * 256 + ".h5"))
+    assert code == 1 and "longer than 255 bytes" in err
+
+
 # ------------------------------------------------------------- temporaries, disk full
 def test_stale_temporaries_of_dead_owners_are_removed(kit, tmp_path):
     from shtools.data_formats._base import _host

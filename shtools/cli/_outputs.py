@@ -11,7 +11,9 @@ files the scene names)::
 It raises :class:`~shtools.errors.InputError` (one line naming the output) when
 an output
 
-* is empty (``-o ''``) or an existing folder;
+* is empty (``-o ''``), an existing folder, an existing device, pipe or socket
+  (the atomic rename would replace ``/dev/null`` by a file), or a name longer
+  than 255 bytes;
 * is the same file as an input (``os.path.samefile`` where both exist, the
   resolved path otherwise) — writing it would destroy the input;
 * is the same file as another output (``tables log --plot`` equal to ``-o``);
@@ -68,8 +70,14 @@ def guard_outputs(outputs: Mapping[str, str | os.PathLike | None],
         if not text.strip():
             raise InputError(f"{option} is empty; give an output file name")
         out = Path(text)
+        if len(out.name.encode()) > 255:
+            raise InputError(f"the file name is longer than 255 bytes; shorten {option}", out)
         if out.is_dir():
             raise InputError(f"is a folder; {option} needs a file name", out)
+        if out.exists() and not out.is_file():
+            # the atomic rename would replace a device (/dev/null) or a pipe by a file
+            raise InputError(f"is not a regular file (a device, pipe or socket); {option} "
+                             "needs a file path", out)
         for src in ins:
             if _same_file(out, src):
                 raise InputError(f"is also an input ({src}); writing it would destroy the "

@@ -50,7 +50,7 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
               help="Accumulation order of methods without @N (default: the runtime's).")
 @click.option("--no-hierarchy", is_flag=True, help="Accumulate all leaf spheres everywhere.")
 @click.option("--no-window", is_flag=True, help="Shade without windowing.")
-@click.option("--n-dirs", default=2000, show_default=True, type=click.IntRange(16),
+@click.option("--n-dirs", default=2000, show_default=True, type=click.IntRange(16, 100_000),
               help="Ray-tracing directions per vertex.")
 @click.option("--png", "png_path", type=click.Path(dir_okay=False),
               help="Write a false-colour side-by-side comparison image.")

@@ -183,9 +183,18 @@ def temporary_prefix(target: str | os.PathLike) -> str:
     """Prefix of the temporaries :func:`atomic_path` makes for ``target``.
 
     ``.NAME.PID@HOST.`` + 8 random characters + ``.tmp``: the owner's process id
-    and host name make a temporary left by a killed run recognisable.
+    and host name make a temporary left by a killed run recognisable.  A NAME
+    too long to leave room for the rest (file names stop at 255 bytes) is cut and
+    tagged with a hash of the whole name.
     """
-    return f".{Path(target).name}.{os.getpid()}@{_host()}."
+    return f".{_temp_stem(Path(target).name)}.{os.getpid()}@{_host()}."
+
+
+def _temp_stem(name: str) -> str:
+    if len(name.encode()) <= 150:
+        return name
+    digest = hashlib.sha1(name.encode()).hexdigest()[:8]
+    return name.encode()[:120].decode(errors="ignore") + "~" + digest
 
 
 def _pid_alive(pid: int) -> bool:
@@ -212,7 +221,7 @@ def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
     """
     target = Path(target)
     directory = target.parent if str(target.parent) else Path(".")
-    pattern = re.compile(rf"^\.{re.escape(target.name)}\.(\d+)@([A-Za-z0-9_-]+)\.\w{{8}}\.tmp$")
+    pattern = re.compile(rf"^\.{re.escape(_temp_stem(target.name))}\.(\d+)@([A-Za-z0-9_-]+)\.\w{{8}}\.tmp$")
     removed = []
     host = _host()
     try:
@@ -243,6 +252,10 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise AssetError("output folder does not exist; create it first", target)
+    if target.exists() and not target.is_file():
+        # os.replace would put a file where a device (/dev/null), pipe or folder was
+        raise AssetError("is not a regular file (a folder, device, pipe or socket); give a "
+                         "file path", target)
     remove_stale_temporaries(target)
     try:
         fd, tmp = tempfile.mkstemp(prefix=temporary_prefix(target), suffix=".tmp",
@@ -423,6 +436,9 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
     path = os.fspath(path)
     if not os.path.exists(path):
         raise AssetError("file not found; check the path or build it first", path)
+    if not os.path.isfile(path):
+        raise AssetError("is not a regular file (a folder, pipe or device); give an asset "
+                         "file", path)
     try:
         f = h5py.File(path, "r")
     except OSError:

@@ -56,6 +56,8 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise InputError("mesh file not found; check the path", path)
     if path.is_dir():
         raise InputError("is a folder, expected a mesh file", path)
+    if not path.is_file():  # reading a pipe or device would block or never end
+        raise InputError("is not a regular file (a pipe or device?); give a mesh file", path)
     ext = path.suffix.lower()
     if ext not in SUPPORTED_EXTENSIONS:
         raise InputError(

@@ -47,6 +47,8 @@ def read_sph(path: str | os.PathLike, *, level: int | None = None) -> SphereSet:
     path = os.fspath(path)
     if not os.path.exists(path):
         raise InputError("sphere file not found; check the path", path)
+    if not os.path.isfile(path):  # a pipe or device would block the read
+        raise InputError("is not a regular file (a folder, pipe or device)", path)
     try:
         with open(path, encoding="utf-8", errors="strict") as fh:
             lines = [ln.split() for ln in fh if ln.strip()]
