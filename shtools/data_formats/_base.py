@@ -221,7 +221,8 @@ def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
     """
     target = Path(target)
     directory = target.parent if str(target.parent) else Path(".")
-    pattern = re.compile(rf"^\.{re.escape(_temp_stem(target.name))}\.(\d+)@([A-Za-z0-9_-]+)\.\w{{8}}\.tmp$")
+    stem = re.escape(_temp_stem(target.name))
+    pattern = re.compile(rf"^\.{stem}\.(\d+)@([A-Za-z0-9_-]+)\.\w{{8}}\.tmp$")
     removed = []
     host = _host()
     try:
