@@ -281,6 +281,21 @@ CASES = [
          "--size"),
         (["bake", "{k}/scene.toml", "-o", "{o}/b.h5"], ["--processes", "0"], "--processes"),
         (["tables", "log", "-o", "{o}/t.h5"], ["-n", "99"], "--order"),
+        (["tables", "log", "-n", "2", "-o", "{o}/t.h5"], ["--samples", "10000000"],
+         "--samples"),
+        (["diff", "{k}/baked.h5", "{k}/baked.h5"], ["--rtol", "nan"], "--rtol"),
+        (["diff", "{k}/baked.h5", "{k}/baked.h5"], ["--atol", "-1"], "--atol"),
+        (["spheres", "fit", "{k}/mesh.obj", "-n", "2", "-o", "{o}/s.h5"],
+         ["--iterations", "1000000000"], "--iterations"),
+        (["spheres", "tree", "{k}/spheres.h5", "-o", "{o}/t.h5"], ["--branching", "1"],
+         "--branching"),
+        (["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5"],
+         ["--n-dirs", "1000000000"], "--n-dirs"),
+        (["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5"], ["--gap", "inf"],
+         "--gap"),
+        (["export", "{k}/baked.h5", "-o", "{o}/x.png"], ["--frame", "-1"], "--frame"),
+        (["tables", "scaling", "-n", "2", "--function", "cone", "-o", "{o}/s.h5"],
+         ["--alpha", "nan"], "--alpha"),
     ]],
     ("opt-export-pixels", ["export", "{k}/baked.h5", "-o", "{o}/x.png", "--size", "16000",
                            "16000"], 1, ["x.png", "pixels"]),
@@ -392,6 +407,20 @@ def test_non_regular_outputs_are_never_replaced(kit, tmp_path):
         code, out, err = _run(*argv)
         check_refused(code, out, err, want_code=1, named=["pipe", "not a regular file"],
                       outputs=[tmp_path / "s.h5"], kit=kit, folders=[tmp_path])
+
+
+def test_export_sequence_size_is_estimated_first(kit, tmp_path, monkeypatch):
+    """A GIF or contact sheet keeps every frame's image: refused past the limit, with
+    the size (the limit lowered here so the 2-frame kit bake exceeds it)."""
+    import shtools.export.writer as writer
+
+    monkeypatch.setattr(writer, "MAX_SEQUENCE_PIXELS", 10_000)
+    for name in ("x.gif", "x.png"):
+        out = tmp_path / name
+        code, stdout, err = _run("export", kit.root / "baked.h5", "--frames", "0:2", "-o", out,
+                                 "--size", "100", "100")
+        check_refused(code, stdout, err, want_code=1, named=[name, "20,000 pixels"],
+                      outputs=[out], kit=kit, folders=[tmp_path])
 
 
 def test_long_output_names_get_short_temporaries(tmp_path):

@@ -104,9 +104,28 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "count": click.IntRange(1, None),
     "level": click.IntRange(0, 64),
     # tables scaling: cone half-angle (its (0, 90) range is checked by the command,
-    # for the cone only), sampled k
+    # for the cone only), sampled k, samples and quadrature nodes
     "alpha_deg": FiniteRange(None, None),
     "k": FiniteRange(0, 1e6),
+    "scaling_order": click.IntRange(1, 16),
+    "scaling_samples": click.IntRange(3, 10_000),
+    "nodes": click.IntRange(8, 100_000),
+    # tables log: cap radii
+    "log_samples": click.IntRange(2, 100_000),
+    # diff
+    "tolerance": FiniteRange(0, None),
+    "show": click.IntRange(0, 1000),
+    # eval
+    "grid": click.IntRange(2, 1024),
+    "gap": FiniteRange(0, 100),
+    "frame": click.IntRange(0, None),
+    "n_dirs": click.IntRange(16, 100_000),
+    # spheres fit / tree / bind: round budget, starts, tree fan-out, skin weights
+    "iterations": click.IntRange(1, 100_000),
+    "restarts": click.IntRange(1, 1000),
+    "branching": click.IntRange(2, 1000),
+    "bones_per_sphere": click.IntRange(1, 64),
+    "check_frames": click.IntRange(0, 10_000),
 }
 
 

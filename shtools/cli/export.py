@@ -17,7 +17,7 @@ MAX_PIXELS = 8192 * 8192
 @click.command("export")
 @click.argument("baked", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--frame", type=int, default=None,
+@click.option("--frame", type=option_type("frame"), default=None,
               help="Scene frame number to export (default the bake's first).")
 @click.option("--frames", "frames_text", metavar="A:B",
               help="Frame range (half-open) for a contact sheet (.png) or animation (.gif).")

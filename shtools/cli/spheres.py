@@ -30,11 +30,11 @@ def spheres():
               help="Seed of sampling and initialisation (same seed -> identical asset).")
 @click.option("--thickness", type=option_type("thickness"), default=None,
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
-@click.option("--iterations", type=click.IntRange(min=1), default=None,
+@click.option("--iterations", type=option_type("iterations"), default=None,
               help="Round budget of the variational fit, counted in rounds at N spheres "
                    "(from N = 64 the coarse stages spend part of it in cheaper rounds) "
                    "[default: scaled to the mesh and N, 40-150].")
-@click.option("--restarts", type=click.IntRange(min=1), default=1, show_default=True,
+@click.option("--restarts", type=option_type("restarts"), default=1, show_default=True,
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
                    "The fit is a non-convex search: a few starts buy a few percent of E.")
 @json_option

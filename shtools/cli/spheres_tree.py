@@ -29,7 +29,7 @@ def _read_sphere_set(path: str) -> tuple[np.ndarray, np.ndarray]:
 @click.command("tree")
 @click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--branching", default=4, show_default=True, type=click.IntRange(min=2),
+@click.option("--branching", default=4, show_default=True, type=option_type("branching"),
               help="Target average number of children per inner node.")
 @click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Seed of the Lloyd clustering (same seed -> identical tree).")
@@ -65,9 +65,11 @@ def tree(spheres_path, output, branching, seed, as_json):
 @click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
 @click.argument("rig_path", metavar="RIGGED", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--bones-per-sphere", default=4, show_default=True, type=click.IntRange(min=1),
+@click.option("--bones-per-sphere", default=4, show_default=True,
+              type=option_type("bones_per_sphere"),
               help="Bones kept per sphere centre (the rest is folded into the kept ones).")
-@click.option("--check-frames", default=16, show_default=True, type=click.IntRange(min=0),
+@click.option("--check-frames", default=16, show_default=True,
+              type=option_type("check_frames"),
               help="Frames per animation at which the posed spheres' coverage of the "
                    "skinned vertices is measured for the summary (0: skip).")
 @click.option("--cover-animations", is_flag=True,

@@ -22,7 +22,7 @@ def tables():
 @output_option
 @click.option(
     "--samples",
-    type=click.IntRange(2, 100_000),
+    type=option_type("log_samples"),
     default=256,
     show_default=True,
     help="Number of cap radii theta in (0, pi/2].",
@@ -83,7 +83,7 @@ def log_cmd(order, output, samples, plot_path, as_json):
 
 
 @tables.command("scaling")
-@click.option("--order", "-n", type=click.IntRange(1, 16), required=True, help="SH order n.")
+@click.option("--order", "-n", type=option_type("scaling_order"), required=True, help="SH order n.")
 @click.option("--function", "function", type=click.Choice(["cone", "midrange"]),
               required=True,
               help="Angular map: 'cone' (deformable shadow fields, k = d/r) or 'midrange' "
@@ -93,14 +93,14 @@ def log_cmd(order, output, samples, plot_path, as_json):
               help="Cone half-angle in degrees, in (0, 90) (cone only; the seed prints 45).")
 @click.option("--energy-preserving", is_flag=True,
               help="Energy-preserving scaling (Lambda = sin(phi) phi', keeps the integral).")
-@click.option("--samples", type=click.IntRange(3, 10_000), default=40, show_default=True,
+@click.option("--samples", type=option_type("scaling_samples"), default=40, show_default=True,
               help="Number K of sampled k.")
 @click.option("--k-range", nargs=2, type=option_type("k"), default=None, metavar="LO HI",
               help="Sampled k range [default: 0.125 8 for cone, 0 0.95 for midrange].")
 @click.option("--interpolation", type=click.Choice(["linear", "linear-log-k"]),
               default="linear", show_default=True,
               help="Rule in k between samples, recorded for the reader (log-k: cone only).")
-@click.option("--nodes", type=click.IntRange(8, 100_000), default=None,
+@click.option("--nodes", type=option_type("nodes"), default=None,
               help="Gauss-Legendre nodes in theta per matrix entry [default: 400, doubled "
               "until the estimated error is below 1e-12].")
 @output_option
