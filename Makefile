@@ -1,6 +1,6 @@
 # shtools — every target sets itself up: a fresh machine needs only Python >= 3.11 and make.
 #   make demo    create .venv, install, bake the bundled demo scene into out/
-#   make test    create .venv if needed, install with the test extra, run the whole suite
+#   make test    create .venv if needed, install with the test extra, run the suite (not slow)
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -10,7 +10,7 @@ OUT    ?= out
 QUICK  ?=
 
 .DEFAULT_GOAL := help
-.PHONY: help demo test bench lint clean golden examples
+.PHONY: help demo test test-slow test-core bench lint clean golden examples
 
 help: ## Show this help
 	@echo "shtools make targets (a fresh clone needs only $(PYTHON) >= 3.11 and make):"
@@ -22,14 +22,34 @@ $(STAMP): pyproject.toml
 	  { echo "error: shtools needs Python >= 3.11; run e.g. 'make PYTHON=python3.11 $(MAKECMDGOALS)'" >&2; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,bench]'
+	$(PY) -m pip install --quiet -e '.[all,test,bench]'
 	rm -f $(VENV)/.installed-* && touch $@
 
 demo: $(STAMP) ## Set up and bake the bundled demo scene into out/ (baked.h5, GLB, PNGs)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m shtools.demo $(OUT)
 
-test: $(STAMP) ## Set up and run the whole test suite (2 workers)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
+test: $(STAMP) ## Set up and run the test suite (2 workers; the slow fits: make test-slow)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q -m "not slow"
+
+test-slow: $(STAMP) ## The slow tests (long sphere fits and bakes), a separate CI step
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q -m slow
+
+# The runtime's tests that need nothing but the core install (numpy + h5py).
+CORE_TESTS := tests/runtime/test_accumulate.py tests/runtime/test_fast_paths.py \
+	tests/runtime/test_self_shadow.py tests/runtime/test_shading.py \
+	tests/runtime/test_parallel.py tests/sh/test_quadrature.py tests/sh/test_tables.py \
+	tests/sh/test_zonal.py tests/sh/test_cached_returns.py tests/formats/test_light_asset.py \
+	tests/formats/test_compare.py tests/formats/test_atomic_mode.py \
+	tests/test_runtime_imports.py tests/test_layers.py
+CORE_VENV := .venv-core
+
+test-core: ## `pip install .` (numpy + h5py only) in a fresh venv; the runtime's tests there
+	rm -rf $(CORE_VENV) && $(PYTHON) -m venv $(CORE_VENV)
+	$(CORE_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(CORE_VENV)/bin/python -m pip install --quiet . pytest pytest-timeout
+	@echo "core install: $$(du -sh $(CORE_VENV)/lib/python*/site-packages | cut -f1) of site-packages"
+	@# -P: import the installed package, not the source tree
+	OPENBLAS_NUM_THREADS=1 $(CORE_VENV)/bin/python -P -m pytest -q -p no:cacheprovider $(CORE_TESTS)
 
 bench: $(STAMP) ## Run every benchmarks/bench_*.py and print their tables (QUICK=1: short)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick)
@@ -44,5 +64,5 @@ lint: $(STAMP) ## ruff check
 	$(VENV)/bin/ruff check shtools tests benchmarks
 
 clean: ## Remove the venv, outputs and caches
-	rm -rf $(VENV) $(OUT) .pytest_cache build *.egg-info
+	rm -rf $(VENV) $(CORE_VENV) $(OUT) .pytest_cache build *.egg-info
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -18,16 +18,11 @@ The demo runs the real stages, in-process through the ``shtools`` command line:
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
 
-# one BLAS thread (see shtools.cli.main): set before NumPy loads
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import numpy as np  # noqa: E402
+import numpy as np
 
 #: Scene timing: frames at FPS; one walk cycle (two steps) per STRIDE_SECONDS.
 FRAMES = 48
@@ -219,38 +214,24 @@ albedo = [0.95, 0.8, 0.65]
 {''.join(limbs)}"""
 
 
-def _fit_part(job) -> str | None:
-    """`spheres fit` then `spheres tree` for one part (in a worker process)."""
-    import io
-    from contextlib import redirect_stdout
+def _fit_part(job) -> None:
+    """Fit then tree for one part (in a worker process), as `spheres fit` + `spheres tree`."""
+    from shtools.geometry.assets import fit_to_file, tree_to_file
 
     out, name, n, method = job
-    try:
-        with redirect_stdout(io.StringIO()):
-            extra = ["--iterations", FIT_ITERATIONS] if method == "variational" else []
-            _run("spheres", "fit", out / "meshes" / f"{name}.obj", "-n", n, "--method", method,
-                 *extra, "-o", out / "spheres" / f"{name}.h5")
-            _run("spheres", "tree", out / "spheres" / f"{name}.h5",
-                 "-o", out / "spheres" / f"{name}_tree.h5")
-    except SystemExit as exc:
-        return str(exc)
-    return None
-
-
-def _run(*args: str) -> None:
-    from shtools.cli.main import main
-
-    code = main([str(a) for a in args])
-    if code != 0:
-        raise SystemExit(f"demo: 'shtools {' '.join(map(str, args))}' failed (exit {code})")
+    iterations = FIT_ITERATIONS if method == "variational" else None
+    fit_to_file(out / "meshes" / f"{name}.obj", n, out / "spheres" / f"{name}.h5",
+                method=method, iterations=iterations)
+    tree_to_file(out / "spheres" / f"{name}.h5", out / "spheres" / f"{name}_tree.h5")
 
 
 def run_demo(outdir: str | Path, *, frames: int = FRAMES, quiet: bool = False,
              fit_method: str | None = None) -> dict:
-    """Generate, bake and export the demo scene into ``outdir``; returns timings (seconds)."""
-    import io
-    from contextlib import redirect_stdout
+    """Generate, bake and export the demo scene into ``outdir``; returns timings (seconds).
 
+    Every stage is a library call (the same functions the ``shtools`` commands run),
+    so the outputs equal those of the command-line pipeline in ``examples/``.
+    """
     out = Path(outdir)
     (out / "meshes").mkdir(parents=True, exist_ok=True)
     (out / "spheres").mkdir(exist_ok=True)
@@ -260,9 +241,7 @@ def run_demo(outdir: str | Path, *, frames: int = FRAMES, quiet: bool = False,
     def stage(name, fn):
         start = time.perf_counter()
         say(f"[demo] {name}")
-        buf = io.StringIO()
-        with redirect_stdout(buf):
-            fn()
+        fn()
         timings[name] = time.perf_counter() - start
 
     def meshes():
@@ -281,34 +260,43 @@ def run_demo(outdir: str | Path, *, frames: int = FRAMES, quiet: bool = False,
         # biggest fits first so the two workers finish together
         jobs.sort(key=lambda job: -job[2])
         with ProcessPoolExecutor(max_workers=2) as pool:
-            for failure in pool.map(_fit_part, jobs):
-                if failure:
-                    raise SystemExit(failure)
+            list(pool.map(_fit_part, jobs))  # a failure re-raises here
 
     def tables():
+        from shtools.data_formats.tables import write_log_tables
         from shtools.runtime.settings import ShadowSettings
 
-        acc = ShadowSettings(order=ORDER).resolved_acc_order()
-        _run("tables", "log", "--order", acc, "-o", out / "tables.h5")
+        write_log_tables(out / "tables.h5", ShadowSettings(order=ORDER).resolved_acc_order())
 
     def light():
-        _run("light", "project", out / "sky.hdr", "--order", ORDER, "-o", out / "sky.h5")
+        from shtools.lighting.environment import project_environment_to_file
+
+        project_environment_to_file(out / "sky.hdr", ORDER, out / "sky.h5")
 
     def bake():
+        from shtools.scene.bake import bake_to_file
+        from shtools.scene.scene import load_scene
+
         (out / "scene.toml").write_text(scene_toml(frames))
-        _run("bake", out / "scene.toml", "-o", out / "baked.h5", "--json")
+        bake_to_file(load_scene(out / "scene.toml"), out / "baked.h5", processes=None)
 
     def export():
+        from shtools.data_formats.bake import read_bake
+        from shtools.export.png import View
+        from shtools.export.writer import export_bake
+
+        baked = read_bake(out / "baked.h5")
+        view = View()
         mid = frames * 5 // 8  # mid-stride for the default 48 frames
-        _run("export", out / "baked.h5", "--frame", mid, "-o", out / "demo.glb")
-        _run("export", out / "baked.h5", "--frame", mid, "-o", out / "frame.png")
+        export_bake(baked, out / "demo.glb", frame=mid, view=view)
+        export_bake(baked, out / "frame.png", frame=mid, view=view)
         step = max(frames // 12, 1)
         if step == 1:
-            _run("export", out / "baked.h5", "--frames", f"0:{frames}", "-o",
-                 out / "sheet.png", "--columns", 4)
+            export_bake(baked, out / "sheet.png", frames_text=f"0:{frames}", view=view,
+                        columns=4)
         else:
             _sheet(out, frames, step)  # 12 tiles: every step-th frame
-        _run("export", out / "baked.h5", "-o", out / "demo.gif", "--size", 400, 300)
+        export_bake(baked, out / "demo.gif", view=view, size=(400, 300))
 
     start = time.perf_counter()
     stage("meshes and sky", meshes)
@@ -336,18 +324,23 @@ def _sheet(out: Path, frames: int, step: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
+    from shtools.geometry.fit_methods import FIT_METHODS
+
     parser = argparse.ArgumentParser(prog="python -m shtools.demo",
                                      description="Generate, bake and export the demo scene.")
     parser.add_argument("outdir", help="output folder (created)")
     parser.add_argument("--frames", type=int, default=FRAMES, help=f"default {FRAMES}")
     parser.add_argument("--fit-method", default=FIT_METHOD,
-                        choices=("variational", "octree", "kmeans"),
+                        choices=FIT_METHODS,
                         help=f"sphere fitting method (default {FIT_METHOD})")
     args = parser.parse_args(argv)
     if args.frames < 2:
         parser.error("--frames must be at least 2")
     out = Path(args.outdir)
-    timings = run_demo(out, frames=args.frames, fit_method=args.fit_method)
+    from shtools.cli._common import one_blas_thread
+
+    with one_blas_thread():  # unless the user set a BLAS thread count
+        timings = run_demo(out, frames=args.frames, fit_method=args.fit_method)
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in timings.items() if k != "total")
     print(f"[demo] stages: {stages}")
     print(f"[demo] done in {timings['total']:.1f} s:")

@@ -284,7 +284,7 @@ def test_diff_nan_equals_nan_but_not_a_number(run_cli, tmp_path):
 
 def test_diff_streams_blocks_and_keeps_global_indices(run_cli, tmp_path, monkeypatch):
     """With tiny blocks the worst elements still carry their index in the whole array."""
-    import shtools.cli.assets as assets
+    import shtools.data_formats.compare as assets
 
     monkeypatch.setattr(assets, "BLOCK_ELEMENTS", 7)  # 4 rows of 3x3 -> one row per block
     rng = np.random.default_rng(9)
@@ -318,7 +318,7 @@ def test_diff_relative_rmse_criterion(run_cli, light_pair):
 
 
 def test_info_ranges_streamed_in_blocks_match_numpy(run_cli, good, monkeypatch):
-    import shtools.cli.assets as assets
+    import shtools.data_formats.compare as assets
 
     monkeypatch.setattr(assets, "BLOCK_ELEMENTS", 5)  # many blocks per dataset
     code, stdout, _ = run_cli("info", good, "--json")

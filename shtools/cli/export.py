@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from shtools.cli._common import json_option, option_type, output_option, report
+from shtools.export.tonemap import CURVES
 
 FORMATS = (".ply", ".glb", ".png", ".gif")
 #: Largest image (or contact-sheet tile) in pixels: 8192 x 8192, ~1 GiB of raster
@@ -25,7 +26,7 @@ MAX_PIXELS = 8192 * 8192
               help="Exposure in stops on top of the automatic exposure.")
 @click.option("--fixed-exposure", is_flag=True,
               help="No automatic exposure: radiance x 2^exposure goes straight to the tone curve.")
-@click.option("--tonemap", "curve", type=click.Choice(["aces", "reinhard", "clamp"]),
+@click.option("--tonemap", "curve", type=click.Choice(tuple(CURVES)),
               default="aces", show_default=True, help="Tone curve.")
 @click.option("--size", nargs=2, type=option_type("size"), default=None, metavar="W H",
               help="Image size in pixels (default 800 600; 320 240 per sheet tile / GIF frame).")

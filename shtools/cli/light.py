@@ -23,7 +23,7 @@ def light():
 @click.option("--window", type=setting_type("window"),
               default="none", show_default=True,
               help="Per-band window against ringing (cosine: the paper's filter).")
-@click.option("--window-h", type=option_type("window_h"), default=None,
+@click.option("--window-h", type=setting_type("window_h"), default=None,
               help="Window width in bands (default: 2n for cosine, n otherwise).")
 @click.option("--rotate-y", type=option_type("rotate_y"), default=0.0, show_default=True,
               metavar="DEG",
@@ -43,17 +43,13 @@ def project(image, order, output, window, window_h, rotate_y, mirror, exposure, 
     basis function is integrated exactly over every pixel.
     """
     from shtools.cli._outputs import guard_outputs
-    from shtools.data_formats.light import write_light
-    from shtools.lighting import project_environment
+    from shtools.lighting.environment import project_environment_to_file
 
     guard_outputs({"-o": output}, [image])
     start = time.perf_counter()
-    coeffs, info = project_environment(
-        image, order, window=window, window_h=window_h, rotate_y=rotate_y,
-        exposure=exposure, mirror=mirror,
-    )
-    write_light(output, coeffs, source="image", inputs={"image": image},
-                parameters={"order": order, **info})
+    coeffs, info = project_environment_to_file(image, order, output, window=window,
+                                               window_h=window_h, rotate_y=rotate_y,
+                                               exposure=exposure, mirror=mirror)
     seconds = time.perf_counter() - start
     mean = coeffs[0] / np.sqrt(4.0 * np.pi)  # average radiance over the sphere
     summary = {"output": output, "image": image, "order": order, **info,

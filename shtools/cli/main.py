@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import os
 import signal
 import sys
 import threading
@@ -25,14 +24,8 @@ import warnings
 import click
 
 from shtools import __version__
+from shtools.cli._common import one_blas_thread
 from shtools.errors import ShtoolsError, disk_error_reason
-
-# One BLAS thread unless the user asked for more, set before NumPy loads (commands
-# import it lazily): shtools parallelises above BLAS (worker processes, passes over
-# many small matrices), and threaded OpenBLAS spins on small products -- the demo
-# bake took 32 s instead of 2.3 s with one other busy job on a 2-core machine.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
 
 #: command name -> "module:attribute" (module under shtools.cli).  Commands whose
 #: module is not present are not listed.
@@ -121,8 +114,10 @@ def main(argv=None) -> int:
 
 def _run(argv: list[str], debug: bool) -> int:
     try:
-        # standalone_mode=False returns ctx.exit(n)'s code instead of raising it
-        rv = cli.main(args=argv, prog_name="shtools", standalone_mode=False)
+        # standalone_mode=False returns ctx.exit(n)'s code instead of raising it;
+        # one BLAS thread unless the user set a count (see one_blas_thread)
+        with one_blas_thread():
+            rv = cli.main(args=argv, prog_name="shtools", standalone_mode=False)
     except Terminated as exc:
         name = signal.Signals(exc.signum).name
         click.echo(f"error: stopped by {name}; no output was written", err=True)

@@ -45,17 +45,9 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
     E = sum_i V(S_i - T) / V(T).
     """
     from shtools.cli._outputs import guard_outputs
-    from shtools.data_formats.spheres import write_spheres
-    from shtools.errors import InputError
-    from shtools.geometry.mesh import load_mesh
-    from shtools.geometry.sphere_fit import fit_spheres
+    from shtools.geometry.assets import fit_to_file
 
-    if count < 1:
-        raise InputError(f"-n must be >= 1 (got {count})")
-    if thickness is not None and not thickness > 0:
-        raise InputError(f"--thickness must be > 0 (got {thickness})")
     guard_outputs({"-o": output}, [mesh_path])
-    mesh = load_mesh(mesh_path)
     bar = progress(total=iterations, desc="fit")
 
     def tick(iteration, energy):
@@ -64,14 +56,11 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
         bar.refresh()
 
     try:
-        result = fit_spheres(mesh, count, method=method, seed=seed, thickness=thickness,
-                             max_iterations=iterations, path=mesh_path, progress=tick,
-                             restarts=restarts)
+        result = fit_to_file(mesh_path, count, output, method=method, seed=seed,
+                             thickness=thickness, iterations=iterations, restarts=restarts,
+                             progress=tick)
     finally:
         bar.close()
-    parameters = {"n": count, "method": method, "seed": seed, "thickness": thickness,
-                  "iterations": iterations, "restarts": restarts}
-    write_spheres(output, result, inputs={"mesh": mesh_path}, parameters=parameters)
     summary = {
         "output": output,
         "spheres": len(result),

@@ -9,21 +9,10 @@ commands defined here.  Both are thin: read the sphere set, call
 from __future__ import annotations
 
 import click
-import numpy as np
 
 from shtools.cli._common import json_option, option_type, output_option, report
 from shtools.cli._outputs import guard_outputs
-from shtools.errors import InputError
-
-
-def _read_sphere_set(path: str) -> tuple[np.ndarray, np.ndarray]:
-    """Centres ``(N, 3)`` and radii ``(N,)`` of a ``spheres`` asset (validated)."""
-    from shtools.data_formats import read_asset
-
-    asset = read_asset(path, "spheres")
-    return np.asarray(asset["centers"], dtype=np.float64), np.asarray(
-        asset["radii"], dtype=np.float64
-    )
+from shtools.geometry.fit_methods import SPHERE_SPACES
 
 
 @click.command("tree")
@@ -39,18 +28,11 @@ def tree(spheres_path, output, branching, seed, as_json):
 
     Every parent is the minimal sphere bounding its children's spheres.
     """
-    from shtools.data_formats.tree import write_tree
-    from shtools.geometry.sphere_tree import build_tree, tree_statistics
+    from shtools.geometry.assets import tree_to_file
+    from shtools.geometry.sphere_tree import tree_statistics
 
     guard_outputs({"-o": output}, [spheres_path])
-    centers, radii = _read_sphere_set(spheres_path)
-    result = build_tree(centers, radii, branching=branching, seed=seed)
-    write_tree(
-        output,
-        result,
-        inputs={"spheres": spheres_path},
-        parameters={"branching": branching, "seed": seed},
-    )
+    result = tree_to_file(spheres_path, output, branching=branching, seed=seed)
     stats = tree_statistics(result)
     summary = {"output": output, **stats}
     report(
@@ -76,7 +58,7 @@ def tree(spheres_path, output, branching, seed, as_json):
               help="Grow each radius so the sphere keeps covering its rest vertices at "
                    "every checked frame of every animation in RIGGED (the paper keeps the "
                    "rest radii); the fitted radii are kept as 'fit_radii'.")
-@click.option("--space", type=click.Choice(["auto", "bind", "scene"]), default="auto",
+@click.option("--space", type=click.Choice(SPHERE_SPACES), default="auto",
               show_default=True,
               help="Space of the sphere set: 'bind' (the rig's POSITION data), 'scene' (the "
                    "glTF as placed in its scene, what 'shtools spheres fit RIG.glb' sees), "
@@ -92,59 +74,31 @@ def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_a
     space (fit them to the rig's rest mesh).
     """
     from shtools.data_formats.bound import write_bound
-    from shtools.geometry.binding import (
-        bind_spheres,
-        covering_radii,
-        posed_coverage,
-        spheres_to_bind_space,
-    )
+    from shtools.geometry.assets import read_sphere_set
+    from shtools.geometry.binding import bind_sphere_set
     from shtools.geometry.skin import load_skinned_gltf
 
     guard_outputs({"-o": output}, [spheres_path, rig_path])
-    centers, radii = _read_sphere_set(spheres_path)
+    centers, radii = read_sphere_set(spheres_path)
     model = load_skinned_gltf(rig_path)
-    try:
-        centers, radii, space = spheres_to_bind_space(centers, radii, model, space)
-    except InputError as exc:
-        raise InputError(exc.message, spheres_path) from None
-    if cover_animations and not model.animations:
-        raise InputError("--cover-animations needs an animation but the rig has none; "
-                         "drop the flag or export a clip", rig_path)
-    bones_per_sphere = min(bones_per_sphere, model.joint_count)
-    binding = bind_spheres(centers, model, bones_per_sphere=bones_per_sphere)
-    if not np.all(np.isfinite(binding.bone_vectors)):
-        raise InputError("binding produced non-finite weights; check the rest mesh", rig_path)
-    fit_radii = radii
-    if cover_animations:
-        radii = covering_radii(binding, fit_radii, model, frames=max(check_frames, 16))
-    coverage = (
-        posed_coverage(binding, radii, model, frames=check_frames) if check_frames else {}
-    )
+    bound = bind_sphere_set(centers, radii, model, bones_per_sphere=bones_per_sphere,
+                            space=space, cover_animations=cover_animations,
+                            check_frames=check_frames, spheres_path=spheres_path,
+                            rig_path=rig_path)
     write_bound(
         output,
-        centers,
-        radii,
-        binding,
-        fit_radii=fit_radii if cover_animations else None,
+        bound.centers,
+        bound.radii,
+        bound.binding,
+        fit_radii=bound.fit_radii if cover_animations else None,
         inputs={"spheres": spheres_path, "rig": rig_path},
-        parameters={"bones_per_sphere": bones_per_sphere, "sphere_space": space,
+        parameters={"bones_per_sphere": bound.bones_per_sphere, "sphere_space": bound.space,
                     "cover_animations": bool(cover_animations),
                     "check_frames": check_frames},
     )
-    summary = {
-        "output": output,
-        "spheres": int(centers.shape[0]),
-        "joints": int(model.inverse_bind.shape[0]),
-        "bones_per_sphere": int(bones_per_sphere),
-        "sphere_space": space,
-        "mesh_closed": bool(binding.mesh_closed),
-        "mvc_fallback_spheres": int(binding.fallback.sum()),
-        "max_dropped_weight": float(binding.dropped_weight.max(initial=0.0)),
-        "max_rest_residual": float(binding.rest_residual.max(initial=0.0)),
-        "animations": list(model.animations),
-        "max_radius_growth": float(np.max(radii / np.maximum(fit_radii, 1e-300))),
-        **coverage,
-    }
+    summary = {"output": output, **bound.summary(model)}
+    coverage, binding = bound.coverage, bound.binding
+    bones_per_sphere = bound.bones_per_sphere
     cov = coverage.get("posed_vertex_coverage")
     human = (
         f"wrote {output}: {summary['spheres']} spheres bound to {summary['joints']} joints "

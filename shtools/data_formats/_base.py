@@ -16,8 +16,8 @@ import hashlib
 import json
 import os
 import re
+import secrets
 import socket
-import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -237,6 +237,24 @@ def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
             (directory / name).unlink()
             removed.append(directory / name)
     return removed
+def _create_temporary(directory: Path, name: str) -> Path:
+    """Create an empty, new ``.<name>.<pid>@<host>.<random>.tmp`` in ``directory``.
+
+    The name is :func:`temporary_prefix` plus 8 random hex digits; returns the path.
+
+    The file is created with mode 0666, which the kernel masks by the process
+    umask -- the mode any output gets -- without reading (or changing) the
+    process-wide umask, which other threads of an embedding program may rely on.
+    """
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        path = directory / f"{temporary_prefix(name)}{secrets.token_hex(4)}.tmp"
+        try:
+            os.close(os.open(path, flags, 0o666))
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(f"could not create a temporary file for {name} in {directory}")
 
 
 @contextlib.contextmanager
@@ -259,16 +277,9 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
                          "file path", target)
     remove_stale_temporaries(target)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=temporary_prefix(target), suffix=".tmp",
-                                   dir=directory)
+        tmp_path = _create_temporary(directory, target.name)
     except OSError as exc:
         raise _output_error(exc, target) from exc
-    os.close(fd)
-    # mkstemp makes the file 0600; give outputs the usual umask-governed mode
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    tmp_path = Path(tmp)
     try:
         yield tmp_path
         os.replace(tmp_path, target)

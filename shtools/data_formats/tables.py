@@ -131,3 +131,18 @@ def read_tables(path: str | os.PathLike) -> dict:
     out = {k: asset.data[k] for k in TABLE_KEYS}
     out["order"] = asset.sh_order
     return out
+
+
+def write_log_tables(path: str | os.PathLike, order: int, samples: int = 256) -> dict:
+    """Build the cap log and OL tables of ``order`` and write them (``shtools tables log``).
+
+    Returns
+    -------
+    dict
+        The tables, as from :func:`shtools.sh.tables.build_log_tables`.
+    """
+    from shtools.sh.tables import build_log_tables
+
+    built = build_log_tables(order, samples=samples)
+    write_tables(path, built, order, parameters={"samples": samples})
+    return built

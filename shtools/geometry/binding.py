@@ -40,6 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from shtools.errors import InputError
+from shtools.geometry.fit_methods import SPHERE_SPACES
 from shtools.geometry.mvc import is_closed_surface, mean_value_coordinates
 from shtools.runtime.spheres import pose_bound_spheres
 
@@ -129,9 +131,8 @@ def spheres_to_bind_space(centers, radii, model, space: str = "auto"):
         For an unknown ``space``, or when ``"auto"`` finds the spheres cover
         fewer than half of the rest vertices in either space.
     """
-    from shtools.errors import InputError
 
-    if space not in ("auto", "bind", "scene"):
+    if space not in SPHERE_SPACES:
         raise InputError(f"unknown sphere space '{space}'; use auto, bind or scene")
     centers = np.asarray(centers, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
@@ -355,3 +356,89 @@ def posed_coverage(binding: SphereBinding, radii, model, frames: int = 16) -> di
         "max_uncovered_distance": max(worst, 0.0),
         "frames": len(poses),
     }
+
+
+@dataclass
+class BoundSphereSet:
+    """A sphere set bound to a rig (:func:`bind_sphere_set`), ready for a ``bound`` asset.
+
+    Attributes
+    ----------
+    centers : ndarray, shape (N, 3)
+        Centres in the rig's bind space.
+    radii : ndarray, shape (N,)
+        Radii used at runtime (grown when covering the animations).
+    fit_radii : ndarray, shape (N,)
+        The radii of the input set.
+    binding : SphereBinding
+    space : str
+        Space the input set was in (``"bind"`` or ``"scene"``).
+    bones_per_sphere : int
+        Bones kept per sphere (at most the rig's joint count).
+    coverage : dict
+        :func:`posed_coverage` over the checked frames (empty if none).
+    """
+
+    centers: np.ndarray
+    radii: np.ndarray
+    fit_radii: np.ndarray
+    binding: SphereBinding
+    space: str
+    bones_per_sphere: int
+    coverage: dict
+
+    def summary(self, model) -> dict:
+        """Counts and worst cases of the binding (the CLI's ``--json`` fields)."""
+        b = self.binding
+        return {
+            "spheres": int(self.centers.shape[0]),
+            "joints": int(model.inverse_bind.shape[0]),
+            "bones_per_sphere": int(self.bones_per_sphere),
+            "sphere_space": self.space,
+            "mesh_closed": bool(b.mesh_closed),
+            "mvc_fallback_spheres": int(b.fallback.sum()),
+            "max_dropped_weight": float(b.dropped_weight.max(initial=0.0)),
+            "max_rest_residual": float(b.rest_residual.max(initial=0.0)),
+            "animations": list(model.animations),
+            "max_radius_growth": float(np.max(self.radii
+                                              / np.maximum(self.fit_radii, 1e-300))),
+            **self.coverage,
+        }
+
+
+def bind_sphere_set(centers, radii, model, *, bones_per_sphere: int = 4,
+                    space: str = "auto", cover_animations: bool = False,
+                    check_frames: int = 16, spheres_path=None,
+                    rig_path=None) -> BoundSphereSet:
+    """Bind a fitted sphere set to a skinned model (what ``shtools spheres bind`` does).
+
+    The set is brought to bind space (:func:`spheres_to_bind_space`), bound
+    (:func:`bind_spheres`), its radii optionally grown to keep covering the
+    rest vertices over the animations (:func:`covering_radii`), and its posed
+    coverage measured at ``check_frames`` frames per animation (0: skip).
+    ``spheres_path`` and ``rig_path`` only name the inputs in errors.
+
+    Raises
+    ------
+    InputError
+        The spheres cover neither space, ``cover_animations`` without an
+        animation, or non-finite weights.
+    """
+    try:
+        centers, radii, space = spheres_to_bind_space(centers, radii, model, space)
+    except InputError as exc:
+        raise InputError(exc.message, spheres_path) from None
+    if cover_animations and not model.animations:
+        raise InputError("--cover-animations needs an animation but the rig has none; "
+                         "drop the flag or export a clip", rig_path)
+    bones_per_sphere = min(bones_per_sphere, model.joint_count)
+    binding = bind_spheres(centers, model, bones_per_sphere=bones_per_sphere)
+    if not np.all(np.isfinite(binding.bone_vectors)):
+        raise InputError("binding produced non-finite weights; check the rest mesh", rig_path)
+    fit_radii = radii
+    if cover_animations:
+        radii = covering_radii(binding, fit_radii, model, frames=max(check_frames, 16))
+    coverage = posed_coverage(binding, radii, model, frames=check_frames) if check_frames \
+        else {}
+    return BoundSphereSet(centers, radii, fit_radii, binding, space, bones_per_sphere,
+                          coverage)

@@ -1,4 +1,8 @@
-"""The sphere-fit methods (one list; the fitter, the scene schema and the CLI import it)."""
+"""Names of sphere-set choices (light: the scene schema and the CLI import them).
+
+The fit methods (the fitter checks them) and the spaces a set to bind may be given in
+(:func:`shtools.geometry.binding.spheres_to_bind_space`).
+"""
 
 from enum import StrEnum
 
@@ -15,3 +19,7 @@ class FitMethod(StrEnum):
 
 
 FIT_METHODS = tuple(m.value for m in FitMethod)
+
+#: spaces a sphere set to bind may be given in: "bind" (the rig's POSITION data),
+#: "scene" (the glTF as placed in its scene) or "auto" (whichever the spheres cover)
+SPHERE_SPACES = ("auto", "bind", "scene")

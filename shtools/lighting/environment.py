@@ -119,3 +119,26 @@ def project_environment(
         "exposure_ev": float(exposure),
     }
     return coeffs, info
+
+
+def project_environment_to_file(image: str | os.PathLike, order: int,
+                                output: str | os.PathLike, *, window: str | None = "none",
+                                window_h: float | None = None, rotate_y: float = 0.0,
+                                exposure: float = 0.0, mirror: bool = False):
+    """Project a lat-long HDR image (:func:`project_environment`) and write a ``light`` asset.
+
+    What ``shtools light project`` runs.
+
+    Returns
+    -------
+    coeffs : ndarray, shape (n*n, 3)
+    info : dict
+        As from :func:`project_environment`.
+    """
+    from shtools.data_formats.light import write_light
+
+    coeffs, info = project_environment(image, order, window=window, window_h=window_h,
+                                       rotate_y=rotate_y, exposure=exposure, mirror=mirror)
+    write_light(output, coeffs, source="image", inputs={"image": image},
+                parameters={"order": order, **info})
+    return coeffs, info

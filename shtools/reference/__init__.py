@@ -10,19 +10,27 @@
 Unlike :mod:`shtools.runtime`, this package may import the geometry stack.
 """
 
-from shtools.reference.metrics import relative_l2_per_vertex, relative_rmse
-from shtools.reference.product_space import product_space_visibility
-from shtools.reference.raytrace import (
-    DEFAULT_DIRECTIONS,
-    raytrace_visibility,
-    sphere_union_visibility,
-)
+import importlib
 
-__all__ = [
-    "DEFAULT_DIRECTIONS",
-    "product_space_visibility",
-    "raytrace_visibility",
-    "relative_l2_per_vertex",
-    "relative_rmse",
-    "sphere_union_visibility",
-]
+#: public name -> module (loaded on first use, so ``shtools.reference.scenes`` and
+#: the metrics import without the geometry stack)
+_LAZY = {
+    "relative_l2_per_vertex": "shtools.reference.metrics",
+    "relative_rmse": "shtools.reference.metrics",
+    "product_space_visibility": "shtools.reference.product_space",
+    "DEFAULT_DIRECTIONS": "shtools.reference.raytrace",
+    "raytrace_visibility": "shtools.reference.raytrace",
+    "sphere_union_visibility": "shtools.reference.raytrace",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'shtools.reference' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_LAZY])

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -32,6 +33,111 @@ from shtools.runtime.hierarchy import leaf_spheres
 from shtools.runtime.settings import RUNTIME_EXP_METHODS
 
 METHOD_NAMES = (*RUNTIME_EXP_METHODS, "product")
+
+
+@dataclass
+class EvalInputs:
+    """One evaluation scene: receivers, blockers, their meshes and the lights.
+
+    Attributes
+    ----------
+    name : str
+    vertices, normals : ndarray, shape (V, 3)
+    groups : ndarray of int, shape (V,), or None
+        Object id per receiver vertex (clusters never span two objects).
+    blockers : list of SphereBlocker
+    meshes : list of trimesh.Trimesh
+        The blockers' real meshes (ray-traced reference).
+    env : ndarray, shape (n*n, 3) or None
+    lights : list of SphereLight
+    settings : dict
+        The scene's runtime settings (``order``, ``acc_order``, ``window``, ...).
+    tables : dict or None
+        Log tables the scene names.
+    """
+
+    name: str
+    vertices: np.ndarray
+    normals: np.ndarray
+    groups: np.ndarray | None
+    blockers: list
+    meshes: list
+    env: np.ndarray | None
+    lights: list
+    settings: dict
+    tables: dict | None = None
+
+
+def eval_settings(inputs: EvalInputs, *, order: int | None = None,
+                  acc_order: int | None = None, window: bool = True,
+                  hierarchy: bool = True) -> ShadowSettings:
+    """The runtime settings of an evaluation: the scene's, overridden by the caller's.
+
+    One process (the method times compare with single-process references).
+    """
+    base = inputs.settings
+    kwargs = {"order": base.get("order", order or 4)}
+    for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster"):
+        if base.get(key) is not None:
+            kwargs[key] = base[key]
+    kwargs["window"] = base.get("window", "cosine") if window else None
+    kwargs["hierarchy"] = base.get("hierarchy", True) if hierarchy else False
+    if acc_order is not None:
+        kwargs["acc_order"] = acc_order
+    elif base.get("acc_order") is not None:
+        kwargs["acc_order"] = base["acc_order"]
+    if kwargs.get("acc_order") is not None and kwargs["acc_order"] < kwargs["order"]:
+        raise InputError(f"--acc-order {kwargs['acc_order']} is below the order {kwargs['order']}")
+    return ShadowSettings(processes=1, **kwargs)
+
+
+def mesh_eval_inputs(mesh_path, spheres_path, tree_path=None, light_path=None, *,
+                     grid: int = 64, gap: float = 0.0, order: int = 4) -> EvalInputs:
+    """The built-in evaluation scene: the mesh over a ground grid touching its lowest point.
+
+    Parameters
+    ----------
+    mesh_path, spheres_path : path-like
+        The blocker mesh and its sphere set (spheres asset).
+    tree_path : path-like, optional
+        A tree asset over the set (enables the hierarchy).
+    light_path : path-like, optional
+        Environment light asset (default: a procedural sky).
+    grid : int
+        Ground receivers per side.
+    gap : float
+        Gap between ground and mesh, as a fraction of the mesh height.
+    order : int
+        Shading SH order.
+    """
+    from shtools.data_formats.spheres import read_spheres
+    from shtools.geometry.mesh import load_mesh
+    from shtools.reference.scenes import mesh_scene
+
+    mesh = load_mesh(mesh_path)
+    sph = read_spheres(spheres_path)
+    tree = None
+    if tree_path is not None:
+        from shtools.data_formats.tree import read_tree
+
+        t = read_tree(tree_path)
+        if int((t.leaf >= 0).sum()) != len(sph.radii):
+            raise InputError(f"the tree has {int((t.leaf >= 0).sum())} leaves but the sphere "
+                             f"set has {len(sph.radii)} spheres; rebuild it from this set",
+                             tree_path)
+        tree = (t.parent, t.leaf)
+    env = None
+    if light_path is not None:
+        from shtools.data_formats.light import read_light
+
+        env, _ = read_light(light_path)
+    sc = mesh_scene(mesh, sph.centers, sph.radii, grid=grid, order=order, tree=tree,
+                    env_sh=env, gap=gap)
+    return EvalInputs(Path(mesh_path).name, sc.vertices, sc.normals, None,
+                      [SphereBlocker(sc.centers, sc.radii, tree=tree)], sc.meshes, sc.env_sh,
+                      [], {"order": order, "hierarchy": tree is not None})
+
+
 
 
 @dataclass

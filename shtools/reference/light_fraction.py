@@ -18,7 +18,7 @@ carry no weight in the radiance.  Returned per receiver:
 
 * ``fraction`` -- :math:`S = \frac{1}{\Omega}\int_{cap} V\,d\omega`;
 * ``radiance`` -- per unit light colour, :math:`\frac1\pi\int_{cap} V\max(0, N\cdot s)\,d\omega`
-  (the white-Lambertian outgoing radiance of DESIGN.md "Radiance");
+  (the white-Lambertian outgoing radiance of docs/conventions.md "Light and radiance");
 * ``unshadowed`` -- the same with ``V = 1``.
 """
 

@@ -73,10 +73,11 @@ def product_space_visibility(vertices, normals, blockers, order: int, acc_order:
         Apply the Sec. 6.2 rules (as the runtime does).
     dtype : numpy dtype
         float64 (reference) or float32 (speed comparisons).
-    kernel : {"cp", "sparse"}
-        Product evaluation (:func:`shtools.sh.product`): quadrature factors of Γ
-        (default, fastest here) or the sparse triple-product contraction that
-        product-space methods classically use (Snyder 2006 code generation).
+    kernel : str
+        Product evaluation (:func:`shtools.sh.product`): ``"cp"``, quadrature
+        factors of Γ (default, fastest here), ``"sparse"``, the sparse
+        triple-product contraction, or a registered kernel (the benchmarks'
+        generated ``"unrolled"`` one, as product-space methods classically use).
 
     Returns
     -------

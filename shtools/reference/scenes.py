@@ -6,6 +6,7 @@ Y is up and the ground is a horizontal grid of receiver vertices.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,7 +28,9 @@ class EvalScene:
     grid_shape : tuple of int or None
         ``(rows, cols)`` when the receivers are a grid (for images).
     meshes : list of trimesh.Trimesh
-        Actual blocker geometry (for the ray-traced reference).
+        Actual blocker geometry (for the ray-traced reference); built on first
+        use when given as a function (``mesh_source``), so scenes used only by
+        the runtime need no geometry stack.
     centers, radii : ndarray, shapes (N, 3), (N,)
         Blocker sphere set.
     tree : tuple (parent (M,), leaf (M,)) or None
@@ -39,12 +42,18 @@ class EvalScene:
     vertices: np.ndarray
     normals: np.ndarray
     grid_shape: tuple | None
-    meshes: list
+    mesh_source: list | Callable[[], list]
     centers: np.ndarray
     radii: np.ndarray
     tree: tuple | None
     env_sh: np.ndarray
     lights: list = field(default_factory=list)
+
+    @property
+    def meshes(self) -> list:
+        if callable(self.mesh_source):
+            self.mesh_source = self.mesh_source()
+        return self.mesh_source
 
 
 def ground_grid(resolution: int, center_xz, half_size: float, y: float = 0.0):
@@ -115,26 +124,30 @@ def capsule_scene(grid: int = 24, order: int = 4, *, spheres: int = 6, lift: flo
     -------
     EvalScene
     """
-    import trimesh
-
     radius = 0.3
     p0 = np.array([-0.6, lift + radius, -0.2])
     p1 = np.array([0.7, lift + radius + 0.5, 0.3])
-    axis = p1 - p0
-    length = float(np.linalg.norm(axis))
-    capsule = trimesh.creation.capsule(height=length, radius=radius, count=[24, 24])
-    # trimesh's capsule runs along +Z from -length/2 to +length/2
-    capsule.apply_transform(trimesh.geometry.align_vectors([0, 0, 1], axis / length))
-    capsule.apply_translation(0.5 * (p0 + p1))
     ball_c, ball_r = np.array([0.5, 0.25, -0.8]), 0.25
-    ball = trimesh.creation.icosphere(subdivisions=4, radius=ball_r)
-    ball.apply_translation(ball_c)
+
+    def meshes():
+        import trimesh
+
+        axis = p1 - p0
+        length = float(np.linalg.norm(axis))
+        capsule = trimesh.creation.capsule(height=length, radius=radius, count=[24, 24])
+        # trimesh's capsule runs along +Z from -length/2 to +length/2
+        capsule.apply_transform(trimesh.geometry.align_vectors([0, 0, 1], axis / length))
+        capsule.apply_translation(0.5 * (p0 + p1))
+        ball = trimesh.creation.icosphere(subdivisions=4, radius=ball_r)
+        ball.apply_translation(ball_c)
+        return [capsule, ball]
+
     c_caps, r_caps = capsule_spheres(p0, p1, radius, spheres)
     # the icosphere is inscribed in its sphere: the sphere bounds it
     centers = np.vstack([c_caps, ball_c[None, :]])
     radii = np.concatenate([r_caps, [ball_r]])
     v, nrm = ground_grid(grid, (0.0, 0.0), 2.0)
-    return EvalScene(v, nrm, (grid, grid), [capsule, ball], centers, radii, None,
+    return EvalScene(v, nrm, (grid, grid), meshes, centers, radii, None,
                      sky_light(order))
 
 

@@ -46,7 +46,8 @@ log depends on the order it is computed at).
 Performance notes: a frame's receiver clusters are split into parts of equal
 work, one evaluated in the calling process and the others in forked worker
 processes (accumulation and exp per part; :mod:`~shtools.runtime.parallel`,
-``processes=None`` = one per core) -- threads do not scale here, the GIL
+``processes=None`` = one per core; the default is 1, the CLI opts in) -- threads do not
+scale here, the GIL
 hand-over between hundreds of short NumPy passes eats the gain.
 Accumulation runs on float32 blocks of (tiles of 32
 receivers of one cluster) x (the tile's sphere list, padded with radius-0
@@ -68,7 +69,7 @@ Public API
 ----------
 ``ShadowSettings(order=4, acc_order=None, exp_method="auto", window="cosine",
 window_h=None, theta_max=radians(25), theta_min=radians(1), hierarchy=True,
-vertices_per_cluster=400, threads=1, processes=None, ...)``
+vertices_per_cluster=400, threads=1, processes=1, ...)``
     Parameters (:mod:`~shtools.runtime.settings`); ``acc_order=None`` means
     ``min(n + 2, 6)``.
 ``SphereBlocker(centers (N,3), radii (N,), tree=None | (parent (M,), leaf (M,)))``

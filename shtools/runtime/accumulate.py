@@ -35,7 +35,7 @@ import numpy as np
 
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.self_shadow import apply_self_shadow_rules, apply_self_shadow_rules_inplace
-from shtools.sh.basis import double_factorial, normalisation
+from shtools.sh.basis import double_factorial, legendre_recurrence, normalisation
 
 #: d^2 floor (scene units^2): guards 1/d for a zero-radius sphere at the receiver.
 MIN_DIST2 = 1e-20
@@ -323,17 +323,17 @@ class BlockKernel:
             # R_{l-2} (one pass fewer) and sigma_l joins the per-coefficient scale
             sigma_prev2 = sigma = float(double_factorial(2 * m - 1))  # Q_mm
             q_prev2 = q_prev1 = None
-            for l in range(m, order):
+            for l, (a_num, c_num, den) in legendre_recurrence(m, order):
                 if l == m:
                     q = None  # R_m = 1
                     term = bands[l]
                 elif l == m + 1:
-                    sigma_prev2, sigma = sigma, sigma * (2 * m + 1)
+                    sigma_prev2, sigma = sigma, sigma * a_num
                     q = z  # R_{m+1} = z (read only)
                     term = self._term(bands[l], q, prod, m)
                 else:
-                    a = (2 * l - 1) / (l - m)
-                    c = (l + m - 1) / (l - m)
+                    a = a_num / den
+                    c = c_num / den
                     gamma = c * sigma_prev2 / (a * sigma)
                     sigma_prev2, sigma = sigma, sigma * a
                     q = q_buf[l % 3]

@@ -1,35 +1,36 @@
-r"""Batched SH exponentials for the runtime, with products by exact quadrature.
+r"""The runtime's product backend: parity-split quadrature SH products in float32 on BLAS.
 
-Same algorithms and definitions as :func:`shtools.sh.exp` (Sec. 4: DC isolation,
-scaling/squaring with :math:`q = \max(0, \lfloor\log_2\|\hat f\|\rfloor + 3)`,
-the factored PS*-p series, OL and HYB), but every truncated SH product
-:math:`(\mathbf f * \mathbf g)_i = \int f g\, y_i` is evaluated as two small
-matrix products through a quadrature that integrates the degree
-:math:`3(n-1)` integrand exactly: reconstruct ``f`` and ``g`` at the ``Q``
-directions, multiply pointwise, project back.  For tens of thousands of
+Every truncated SH product :math:`(\mathbf f * \mathbf g)_i = \int f g\, y_i` is
+evaluated as two small matrix products through a quadrature that integrates
+the degree :math:`3(n-1)` integrand exactly: reconstruct ``f`` and ``g`` at the
+``Q`` directions, multiply pointwise, project back.  For tens of thousands of
 vectors this runs on BLAS in float32 and is far faster than contracting the
-sparse triple-product tensor.  Tests check it against :func:`shtools.sh.exp`.
+sparse triple-product tensor.
+
+:class:`QuadratureProducts` is a :class:`shtools.sh.exponential.ProductBackend`;
+:func:`fast_exp` runs the one exp driver of :mod:`shtools.sh.exponential`
+(:func:`~shtools.sh.exponential.exp_batched`) on it, and the Volterra
+exponential with a lighter quadrature.  Tests check it against
+:func:`shtools.sh.exp`.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from shtools.sh import basis, sphere_quadrature, squarings
+from shtools.sh import basis
+from shtools.sh.exponential import exp_batched, volterra
+from shtools.sh.quadrature import quarter_sphere_quadrature, sphere_quadrature
 
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 #: Methods implemented here; others fall back to :func:`shtools.sh.exp`.
 FAST_METHODS = ("hyb", "ps*", "ol", "volterra")
 #: Quadrature degree of the fast Volterra exp as a multiple of the order: exp of a
 #: log-visibility reconstruction is smooth, and 4n + 6 keeps the projection within
 #: 1e-4 of :func:`shtools.sh.exp`'s denser rule (tests/runtime/test_fast_exp.py).
 VOLTERRA_DEGREE = (4, 6)
-#: Default PS*-p degree (as :data:`shtools.sh.exponential.DEFAULT_DEGREE`).
-DEFAULT_PS_STAR_DEGREE = 2
 
 
 #: Parity classes of the SH coefficients under the two reflections that map the
@@ -47,15 +48,13 @@ SPLIT_MIN_ORDER = 5
 def _split_operators(order: int, dtype_name: str):
     """Class-split quadrature operators of an exact order-``n`` product.
 
-    The Gauss-Legendre x uniform-azimuth rule exact to degree ``3(n-1)`` is
-    symmetric under z -> -z and phi -> phi + pi (the azimuth count is made
-    even).  Each SH coefficient is even or odd under both, so a function's
-    values at the 4 images of a base point (z >= 0, 0 <= phi < pi) are
-    ``a +- b +- c +- d`` of the 4 class reconstructions at that point, and a
-    product needs reconstructions at a quarter of the nodes only.  A z = 0
-    node is its own mirror and is counted twice at half weight (odd classes
-    vanish there).  Below :data:`SPLIT_MIN_ORDER` there is one class (all
-    coefficients) on the full rule.
+    The rule exact to degree ``3(n-1)`` is symmetric under z -> -z and
+    phi -> phi + pi (:func:`shtools.sh.quadrature.quarter_sphere_quadrature`).
+    Each SH coefficient is even or odd under both, so a function's values at
+    the 4 images of a base point are ``a +- b +- c +- d`` of the 4 class
+    reconstructions at that point, and a product needs reconstructions at a
+    quarter of the nodes only (odd classes vanish at z = 0).  Below
+    :data:`SPLIT_MIN_ORDER` there is one class (all coefficients) on the full rule.
 
     Returns
     -------
@@ -74,16 +73,7 @@ def _split_operators(order: int, dtype_name: str):
         cls = np.zeros(order * order, dtype=np.int64)
         n_classes, sq_factor = 1, (1.0,)
     else:
-        n_gauss = degree // 2 + 1
-        n_phi = degree + 1 + (degree + 1) % 2  # even: phi + pi is a node
-        z, wz = np.polynomial.legendre.leggauss(n_gauss)
-        keep = z >= -1e-12
-        z, wz = np.abs(z[keep]), wz[keep] * np.where(np.abs(z[keep]) < 1e-12, 0.5, 1.0)
-        phi = 2.0 * np.pi * (np.arange(n_phi // 2) + 0.5) / n_phi
-        zz, pp = np.meshgrid(z, phi, indexing="ij")
-        r = np.sqrt(np.clip(1.0 - zz * zz, 0.0, None))
-        dirs = np.stack([r * np.cos(pp), r * np.sin(pp), zz], axis=-1).reshape(-1, 3)
-        w = np.repeat(wz * (2.0 * np.pi / n_phi), n_phi // 2) * 4.0
+        dirs, w = quarter_sphere_quadrature(degree)
         band = np.repeat(np.arange(order), 2 * np.arange(order) + 1)
         m = np.arange(order * order) - band * band - band
         cls = (band + m) % 2 + 2 * (np.abs(m) % 2)
@@ -162,6 +152,16 @@ class QuadratureProducts:
         """
         q_b = self.recon[0].shape[1]
         return [np.empty((rows, q_b), self.dtype) for _ in range(2 * len(self.recon))]
+
+    def workspace_layout(self) -> tuple[int, int]:
+        """``(arrays, columns)`` of a :meth:`workspace`."""
+        return 2 * len(self.recon), self.recon[0].shape[1]
+
+    def project_square(self, vals, rows=slice(None), out_order: int | None = None, out=None):
+        """Class parts of ``f * f`` for ``rows`` of :meth:`square_values` (truncated to
+        ``out_order`` when given; into ``out`` when given)."""
+        sizes = None if out_order is None else self.class_sizes(out_order)
+        return self._project(vals, rows, sizes, square=True, out=out)
 
     def _values(self, parts, ws=None):
         if ws is None:
@@ -246,6 +246,10 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
              workspaces: list | None = None) -> np.ndarray:
     """SH exponential of many vectors (``"hyb"``, ``"ps*"``, ``"ol"`` or ``"volterra"``).
 
+    The driver of :func:`shtools.sh.exponential.exp_batched` on
+    :class:`QuadratureProducts` (Volterra: :func:`shtools.sh.exponential.volterra`
+    with a quadrature of degree ``4n + 6``).
+
     Parameters
     ----------
     f : array_like, shape (B, n*n)
@@ -254,7 +258,7 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
     tables : dict, optional
         OL tables ``ol_norm, ol_a, ol_b`` of order ``n`` (needed for hyb/ol).
     degree : int, optional
-        PS*-p series degree (default 2).
+        PS*-p series degree (default :data:`shtools.sh.exponential.DEFAULT_DEGREE`).
     chunk : int
         Vectors per block (bounds memory: the reused scratch is about
         ``chunk * 1 KB`` at order 6).
@@ -276,141 +280,15 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
     f = np.asarray(f)
     dtype = f.dtype if f.dtype in (np.float32, np.float64) else np.dtype(np.float64)
     f = f.astype(dtype, copy=False)
-    size = f.shape[-1]
-    order = math.isqrt(size)
-    n_out = order if out_order is None else int(out_order)
-    if not 1 <= n_out <= order:
-        raise ValueError(f"out_order must be in 1..{order}, got {out_order!r}")
+    order = math.isqrt(f.shape[-1])
     if method not in FAST_METHODS:
         raise ValueError(f"fast_exp supports {FAST_METHODS}, got {method!r}")
-    if method in ("hyb", "ol") and tables is None:
-        raise ValueError("the hyb and ol methods need OL tables")
-    p = DEFAULT_PS_STAR_DEGREE if degree is None else int(degree)
-    ops = QuadratureProducts(order, dtype)
-    out = np.empty((f.shape[0], n_out * n_out), dtype=dtype)
-    starts = range(0, f.shape[0], chunk)
     if method == "volterra":
-        dirs, w = sphere_quadrature(VOLTERRA_DEGREE[0] * order + VOLTERRA_DEGREE[1])
-        y = basis(dirs, order)
-        recon = np.ascontiguousarray(y.T, dtype=dtype)
-        proj = np.ascontiguousarray(y[:, : n_out * n_out] * w[:, None], dtype=dtype)
-        for s in starts:
-            v = f[s : s + chunk] @ recon
-            np.exp(v, out=v)
-            out[s : s + chunk] = v @ proj
-        return out
-
-    n_workers = max(1, min(int(threads), len(starts)))
-    spaces = _workspaces(ops, min(chunk, f.shape[0]), n_workers,
-                         [] if workspaces is None else workspaces)
-
-    def work(k):
-        for s in starts[k::n_workers]:
-            _exp_block(f[s : s + chunk], method, tables, p, ops, n_out, out[s : s + chunk],
-                       spaces[k])
-
-    if n_workers > 1:
-        with ThreadPoolExecutor(max_workers=n_workers) as pool:
-            list(pool.map(work, range(n_workers)))
-    else:
-        work(0)
-    return out
-
-
-def _workspaces(ops: QuadratureProducts, rows: int, count: int, kept: list) -> list:
-    """``count`` workspaces of at least ``rows`` rows for ``ops``, reusing ``kept``
-    (which is updated in place) when the shapes fit."""
-    q_b, n_arrays = ops.recon[0].shape[1], 2 * len(ops.recon)
-    for k in range(count):
-        fits = (k < len(kept) and len(kept[k]) == n_arrays and kept[k][0].shape[0] >= rows
-                and kept[k][0].shape[1] == q_b and kept[k][0].dtype == ops.dtype)
-        if not fits:
-            space = ops.workspace(rows)
-            if k < len(kept):
-                kept[k] = space
-            else:
-                kept.append(space)
-    return kept[:count]
-
-
-def _ol_split(parts, norm: np.ndarray, tables: dict):
-    """OL (Sec. 4.2) on class parts of ``f_hat``: ``a(|f|) * 1 + b(|f|) * f_hat``."""
-    a = np.interp(norm, tables["ol_norm"], tables["ol_a"])
-    b = np.interp(norm, tables["ol_norm"], tables["ol_b"])
-    out = [p * b[:, None].astype(p.dtype) for p in parts]
-    out[0][:, 0] = a * SQRT_4PI
-    return out
-
-
-def _factored_series(parts, degree: int, ops: QuadratureProducts, ws=None):
-    """Eq. 22 for exp on class parts: even part plus ``f *`` odd part (as
-    :mod:`shtools.sh.exponential`)."""
-    coef = [1.0 / math.factorial(k) for k in range(degree + 1)]
-    even = [np.zeros_like(p) for p in parts]
-    even[0][:, 0] = SQRT_4PI * coef[0]
-    odd = [np.zeros_like(p) for p in parts]
-    odd[0][:, 0] = SQRT_4PI * coef[1]
-    f2 = ops.square_split(parts, ws=ws) if degree >= 2 else None
-    power = f2
-    for k in range(1, degree // 2 + 1):
-        if k > 1:
-            power = ops.product_split(power, f2)
-        for e, o, pw in zip(even, odd, power, strict=True):
-            e += coef[2 * k] * pw
-            if 2 * k + 1 <= degree:
-                o += coef[2 * k + 1] * pw
-    if degree <= 2:  # the odd part is h_1 * 1, and f * 1 = f exactly
-        for e, p in zip(even, parts, strict=True):
-            e += coef[1] * p
-        return even
-    return [e + x for e, x in zip(even, ops.product_split(parts, odd), strict=True)]
-
-
-def _exp_block(f, method, tables, degree, ops: QuadratureProducts, n_out: int, out,
-               ws=None) -> None:
-    """exp of ``f (B, n*n)`` truncated to ``n_out``, written into ``out (B, n_out^2)``.
-
-    ``ws`` is a :meth:`QuadratureProducts.workspace` of at least ``B`` rows.
-    """
-    dc = np.exp(f[:, 0].astype(np.float64) / SQRT_4PI)
-    parts = ops.split(f)
-    parts[0][:, 0] = 0.0  # f_hat: DC isolated
-    norm = np.sqrt(sum(np.einsum("bi,bi->b", p, p, dtype=np.float64) for p in parts))
-    if method == "ol":
-        ops.merge(_ol_split(parts, norm, tables), n_out, out=out)
-        out *= dc[:, None].astype(out.dtype)
-        return
-    # vectors sorted by norm (descending), so those still needing a square at
-    # each step are a prefix, squared in place without gathers; f_hat = 0 rows
-    # (no blocker in view) come last and are exactly exp(dc)
-    q = squarings(norm)
-    key = np.where(norm > 0, q + 1, 0)  # small ints: a fast radix argsort
-    by_norm = np.argsort(-key, kind="stable")
-    live = int(np.count_nonzero(key))
-    q_sorted = q[by_norm[:live]]
-    norm_sorted = norm[by_norm[:live]]
-    scale = np.ldexp(1.0, -q_sorted)
-    scaled = [p[by_norm[:live]] * scale[:, None].astype(p.dtype) for p in parts]
-    if method == "hyb":
-        g = _ol_split(scaled, norm_sorted * scale, tables)
-    else:
-        g = _factored_series(scaled, degree, ops, ws)
-    res = np.empty((f.shape[0], n_out * n_out), dtype=out.dtype)
-    res[live:] = 0.0
-    res[live:, 0] = SQRT_4PI
-    q_max = int(q_sorted.max(initial=0))
-    done = int(np.count_nonzero(q_sorted > 0))
-    ops.merge([p[done:] for p in g], n_out, out=res[done:live])
-    sizes = ops.class_sizes(n_out)
-    for step in range(q_max):
-        count = done
-        done = int(np.count_nonzero(q_sorted > step + 1))
-        # rows [done, count) take their last square: project onto the kept
-        # coefficients only; rows [0, done) keep squaring at full order
-        vals = ops.square_values([p[:count] for p in g], ws)
-        ops.merge(ops._project(vals, slice(done, count), sizes, square=True), n_out,
-                  out=res[done:count])
-        if done:
-            ops._project(vals, slice(0, done), square=True, out=[p[:done] for p in g])
-    out[by_norm] = res
-    out *= dc[:, None].astype(out.dtype)
+        n_out = order if out_order is None else int(out_order)
+        if not 1 <= n_out <= order:
+            raise ValueError(f"out_order must be in 1..{order}, got {out_order!r}")
+        return volterra(f, VOLTERRA_DEGREE[0] * order + VOLTERRA_DEGREE[1], out_order=n_out,
+                        chunk=chunk)
+    return exp_batched(f, method, QuadratureProducts(order, dtype), tables, degree=degree,
+                       chunk=chunk, threads=threads, out_order=out_order,
+                       workspaces=workspaces)

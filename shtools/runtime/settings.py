@@ -283,8 +283,11 @@ class ShadowSettings:
         2 threads on 2 cores); ``processes`` is the way to use more cores.
     processes : int or None
         Processes sharing the per-vertex stages of a frame (accumulation and
-        exp), see :mod:`shtools.runtime.parallel`; None uses the available
-        cores (at most 8), 1 evaluates in the calling process.  Workers are
+        exp), see :mod:`shtools.runtime.parallel`.  Default 1: the library
+        evaluates in the calling process, so an embedding program gets no
+        processes it did not ask for; None uses the available cores (at most
+        8) -- what ``shtools bake`` and :func:`shtools.scene.bake.bake_scene`
+        choose unless told otherwise.  Workers are
         forked on the first frame with at least ``MIN_PARALLEL_PAIRS``
         sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
         process.
@@ -317,7 +320,7 @@ class ShadowSettings:
                                doc="sphere-vertex pairs per array pass (memory bound)")
     threads: int = setting(1, "int", lo=1, hi=64, scene=False,
                            doc="threads accumulating blocks within a process")
-    processes: int | None = setting(None, "int", lo=1, hi=64, scene=False,
+    processes: int | None = setting(1, "int", lo=1, hi=64, scene=False,
                                     none_means="one per core",
                                     doc="processes sharing each frame")
 

@@ -59,8 +59,8 @@ sub-segment of at most ``SEGMENT_PX`` pixels (a long edge's bounding box would
 be the whole image); ``z_far`` is the shadow-map depth outside the edge at each
 texel's nearest point (the deepest of 1.5, 3 and 6 px; the receivers' far
 depth where nothing is behind); the quad width uses the edge's smaller
-``z_near`` and the receivers' far depth (conservative), clamped to the guard
-band; the post-distortion test looks at least 1.5 px outside the edge (a point
+``z_near`` and the deepest of those ``z_far`` at its ends and middle, clamped
+to the guard band; the post-distortion test looks at least 1.5 px outside the edge (a point
 closer than that would find the edge's own rasterised pixels); silhouette
 corners get round caps (``corners="caps"``, default; the seed's bare quads
 leave wedge gaps at the convex corners of tessellated contours, measured in
@@ -74,7 +74,7 @@ pipeline embedding :mod:`shtools.runtime` gets the small-light path too.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -207,7 +207,7 @@ class FaceMaps:
 
 @dataclass
 class SSOCStats:
-    """CPU seconds per stage of the last frame (the seed's Table 1 columns)."""
+    """CPU seconds (process time) per stage of the last frame (the seed's Table 1 columns)."""
 
     silhouettes: float = 0.0
     shadow_map: float = 0.0
@@ -216,7 +216,6 @@ class SSOCStats:
     n_silhouettes: int = 0
     camera: str = ""
     faces: int = 0
-    extra: dict = field(default_factory=dict)
 
 
 class OcclusionCamera:
@@ -240,6 +239,8 @@ class OcclusionCamera:
         self.adjacency: list[EdgeAdjacency] = [edge_adjacency(f) for f in self.faces]
         #: Stage times of the last call (:class:`SSOCStats`).
         self.last_stats = SSOCStats()
+        #: Shadow and distortion maps of the last call, by cube face (for inspection).
+        self.maps: dict[int, FaceMaps] = {}
         self._camera: LightCamera | None = None
 
     # ------------------------------------------------------------------ public
@@ -278,9 +279,9 @@ class OcclusionCamera:
                 raise InputError(f"the light centre is inside occluder mesh {k}; "
                                  "move the light out of the object")
         stats = SSOCStats()
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         tris, sil = self._silhouettes(verts, c)
-        stats.silhouettes = time.perf_counter() - t0
+        stats.silhouettes = time.process_time() - t0
         stats.n_silhouettes = len(sil[0])
         cam = fit_light_camera(c, pts, mode=st.camera, resolution=st.resolution, guard=st.guard)
         self._camera = cam
@@ -290,19 +291,19 @@ class OcclusionCamera:
         scale = max(float(np.ptp(np.concatenate([pts, tris.reshape(-1, 3)]), axis=0).max())
                     if len(tris) else 1.0, 1e-12)
         near = NEAR_REL * scale
-        self.maps: dict[int, FaceMaps] = {}
+        self.maps = {}
         for k in np.unique(face_of):
             idx = np.flatnonzero(face_of == k)
-            t1 = time.perf_counter()
+            t1 = time.process_time()
             depth = _shadow_map(cam, int(k), tris, near)
-            t2 = time.perf_counter()
+            t2 = time.process_time()
             z_recv = float(cam.to_camera(int(k), pts[idx])[:, 2].max())
             outer, inner = _distortion_maps(cam, int(k), sil, depth, r, near, z_recv, st)
-            t3 = time.perf_counter()
+            t3 = time.process_time()
             maps = FaceMaps(depth.reshape(-1), outer, inner)
             self.maps[int(k)] = maps
             out[idx] = _receivers(cam, int(k), maps, pts[idx], nrm[idx], r, st)
-            t4 = time.perf_counter()
+            t4 = time.process_time()
             stats.shadow_map += t2 - t1
             stats.ssoc += t3 - t2
             stats.receivers += t4 - t3
@@ -467,11 +468,16 @@ def _distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius
     ax, ay, bx, by, za, zb = (x[sel] for x in (ax, ay, bx, by, za, zb))
     nx, ny = nx[sel] / nl[sel], ny[sel] / nl[sel]
     t0, t1, edge_id = t0[sel], t1[sel], edge_id[sel]
-    # per-edge width: the smallest z_near against the receivers' far bound (conservative)
+    # per-edge width: the smallest z_near against the deepest z_far at its ends and middle
     ex, ey = bx - ax, by - ay
     inv_za, inv_zb = 1.0 / za, 1.0 / zb
     inv_zn = np.maximum(inv_za + t0 * (inv_zb - inv_za), inv_za + t1 * (inv_zb - inv_za))
-    width = np.minimum(f * radius * np.maximum(inv_zn - 1.0 / z_recv, 0.0), w_max)
+    zf = np.zeros(len(sel))
+    for t in (0.0, 0.5, 1.0):
+        tt = t0 + t * (t1 - t0)
+        zn_t = 1.0 / (inv_za + tt * (inv_zb - inv_za))
+        zf = np.maximum(zf, _z_far(flat, R, ax + tt * ex, ay + tt * ey, nx, ny, zn_t, z_recv))
+    width = np.minimum(f * radius * np.maximum(inv_zn - 1.0 / zf, 0.0), w_max)
     live = width > 0
     # split each clipped edge into sub-segments of at most SEGMENT_PX pixels
     length = np.hypot(ex, ey) * (t1 - t0)
@@ -530,11 +536,14 @@ def _distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius
         rnx = np.where(cap, sgn * gx / np.where(cap, dist, 1.0), rnx)
         rny = np.where(cap, sgn * gy / np.where(cap, dist, 1.0), rny)
         zn = 1.0 / (inv_za[s_] + tc * (inv_zb[s_] - inv_za[s_]))
-        zfar = _z_far(flat, R, exx, eyy, rnx, rny, zn, z_recv)
-        rec = (py * R + px, dist, edge_id[s_], exx, eyy, rnx, rny, zn, zfar)
+        rec = (py * R + px, dist, edge_id[s_], exx, eyy, rnx, rny, zn)
         out_side = sd >= 0
         _splat(outer, tuple(x[out_side] for x in rec))
         _splat(inner, tuple(x[~out_side] for x in rec))
+    for dm in (outer, inner):  # z_far of the winning records only
+        full = np.flatnonzero(dm.edge >= 0)
+        dm.z_far[full] = _z_far(flat, R, dm.e[full, 0], dm.e[full, 1], dm.n[full, 0],
+                                dm.n[full, 1], dm.z_near[full], z_recv)
     return outer, inner
 
 
@@ -554,23 +563,23 @@ def _z_far(flat, R, ex, ey, nx, ny, zn, z_recv) -> np.ndarray:
 
 
 def _splat(dm: DistortionMap, rec) -> None:
-    """Write fragments into a map, keeping per texel the nearest silhouette (Sec. 3.2.1 step 5)."""
+    """Write fragments into a map, keeping per texel the nearest silhouette (Sec. 3.2.1 step 5).
+
+    ``rec = (texel, distance, edge, ex, ey, nx, ny, z_near)``; ``z_far`` is filled
+    in afterwards for the winners.
+    """
     pid, dist = rec[0], rec[1]
     if not pid.size:
         return
-    order = np.lexsort((dist, pid))
-    pid, dist = pid[order], dist[order]
-    first = np.ones(pid.size, dtype=bool)
-    first[1:] = pid[1:] != pid[:-1]
-    sel = order[first]
-    pid, dist = pid[first], dist[first]
-    win = dist < dm.dist[pid]
-    pid, sel = pid[win], sel[win]
-    dm.dist[pid] = dist[win]
-    dm.edge[pid] = rec[2][sel]
-    dm.e[pid, 0], dm.e[pid, 1] = rec[3][sel], rec[4][sel]
-    dm.n[pid, 0], dm.n[pid, 1] = rec[5][sel], rec[6][sel]
-    dm.z_near[pid], dm.z_far[pid] = rec[7][sel], rec[8][sel]
+    best = dm.dist.copy()
+    np.minimum.at(best, pid, dist)
+    win = (dist == best[pid]) & (dist < dm.dist[pid])  # ties: any of the equals
+    pid = pid[win]
+    dm.dist[pid] = rec[1][win]
+    dm.edge[pid] = rec[2][win]
+    dm.e[pid, 0], dm.e[pid, 1] = rec[3][win], rec[4][win]
+    dm.n[pid, 0], dm.n[pid, 1] = rec[5][win], rec[6][win]
+    dm.z_near[pid] = rec[7][win]
 
 
 # ---------------------------------------------------------------------- receivers

@@ -1,10 +1,12 @@
 """The baker: a parsed scene in, per-frame per-vertex radiance out.
 
-:func:`prepare_scene` loads everything a bake needs once (meshes, blocker
+Three jobs, one module each: :func:`~shtools.scene.prepare.prepare_scene`
+(:mod:`shtools.scene.prepare`) loads everything a bake needs once (meshes, blocker
 spheres and trees — fitted on the fly when the scene asks —, skins, the
-environment SH, the log tables) and checks that SH orders agree.
-:func:`bake_scene` then poses the scene frame by frame (rigid keyframes, parent
-chains, skinning, keyframed lights), evaluates visibility with the chosen method
+environment SH, the log tables) and checks that SH orders agree;
+:func:`~shtools.scene.pose.pose_frame` (:mod:`shtools.scene.pose`) poses it at a
+time (rigid keyframes, parent chains, skinning, keyframed lights);
+:func:`bake_scene` (here) runs the frames: it evaluates visibility with the chosen method
 and shades it, yielding a :class:`FrameResult` per frame and, given ``output``,
 streaming the frames into a ``bake`` asset that appears only when every frame
 is done.
@@ -17,29 +19,20 @@ shadowed by its registered way (:mod:`shtools.scene.shadows`).
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from shtools.data_formats.bake import parse_frames  # noqa: F401  (re-exported)
+from shtools.data_formats.bake import parse_frames
 from shtools.errors import AssetError, InputError
-from shtools.scene.animation import (
-    SkinnedMotion,
-    light_at,
-    transform_normals,
-    transform_points,
-    vertex_normals,
-    world_matrices,
-)
-from shtools.scene.blockers import PrepareContext, blocker_kinds
-from shtools.scene.scene import ObjectSpec, Scene
+from shtools.scene.pose import FrameState, pose_frame
+from shtools.scene.prepare import PreparedObject, PreparedScene, prepare_scene, scene_files
+from shtools.scene.scene import Scene
 from shtools.scene.shadows import (
     LIGHT_SHADOWS,
     VISIBILITY_METHODS,
@@ -48,90 +41,10 @@ from shtools.scene.shadows import (
     shade_frame,
 )
 
-
-@dataclass
-class PreparedObject:
-    """An object with its geometry and blocker spheres in its local frame.
-
-    Attributes
-    ----------
-    spec : ObjectSpec
-    vertices, normals : ndarray, shape (V, 3)
-        Rest geometry (local frame).
-    faces : ndarray, shape (F, 3)
-    centers : ndarray, shape (N, 3) or None
-        Blocker spheres (local frame, rest pose for skinned objects).
-    radii : ndarray, shape (N,) or None
-    tree : tuple of (parent (M,), leaf (M,)) or None
-    motion : SkinnedMotion or None
-    bone_index : ndarray, shape (N, K) or None
-        Skin binding of the spheres (skinned blockers).
-    bone_vectors : ndarray, shape (N, K, 4) or None
-    blocker_data : object
-        What a blocker kind that is not a sphere set prepared (its own type).
-    """
-
-    spec: ObjectSpec
-    vertices: np.ndarray
-    normals: np.ndarray
-    faces: np.ndarray
-    centers: np.ndarray | None = None
-    radii: np.ndarray | None = None
-    tree: tuple[np.ndarray, np.ndarray] | None = None
-    motion: SkinnedMotion | None = None
-    bone_index: np.ndarray | None = None
-    bone_vectors: np.ndarray | None = None
-    blocker_data: Any = None
-
-    @property
-    def moves(self) -> bool:
-        return self.motion is not None or bool(self.spec.keyframes)
-
-
-@dataclass
-class PreparedScene:
-    """Everything a bake needs, loaded and checked."""
-
-    scene: Scene
-    objects: list[PreparedObject]
-    env_sh: np.ndarray | None  # (n*n, 3)
-    tables: dict | None
-    inputs: dict[str, Path] = field(default_factory=dict)
-
-    @property
-    def receivers(self) -> list[PreparedObject]:
-        return [o for o in self.objects if o.spec.receives]
-
-    @property
-    def blockers(self) -> list[PreparedObject]:
-        return [o for o in self.objects if o.spec.blocks]
-
-    @property
-    def n_vertices(self) -> int:
-        return sum(len(o.vertices) for o in self.receivers)
-
-    def receivers_move(self) -> bool:
-        """True when any receiver (or one of its parents) is animated."""
-        by_name = {o.spec.name: o for o in self.objects}
-        for o in self.receivers:
-            cur = o
-            while cur is not None:
-                if cur.moves:
-                    return True
-                cur = by_name.get(cur.spec.parent) if cur.spec.parent else None
-        return False
-
-
-@dataclass
-class FrameState:
-    """The posed scene at one frame (world space)."""
-
-    vertices: np.ndarray  # (V, 3)
-    normals: np.ndarray  # (V, 3)
-    blockers: list  # runtime blockers (SphereBlocker or LogBlocker), one per blocker object
-    lights: list  # list[shtools.runtime.SphereLight]
-    blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
-    light_shadows: list = field(default_factory=list)  # the way of each light (by name)
+#: the three jobs' public names, importable from here as before the split
+__all__ = ["FrameResult", "FrameState", "PreparedObject", "PreparedScene", "bake_scene",
+           "bake_to_file", "check_bake_size", "parse_frames", "pose_frame", "prepare_scene",
+           "runtime_settings", "scene_files"]
 
 
 @dataclass
@@ -160,182 +73,6 @@ class FrameResult:
     seconds: float
 
 
-# --------------------------------------------------------------------------- preparation
-def _object_geometry(obj: ObjectSpec) -> tuple[PreparedObject, object]:
-    """Load or generate an object's mesh; returns it and the skinned model if any."""
-    if obj.primitive is not None:
-        from shtools.scene.primitives import make_primitive
-
-        kind, params = obj.primitive
-        try:
-            prim = make_primitive(kind, params)
-        except InputError as exc:
-            raise InputError(f"objects '{obj.name}': {exc.message}") from None
-        prep = PreparedObject(obj, np.asarray(prim.mesh.vertices, float), prim.normals,
-                              np.asarray(prim.mesh.faces, np.int64))
-        if prim.spheres is not None and obj.blocker is not None and obj.blocker.kind == "exact":
-            prep.centers, prep.radii = prim.spheres
-        return prep, None
-    if obj.skin is not None:
-        from shtools.geometry.skin import load_skinned_gltf
-
-        model = load_skinned_gltf(obj.mesh)
-        v = np.asarray(model.rest_vertices, float)
-        f = np.asarray(model.faces, np.int64)
-        prep = PreparedObject(obj, v, vertex_normals(v, f), f)
-        prep.motion = SkinnedMotion(model, obj.skin.animation, obj.skin.speed, obj.skin.offset)
-        return prep, model
-    from shtools.geometry.mesh import load_mesh
-
-    mesh = load_mesh(obj.mesh)
-    return PreparedObject(obj, np.asarray(mesh.vertices, float),
-                          np.asarray(mesh.vertex_normals, float),
-                          np.asarray(mesh.faces, np.int64)), None
-
-
-def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None:
-    """Prepare the object's blocker with its kind (spheres, tree, skin binding, ...)."""
-    spec = prep.spec.blocker
-    if spec is None:
-        return
-    blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs))
-
-
-def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
-    env = scene.environment
-    order = scene.settings.order
-    if env.kind is None:
-        return None
-    if env.kind == "coeffs":
-        coeffs = env.coeffs
-    elif env.kind == "light":
-        from shtools.data_formats.light import read_light
-
-        coeffs, _ = read_light(env.path)
-        n = math.isqrt(len(coeffs))
-        if n != order:
-            raise AssetError(f"light is SH order {n} but the scene's settings.order is {order}; "
-                             f"re-project it with --order {order} or change the order", env.path)
-        inputs["environment"] = env.path
-    else:
-        from shtools.lighting.environment import project_environment
-
-        # the same code path as `shtools light project`; the runtime windows later
-        coeffs, _ = project_environment(env.path, order, rotate_y=math.degrees(env.rotate))
-        inputs["environment"] = env.path
-    coeffs = np.asarray(coeffs, dtype=float) * env.intensity
-    if env.rotate and env.kind != "image":
-        from shtools.sh import rotate
-
-        c, s = np.cos(env.rotate), np.sin(env.rotate)
-        r_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-        coeffs = rotate(coeffs.T, r_y).T
-    return coeffs
-
-
-def _tables(scene: Scene, inputs: dict) -> dict | None:
-    st = scene.settings
-    if st.tables is None:
-        return None
-    from shtools.data_formats.tables import read_tables
-    from shtools.runtime import ShadowSettings
-
-    tables = read_tables(st.tables)
-    # cap logs are order-specific (an order-8 log truncated is not the order-6 log),
-    # so the tables must be built at exactly the order the runtime accumulates at
-    want = ShadowSettings(order=st.order, acc_order=st.acc_order).resolved_acc_order()
-    if int(tables["order"]) != want:
-        raise AssetError(f"tables are SH order {tables['order']} but the scene accumulates at "
-                         f"order {want}; rebuild them with 'shtools tables log --order {want}'",
-                         st.tables)
-    inputs["tables"] = st.tables
-    return tables
-
-
-def scene_files(scene: Scene) -> list[Path]:
-    """Every file a bake of ``scene`` reads: the scene itself and each file it names.
-
-    Used to refuse an output path that would overwrite one of them.
-    """
-    files = [scene.path, scene.settings.tables, scene.environment.path]
-    for obj in scene.objects:
-        files.append(obj.mesh)
-        if obj.blocker is not None:
-            files.append(obj.blocker.path)
-    return [Path(f) for f in files if f is not None]
-
-
-def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> PreparedScene:
-    """Load meshes, blockers, skins, environment and tables of a parsed scene.
-
-    Raises
-    ------
-    InputError, AssetError
-        A file cannot be used, a skinned glTF has no skin or animation, SH
-        orders disagree between assets, a bound set does not match its rig.
-    """
-    inputs: dict[str, Path] = {}
-    objects = []
-    for obj in scene.objects:
-        if log:
-            log(f"loading {obj.name}")
-        prep, model = _object_geometry(obj)
-        if obj.mesh is not None:
-            inputs[f"{obj.name}.mesh"] = obj.mesh
-        _object_blocker(prep, model, scene.settings, inputs)
-        objects.append(prep)
-    return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
-                         inputs)
-
-
-# --------------------------------------------------------------------------- posing
-#: Largest world coordinate a posed vertex may have: the runtime works in float32,
-#: whose squares overflow above ~1.8e19.
-MAX_COORDINATE = 1e18
-
-
-def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
-    """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
-
-    Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
-    """
-    from shtools.runtime import SphereLight
-
-    kinds = blocker_kinds()
-    worlds = world_matrices(prepared.scene.objects, t)
-    verts, norms, blockers, meshes = [], [], [], []
-    for o in prepared.objects:
-        m = worlds[o.spec.name]
-        if o.motion is not None:
-            joints = o.motion.joint_matrices(t)
-            local_v = np.asarray(o.motion.model.skin(joints), dtype=float)
-            local_n = vertex_normals(local_v, o.faces)
-        else:
-            joints = None
-            local_v, local_n = o.vertices, o.normals
-        world_v = transform_points(m, local_v)
-        if not np.all(np.abs(world_v) <= MAX_COORDINATE):
-            raise InputError(f"objects '{o.spec.name}': posed vertices at t = {t:g} s are not "
-                             f"finite or beyond +-{MAX_COORDINATE:g} (the runtime computes in "
-                             "float32); check its translate/scale and its parents'",
-                             prepared.scene.path)
-        if o.spec.receives:
-            verts.append(world_v)
-            norms.append(transform_normals(m, local_n))
-        if o.spec.blocks:
-            blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
-            if with_meshes:
-                meshes.append((world_v, o.faces))
-    lights = []
-    for spec in prepared.scene.lights:
-        key = light_at(spec, t)
-        lights.append(SphereLight(position=key.position, radius=float(key.radius),
-                                  color=key.color))
-    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
-                      [spec.shadows for spec in prepared.scene.lights])
-
-
-# --------------------------------------------------------------------------- baking
 def runtime_settings(scene: Scene, method: str, processes: int | None = None):
     """The runtime's :class:`~shtools.runtime.ShadowSettings` for a scene and method.
 

@@ -36,7 +36,7 @@ class BakeRun:
 
     Attributes
     ----------
-    prepared : shtools.scene.bake.PreparedScene
+    prepared : shtools.scene.prepare.PreparedScene
     runtime : shtools.runtime.ShadowRuntime
         Shading (and the SHEXP visibility) at the scene's settings.
     method : str

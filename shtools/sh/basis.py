@@ -145,17 +145,16 @@ def _fill_basis(out: np.ndarray, x, y, z, order: int) -> None:
         if m > 0:
             c_prev, s_prev = c_prev * x - s_prev * y, c_prev * y + s_prev * x
         # Q_l^m(z) for l = m..order-1, no Condon–Shortley phase.
-        q_mm = float(double_factorial(2 * m - 1))
         q_lm2 = None
-        q_lm1 = np.full_like(z, q_mm)
-        for l in range(m, order):
+        q_lm1 = np.full_like(z, float(double_factorial(2 * m - 1)))
+        for l, (a, c, d) in legendre_recurrence(m, order):
             if l == m:
                 q = q_lm1
             elif l == m + 1:
-                q = (2 * m + 1) * z * q_lm1
+                q = a * z * q_lm1
                 q_lm2, q_lm1 = q_lm1, q
             else:
-                q = ((2 * l - 1) * z * q_lm1 - (l + m - 1) * q_lm2) / (l - m)
+                q = (a * z * q_lm1 - c * q_lm2) / d
                 q_lm2, q_lm1 = q_lm1, q
             base = l * l + l
             if m == 0:
@@ -164,6 +163,18 @@ def _fill_basis(out: np.ndarray, x, y, z, order: int) -> None:
                 kq = q * k[l, m]
                 np.multiply(kq, c_prev, out=out[base + m])
                 np.multiply(kq, s_prev, out=out[base - m])
+
+
+def legendre_recurrence(m: int, order: int) -> list[tuple[int, tuple[int, int, int]]]:
+    """Integer coefficients of the associated Legendre recurrence for ``l = m..order-1``.
+
+    ``Q_m^m = (2m-1)!!``, ``Q_{m+1}^m = (2m+1) z Q_m^m`` and
+    ``Q_l^m = ((2l-1) z Q_{l-1}^m - (l+m-1) Q_{l-2}^m) / (l-m)``; entry ``l`` is
+    ``(l, (2l-1, l+m-1, l-m))`` (no Condon–Shortley phase).  The one statement of
+    the recurrence: :func:`basis` and the runtime's fused accumulation kernel
+    (:mod:`shtools.runtime.accumulate`) both iterate it.
+    """
+    return [(l, (2 * l - 1, l + m - 1, l - m)) for l in range(m, order)]
 
 
 def double_factorial(n: int) -> int:

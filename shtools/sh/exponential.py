@@ -26,23 +26,33 @@ diagonalising the product matrix (eq. 28):
 ``"volterra"`` — the Volterra exponential (eq. 10),
 :math:`\int_S \exp(f(s))\,\mathbf y(s)\,ds` by quadrature.
 
-The number of squarings differs between vectors of a batch; the batch is
-squared in at most ``max(q)`` passes over the vectors that still need one, so
-no Python loop runs per vector.  ``acc_order`` accumulates the series products
-and squarings at a higher order and truncates only the result (Sec. 4: "errors
-... can be further reduced by accumulating products at higher order").
+PS*, OL and HYB run on **one driver**, :func:`exp_batched`, which takes a
+*product backend* (:class:`ProductBackend`): :class:`TensorProducts` here (the
+triple-tensor products of :mod:`shtools.sh.triple`, by the exact quadrature
+factors of Γ or another registered kernel) or the runtime's parity-split
+float32 quadrature (:class:`shtools.runtime.fast_exp.QuadratureProducts`).
+The number of squarings differs between vectors of a batch; rows are sorted
+by it and squared in at most ``max(q)`` passes over the prefix that still needs
+one, so no Python loop runs per vector.  ``acc_order`` accumulates the series
+products and squarings at a higher order and truncates only the result
+(Sec. 4: "errors ... can be further reduced by accumulating products at higher
+order").
 """
 
 from __future__ import annotations
 
+import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from enum import StrEnum
+from typing import Protocol
 
 import numpy as np
 
-from shtools.sh.basis import check_order, order_from_size
-from shtools.sh.quadrature import project, reconstruct, sphere_quadrature
-from shtools.sh.triple import CHUNK_BYTES, _pad, product, product_matrix, square
+from shtools.sh._kernels import run_product
+from shtools.sh.basis import basis, check_order, order_from_size
+from shtools.sh.quadrature import sphere_quadrature
+from shtools.sh.triple import CHUNK_BYTES, _pad, product, product_matrix
 
 SQRT_4PI = math.sqrt(4.0 * math.pi)
 
@@ -77,55 +87,6 @@ def _one(batch: int, size: int, dtype) -> np.ndarray:
     return one
 
 
-def _dc_isolate(f: np.ndarray):
-    """Return ``(exp(f0/sqrt(4 pi)) (B,), f_hat (B, N), ||f_hat|| (B,))``."""
-    f_hat = f.copy()
-    f_hat[:, 0] = 0.0
-    norm = np.sqrt(np.einsum("bi,bi->b", f_hat, f_hat, dtype=np.float64))
-    return np.exp(f[:, 0].astype(np.float64) / SQRT_4PI), f_hat, norm
-
-
-def _repeated_squaring(g: np.ndarray, q: np.ndarray, order: int,
-                       in_order: int | None = None) -> np.ndarray:
-    """Square row ``b`` of ``g`` ``q[b]`` times (eq. 21), in ``max(q)`` batched passes.
-
-    ``g`` has ``order**2`` columns; if only its first ``in_order**2`` can be
-    nonzero, the first pass squares just those (cheaper, same result).
-    """
-    qmax = int(q.max(initial=0))
-    if qmax == 0:
-        return g
-    perm = np.argsort(-q, kind="stable")  # rows needing more squarings first
-    q_sorted = q[perm]
-    work = g[perm]
-    for step in range(qmax):
-        count = int(np.count_nonzero(q_sorted > step))  # a prefix of the sorted rows
-        cols = order * order if step or in_order is None else in_order * in_order
-        work[:count] = square(work[:count, :cols], order)
-    out = np.empty_like(work)
-    out[perm] = work
-    return out
-
-
-def _factored_series(f: np.ndarray, degree: int, order: int) -> np.ndarray:
-    """Eq. 22 for ``h = exp`` (``degree >= 1``): even part plus ``f * odd part``."""
-    b, size = f.shape
-    coef = [1.0 / math.factorial(k) for k in range(degree + 1)]
-    even = _one(b, size, f.dtype)  # h_0 = 1
-    odd = _one(b, size, f.dtype)  # h_1 = 1
-    f2 = square(f, order) if degree >= 2 else None
-    power = f2  # f^{2k*}, built as f^{(2k-2)*} * f^{2*}
-    for k in range(1, degree // 2 + 1):
-        if k > 1:
-            power = product(power, f2, order)
-        even += coef[2 * k] * power
-        if 2 * k + 1 <= degree:
-            odd += coef[2 * k + 1] * power
-    if degree <= 2:  # the odd part is just 1, and f * 1 = f exactly
-        return even + f
-    return even + product(f, odd, order)
-
-
 def _product_series(f: np.ndarray, degree: int, order: int) -> np.ndarray:
     """Eq. 17 truncated at ``degree``, powers accumulated left to right."""
     b, size = f.shape
@@ -135,14 +96,6 @@ def _product_series(f: np.ndarray, degree: int, order: int) -> np.ndarray:
         if k > 1:
             power = product(power, f, order)
         g += power / math.factorial(k)
-    return g
-
-
-def _ol(f_hat: np.ndarray, norm: np.ndarray, tables: dict) -> np.ndarray:
-    a = np.interp(norm, tables["ol_norm"], tables["ol_a"])
-    b = np.interp(norm, tables["ol_norm"], tables["ol_b"])
-    g = f_hat * b[:, None].astype(f_hat.dtype)
-    g[:, 0] = a * SQRT_4PI
     return g
 
 
@@ -207,13 +160,16 @@ def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | N
         from shtools.sh.tables import default_tables
 
         tables = default_tables(n)
+    if method in ("ps*", "hyb", "ol"):  # the one driver, on triple-tensor products
+        g = exp_batched(_pad(flat, work), method, TensorProducts(work, dtype), tables,
+                        degree=int(degree), out_order=n)
+        return g.reshape(*lead, n * n)
     # bytes of working memory per vector: product matrices for "exact", nodes of the
-    # quadrature for "volterra", a dozen SH vectors (and product nodes) otherwise
+    # quadrature for "volterra", a dozen SH vectors otherwise
     per_item = 3 * n**4 * 8 if method == "exact" else 16 * (work + 1) ** 2 * 8
     if method == "volterra":
         qd = 6 * n + 18 if quad_degree is None else int(quad_degree)
-        dirs, w = sphere_quadrature(qd)
-        per_item = 3 * dirs.shape[0] * 8
+        per_item = 3 * sphere_quadrature(qd)[0].shape[0] * 8
     step = max(1, CHUNK_BYTES // per_item)
     out = np.empty((flat.shape[0], n * n), dtype=dtype)
     for s in range(0, flat.shape[0], step):
@@ -221,24 +177,299 @@ def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | N
         if method == "exact":
             g = _exact(chunk.astype(np.float64))
         elif method == "volterra":
-            values = reconstruct(chunk.astype(np.float64), dirs)
-            g = project(np.exp(values), dirs, w, n)
-        elif method == "ps":
+            g = volterra(chunk.astype(np.float64), qd, chunk=step)
+        else:  # "ps"
             g = _product_series(_pad(chunk, work), int(degree), work)
-        else:
-            dc, f_hat, norm = _dc_isolate(chunk)
-            if method == "ol":
-                g = _ol(f_hat, norm, tables)
-            else:
-                q = squarings(norm)
-                scale = np.ldexp(1.0, -q)
-                scaled = f_hat * scale[:, None].astype(dtype)
-                if method == "hyb":
-                    g = _repeated_squaring(_pad(_ol(scaled, norm * scale, tables), work), q,
-                                           work, in_order=n)
-                else:
-                    g = _repeated_squaring(_factored_series(_pad(scaled, work), int(degree), work),
-                                           q, work)
-            g *= dc[:, None].astype(dtype)
         out[s : s + step] = g[:, : n * n]
     return out.reshape(*lead, n * n)
+
+
+# --------------------------------------------------------------------------- backends
+class ProductBackend(Protocol):
+    """Truncated SH products of order-``n`` vectors held as *parts* (list of ``(B, n_k)``).
+
+    A backend may split a vector into coefficient classes (the runtime's
+    parity-split quadrature does) or keep it whole (one part); the exp driver
+    only adds, scales and multiplies parts, so chains of products split and
+    merge once.  Part 0 holds coefficient 0 (the DC term) in its column 0.
+    """
+
+    order: int
+    dtype: np.dtype
+
+    def split(self, f: np.ndarray, copy: bool = True) -> list[np.ndarray]: ...
+    def merge(self, parts, out_order: int | None = None, out=None) -> np.ndarray: ...
+    def workspace(self, rows: int) -> list: ...
+    def workspace_layout(self) -> tuple[int, int]: ...
+    def square_split(self, parts, out_order: int | None = None, ws=None) -> list: ...
+    def product_split(self, f_parts, g_parts) -> list: ...
+    def square_values(self, parts, ws=None): ...
+    def project_square(self, values, rows: slice, out_order: int | None = None,
+                       out=None) -> list: ...
+
+
+class TensorProducts:
+    """A one-part :class:`ProductBackend`: products by :mod:`shtools.sh.triple` kernels.
+
+    Parameters
+    ----------
+    order : int
+        SH order of inputs and outputs.
+    dtype : numpy dtype
+    kernel : str
+        A product kernel of :mod:`shtools.sh._kernels` (``"cp"``: the exact
+        quadrature factors of the triple tensor on BLAS; ``"dense"``: contraction
+        with the dense tensor; or one registered by a benchmark).
+    """
+
+    def __init__(self, order: int, dtype=np.float64, kernel: str = "cp"):
+        self.order = int(order)
+        self.dtype = np.dtype(dtype)
+        self.kernel = kernel
+
+    def split(self, f, copy: bool = True):
+        return [np.array(f, dtype=self.dtype, order="C", copy=copy or None)]
+
+    def merge(self, parts, out_order=None, out=None):
+        top = (self.order if out_order is None else out_order) ** 2
+        if out is None:
+            return np.ascontiguousarray(parts[0][:, :top])
+        out[...] = parts[0][:, :top]
+        return out
+
+    def workspace(self, rows: int) -> list:
+        return []
+
+    def workspace_layout(self) -> tuple[int, int]:
+        return 0, 0
+
+    def _run(self, f, g, out_order):
+        return run_product(np.ascontiguousarray(f), None if g is None else
+                           np.ascontiguousarray(g), self.order, out_order, kernel=self.kernel)
+
+    def square_split(self, parts, out_order=None, ws=None):
+        out = self.order if out_order is None else out_order
+        return [np.ascontiguousarray(self._run(parts[0], None, out))]
+
+    def product_split(self, f_parts, g_parts):
+        return [np.ascontiguousarray(self._run(f_parts[0], g_parts[0], self.order))]
+
+    def square_values(self, parts, ws=None):
+        return parts  # the square is formed when projected
+
+    def project_square(self, values, rows, out_order=None, out=None):
+        sq = self.square_split([values[0][rows]], out_order)
+        if out is None:
+            return sq
+        out[0][...] = sq[0]
+        return out
+
+
+# --------------------------------------------------------------------------- driver
+def exp_batched(f, method: str, backend: ProductBackend, tables: dict | None = None, *,
+                degree: int | None = None, chunk: int = 4096, threads: int = 1,
+                out_order: int | None = None, workspaces: list | None = None) -> np.ndarray:
+    """PS*-p, HYB or OL exponential of many vectors on a product backend (the one driver).
+
+    DC isolation, the squaring count ``q`` of Sec. 4.1, the OL model or the
+    factored PS*-p series (eq. 22), then ``q`` squarings.  Rows are sorted by
+    ``q`` so the rows still squaring are a prefix; each row's last squaring
+    projects onto the ``out_order`` coefficients only.  ``f_hat = 0`` rows are
+    exactly ``exp(dc)``.
+
+    Parameters
+    ----------
+    f : array_like, shape (B, n*n)
+        Log vectors at the backend's order ``n`` (float32 stays float32).
+    method : {"hyb", "ps*", "ol"}
+    backend : ProductBackend
+        Of order ``n`` and ``f``'s dtype.
+    tables : dict, optional
+        OL tables ``ol_norm, ol_a, ol_b`` (needed by hyb and ol).
+    degree : int, optional
+        PS*-p degree (default ``DEFAULT_DEGREE["ps*"]``).
+    chunk : int
+        Vectors per block (bounds memory).
+    threads : int
+        Blocks evaluated concurrently (NumPy/BLAS release the GIL).
+    out_order : int, optional
+        Order of the result (default ``n``).
+    workspaces : list, optional
+        Backend scratch kept by the caller between calls (one per thread).
+
+    Returns
+    -------
+    ndarray, shape (B, out_order^2)
+    """
+    f = np.asarray(f)
+    dtype = backend.dtype
+    f = f.astype(dtype, copy=False)
+    order = backend.order
+    if f.shape[-1] != order * order:
+        raise ValueError(f"vectors of size {f.shape[-1]} do not match the backend's order "
+                         f"{order}")
+    n_out = order if out_order is None else int(out_order)
+    if not 1 <= n_out <= order:
+        raise ValueError(f"out_order must be in 1..{order}, got {out_order!r}")
+    if method not in ("hyb", "ps*", "ol"):
+        raise ValueError(f"the exp driver runs hyb, ps* and ol, got {method!r}")
+    if method in ("hyb", "ol") and tables is None:
+        raise ValueError("the hyb and ol methods need OL tables")
+    p = DEFAULT_DEGREE["ps*"] if degree is None else int(degree)
+    out = np.empty((f.shape[0], n_out * n_out), dtype=dtype)
+    starts = range(0, f.shape[0], chunk)
+    n_workers = max(1, min(int(threads), len(starts)))
+    spaces = _workspaces(backend, min(chunk, f.shape[0]), n_workers,
+                         [] if workspaces is None else workspaces)
+
+    def work(k):
+        for s in starts[k::n_workers]:
+            _exp_block(f[s : s + chunk], method, tables, p, backend, n_out,
+                       out[s : s + chunk], spaces[k])
+
+    if n_workers > 1:
+        with ThreadPoolExecutor(max_workers=n_workers) as pool:
+            list(pool.map(work, range(n_workers)))
+    else:
+        work(0)
+    return out
+
+
+def _workspaces(ops, rows: int, count: int, kept: list) -> list:
+    """``count`` workspaces of at least ``rows`` rows for ``ops``, reusing ``kept``
+    (which is updated in place) when the shapes fit."""
+    n_arrays, width = ops.workspace_layout()
+    for k in range(count):
+        fits = (k < len(kept) and len(kept[k]) == n_arrays
+                and (n_arrays == 0 or (kept[k][0].shape[0] >= rows
+                                       and kept[k][0].shape[1] == width
+                                       and kept[k][0].dtype == ops.dtype)))
+        if not fits:
+            space = ops.workspace(rows)
+            if k < len(kept):
+                kept[k] = space
+            else:
+                kept.append(space)
+    return kept[:count]
+
+
+def _ol_split(parts, norm: np.ndarray, tables: dict):
+    """OL (eq. 23) on parts of ``f_hat``: ``a(|f|) * 1 + b(|f|) * f_hat``."""
+    a = np.interp(norm, tables["ol_norm"], tables["ol_a"])
+    b = np.interp(norm, tables["ol_norm"], tables["ol_b"])
+    out = [p * b[:, None].astype(p.dtype) for p in parts]
+    out[0][:, 0] = a * SQRT_4PI
+    return out
+
+
+def _factored_series(parts, degree: int, ops, ws=None):
+    """Eq. 22 for exp on parts: even part plus ``f *`` odd part.
+
+    Even powers are built as :math:`f^{2*} = f * f`, :math:`f^{2k*} = f^{(2k-2)*} * f^{2*}`.
+    """
+    coef = [1.0 / math.factorial(k) for k in range(degree + 1)]
+    even = [np.zeros_like(p) for p in parts]
+    even[0][:, 0] = SQRT_4PI * coef[0]
+    odd = [np.zeros_like(p) for p in parts]
+    odd[0][:, 0] = SQRT_4PI * coef[1]
+    f2 = ops.square_split(parts, ws=ws) if degree >= 2 else None
+    power = f2
+    for k in range(1, degree // 2 + 1):
+        if k > 1:
+            power = ops.product_split(power, f2)
+        for e, o, pw in zip(even, odd, power, strict=True):
+            e += coef[2 * k] * pw
+            if 2 * k + 1 <= degree:
+                o += coef[2 * k + 1] * pw
+    if degree <= 2:  # the odd part is h_1 * 1, and f * 1 = f exactly
+        for e, p in zip(even, parts, strict=True):
+            e += coef[1] * p
+        return even
+    return [e + x for e, x in zip(even, ops.product_split(parts, odd), strict=True)]
+
+
+def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None) -> None:
+    """exp of ``f (B, n*n)`` truncated to ``n_out``, written into ``out (B, n_out^2)``."""
+    dc = np.exp(f[:, 0].astype(np.float64) / SQRT_4PI)
+    parts = ops.split(f)
+    parts[0][:, 0] = 0.0  # f_hat: DC isolated
+    norm = np.sqrt(sum(np.einsum("bi,bi->b", p, p, dtype=np.float64) for p in parts))
+    if method == "ol":
+        ops.merge(_ol_split(parts, norm, tables), n_out, out=out)
+        out *= dc[:, None].astype(out.dtype)
+        return
+    # vectors sorted by norm (descending), so those still needing a square at
+    # each step are a prefix, squared in place without gathers; f_hat = 0 rows
+    # (no blocker in view) come last and are exactly exp(dc)
+    q = squarings(norm)
+    key = np.where(norm > 0, q + 1, 0)  # small ints: a fast radix argsort
+    by_norm = np.argsort(-key, kind="stable")
+    live = int(np.count_nonzero(key))
+    q_sorted = q[by_norm[:live]]
+    norm_sorted = norm[by_norm[:live]]
+    scale = np.ldexp(1.0, -q_sorted)
+    scaled = [p[by_norm[:live]] * scale[:, None].astype(p.dtype) for p in parts]
+    if method == "hyb":
+        g = _ol_split(scaled, norm_sorted * scale, tables)
+    else:
+        g = _factored_series(scaled, degree, ops, ws)
+    res = np.empty((f.shape[0], n_out * n_out), dtype=out.dtype)
+    res[live:] = 0.0
+    res[live:, 0] = SQRT_4PI
+    q_max = int(q_sorted.max(initial=0))
+    done = int(np.count_nonzero(q_sorted > 0))
+    ops.merge([p[done:] for p in g], n_out, out=res[done:live])
+    for step in range(q_max):
+        count = done
+        done = int(np.count_nonzero(q_sorted > step + 1))
+        # rows [done, count) take their last square: project onto the kept
+        # coefficients only; rows [0, done) keep squaring at full order
+        vals = ops.square_values([p[:count] for p in g], ws)
+        ops.merge(ops.project_square(vals, slice(done, count), n_out), n_out,
+                  out=res[done:count])
+        if done:
+            ops.project_square(vals, slice(0, done), out=[p[:done] for p in g])
+    out[by_norm] = res
+    out *= dc[:, None].astype(out.dtype)
+
+
+# --------------------------------------------------------------------------- volterra
+@functools.lru_cache(maxsize=32)
+def _volterra_operators(order: int, out_order: int, quad_degree: int, dtype_name: str):
+    dirs, w = sphere_quadrature(quad_degree)
+    y = basis(dirs, order)
+    recon = np.ascontiguousarray(y.T, dtype=dtype_name)
+    proj = np.ascontiguousarray(y[:, : out_order * out_order] * w[:, None], dtype=dtype_name)
+    recon.setflags(write=False)
+    proj.setflags(write=False)
+    return recon, proj
+
+
+def volterra(f, quad_degree: int, *, out_order: int | None = None,
+             chunk: int = 4096) -> np.ndarray:
+    """The Volterra exponential (eq. 10), :math:`\\int_S \\exp(f(s))\\,\\mathbf y(s)\\,ds`.
+
+    Parameters
+    ----------
+    f : ndarray, shape (B, n*n)
+        float32 or float64 (the arithmetic type).
+    quad_degree : int
+        Degree of the quadrature (:func:`shtools.sh.sphere_quadrature`).
+    out_order : int, optional
+        Order of the result (default ``n``).
+    chunk : int
+        Vectors per block.
+
+    Returns
+    -------
+    ndarray, shape (B, out_order^2)
+    """
+    order = order_from_size(f.shape[-1])
+    n_out = order if out_order is None else int(out_order)
+    recon, proj = _volterra_operators(order, n_out, int(quad_degree), f.dtype.name)
+    out = np.empty((f.shape[0], n_out * n_out), dtype=f.dtype)
+    for s in range(0, f.shape[0], chunk):
+        v = f[s : s + chunk] @ recon
+        np.exp(v, out=v)
+        out[s : s + chunk] = v @ proj
+    return out

@@ -28,10 +28,7 @@ from shtools.sh.basis import basis, check_order, order_from_size
 
 @functools.lru_cache(maxsize=64)
 def _quadrature_cached(degree: int) -> tuple[np.ndarray, np.ndarray]:
-    n_gauss = degree // 2 + 1
-    n_phi = degree + 1
-    z, wz = np.polynomial.legendre.leggauss(n_gauss)
-    phi = 2.0 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
+    z, wz, phi, n_phi = _gauss_azimuth_grid(degree, even_azimuths=False)
     zz, pp = np.meshgrid(z, phi, indexing="ij")
     r = np.sqrt(np.clip(1.0 - zz * zz, 0.0, None))
     dirs = np.stack([r * np.cos(pp), r * np.sin(pp), zz], axis=-1).reshape(-1, 3)
@@ -109,3 +106,54 @@ def reconstruct(coeffs, dirs) -> np.ndarray:
     order = order_from_size(c.shape[-1])
     y = basis(np.asarray(dirs, dtype=np.float64), order)  # (Q, n*n)
     return c @ y.T
+
+
+def _gauss_azimuth_grid(degree: int, even_azimuths: bool):
+    """Gauss-Legendre nodes in z and uniform azimuths of a degree-exact product rule.
+
+    Returns ``(z, wz, phi, n_phi)`` with ``N = degree // 2 + 1`` Gauss nodes and
+    ``M = degree + 1`` azimuths (made even when ``even_azimuths``, so that
+    ``phi + pi`` is a node).
+    """
+    n_gauss = degree // 2 + 1
+    n_phi = degree + 1 + ((degree + 1) % 2 if even_azimuths else 0)
+    z, wz = np.polynomial.legendre.leggauss(n_gauss)
+    phi = 2.0 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
+    return z, wz, phi, n_phi
+
+
+@functools.lru_cache(maxsize=64)
+def _half_cached(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    z, wz, _, n_phi = _gauss_azimuth_grid(degree, even_azimuths=True)
+    keep = z >= -1e-12
+    z, wz = np.abs(z[keep]), wz[keep] * np.where(np.abs(z[keep]) < 1e-12, 0.5, 1.0)
+    phi = 2.0 * np.pi * (np.arange(n_phi // 2) + 0.5) / n_phi
+    zz, pp = np.meshgrid(z, phi, indexing="ij")
+    r = np.sqrt(np.clip(1.0 - zz * zz, 0.0, None))
+    dirs = np.stack([r * np.cos(pp), r * np.sin(pp), zz], axis=-1).reshape(-1, 3)
+    weights = np.repeat(wz * (2.0 * np.pi / n_phi), n_phi // 2) * 4.0
+    dirs.setflags(write=False)
+    weights.setflags(write=False)
+    return dirs, weights
+
+
+def quarter_sphere_quadrature(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Base points of the degree-exact rule under z -> -z and phi -> phi + pi.
+
+    The rule of :func:`sphere_quadrature` with an even azimuth count is
+    symmetric under both reflections, so a function whose SH coefficients are
+    split by parity (even/odd in ``l + m`` and in ``m``) is known at all nodes
+    from its values at the base points ``z >= 0``, ``0 <= phi < pi`` (a quarter of
+    them).  A ``z = 0`` node is its own mirror and keeps half its weight; the
+    weights include the factor 4 of the images, so ``sum_q w_q g(s_q)``
+    integrates a function even under both reflections exactly.
+
+    Returns
+    -------
+    dirs : ndarray, shape (Qb, 3)
+    weights : ndarray, shape (Qb,)
+        Cached and read-only.
+    """
+    if isinstance(degree, bool) or int(degree) != degree or degree < 0:
+        raise ValueError(f"quadrature degree must be an integer >= 0, got {degree!r}")
+    return _half_cached(int(degree))

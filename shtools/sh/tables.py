@@ -92,9 +92,17 @@ def _ol_coefficients(f: np.ndarray, g: np.ndarray):
 
 
 @functools.lru_cache(maxsize=16)
-def default_tables(order: int) -> dict:
-    """:func:`build_log_tables` with default parameters, cached per order (read-only arrays)."""
+def _default_tables(order: int) -> dict:
     tables = build_log_tables(order)
     for v in tables.values():
         v.setflags(write=False)
     return tables
+
+
+def default_tables(order: int) -> dict:
+    """:func:`build_log_tables` with default parameters, cached per order.
+
+    Returns a new dict each call (the cached arrays in it are read-only), so a
+    caller that adds or replaces a key does not change what the next caller gets.
+    """
+    return dict(_default_tables(order))

@@ -16,7 +16,8 @@ input pair ``j <= k``:
 
 Products and squares are evaluated by :mod:`shtools.sh._kernels`: by default
 through the exact rank-``Q`` factorisation of Γ given by the quadrature (three
-small BLAS matrix products), or by code generated from the pair grouping above.
+small BLAS matrix products), or by the pair grouping above (gathered pair
+products times the pair coefficients).
 The product matrix is :math:`(M_f)_{ij} = \sum_k \Gamma_{ijk} f_k` (eq. 5) and the triple
 integral is :math:`(a, b, c) = (a * b)\cdot c`.
 
@@ -162,9 +163,10 @@ def product(f, g, order: int | None = None, *, kernel: str = "cp") -> np.ndarray
     order : int, optional
         Output order (default: the order of ``f``).  A higher order keeps more of
         the exact product (whose order is ``n_f + n_g - 1``).
-    kernel : {"cp", "sparse"}
-        Evaluation (:mod:`shtools.sh._kernels`): quadrature factors of Γ on BLAS
-        (default, faster) or the unrolled sparse Γ contraction; both exact.
+    kernel : str
+        Evaluation (:data:`shtools.sh._kernels.PRODUCT_KERNELS`): ``"cp"``,
+        quadrature factors of Γ on BLAS (default, faster), or ``"sparse"``, the
+        sparse Γ contraction; all exact.
 
     Returns
     -------

@@ -27,6 +27,12 @@ def _inside_any(points, spheres, tolerance=0.0):
 
 
 @pytest.fixture(scope="module")
+def small_torus():
+    """The 32x16 torus alone (bad-input tests need no fit)."""
+    return trimesh.creation.torus(1.0, 0.35, major_sections=32, minor_sections=16)
+
+
+@pytest.fixture(scope="module")
 def torus_fits():
     """Variational fits of the 32x16 torus for N = 4 ... 64 (shared by tests).
 
@@ -58,6 +64,7 @@ def test_bounding_property(request, which):
     assert np.all(d.min(axis=1) <= gap + 1e-12)
 
 
+@pytest.mark.slow  # five variational fits (torus_fits) or restarts: minutes under load
 def test_outside_volume_ratio_matches_monte_carlo(torus_fits):
     mesh, fits = torus_fits
     result = fits[8]
@@ -78,6 +85,7 @@ def test_outside_volume_ratio_matches_monte_carlo(torus_fits):
     assert result.outside_volume_ratio == pytest.approx(e_mc, rel=4 / np.sqrt(count_out) + 0.01)
 
 
+@pytest.mark.slow  # five variational fits (torus_fits) or restarts: minutes under load
 def test_outside_volume_decreases_with_more_spheres(torus_fits):
     _, fits = torus_fits
     energies = [fits[n].outside_volume_ratio for n in (4, 8, 16, 32, 64)]
@@ -85,6 +93,7 @@ def test_outside_volume_decreases_with_more_spheres(torus_fits):
     assert fits[64].coverage == 1.0
 
 
+@pytest.mark.slow  # five variational fits (torus_fits) or restarts: minutes under load
 def test_split_keeps_every_point_covered(torus_fits):
     """Splitting spheres (the coarse-to-fine step) keeps the union a cover and
     does not raise the summed outside volume of the split spheres."""
@@ -108,6 +117,7 @@ def test_split_keeps_every_point_covered(torus_fits):
     assert after <= before * 1.02
 
 
+@pytest.mark.slow  # five variational fits (torus_fits) or restarts: minutes under load
 def test_variational_beats_baselines(torus_fits):
     mesh, fits = torus_fits
     variational = fits[16].outside_volume_ratio
@@ -125,6 +135,7 @@ def test_same_seed_same_spheres(capsule_union_mesh):
     np.testing.assert_array_equal(a.radii, b.radii)
 
 
+@pytest.mark.slow  # five variational fits (torus_fits) or restarts: minutes under load
 def test_restarts_keep_the_lowest_e_of_consecutive_seeds(capsule_union_mesh):
     kwargs = dict(max_iterations=4, samples=SAMPLES)
     single = [fit_spheres(capsule_union_mesh, 6, seed=s, **kwargs) for s in (3, 4, 5)]
@@ -149,13 +160,13 @@ def test_flat_sheet_needs_thickness(flat_sheet_mesh):
 
 
 @pytest.mark.parametrize("n", [0, -3, 10**7])
-def test_bad_sphere_counts(torus_fits, n):
-    mesh, _ = torus_fits
+def test_bad_sphere_counts(small_torus, n):
+    mesh = small_torus
     with pytest.raises(InputError, match="spheres"):
         fit_spheres(mesh, n, samples=SAMPLES)
 
 
-def test_unknown_method(torus_fits):
-    mesh, _ = torus_fits
+def test_unknown_method(small_torus):
+    mesh = small_torus
     with pytest.raises(InputError, match="unknown method"):
         fit_spheres(mesh, 4, method="medial")

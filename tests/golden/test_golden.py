@@ -26,7 +26,8 @@ def test_golden_bake_matches(tmp_path, run_cli):
     assert code == 0, stderr
     code, stdout, stderr = run_cli("diff", out, HERE / "golden.h5", "--rtol", RTOL,
                                    "--atol", ATOL)
-    assert code == 0, stdout + stderr
+    made_by = (HERE / "provenance.json").read_text()  # commit and library versions
+    assert code == 0, f"{stdout}{stderr}\ngolden.h5 was made by: {made_by}"
 
 
 def test_golden_comparison_can_fail(tmp_path, run_cli):

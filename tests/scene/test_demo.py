@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from shtools.data_formats.bake import read_bake
@@ -33,6 +34,7 @@ def test_demo_scene_parses_and_animates(tmp_path):
                                end["torso"][:3, :3] @ [0.0, -0.22, 0.1], atol=1e-12)
 
 
+@pytest.mark.slow  # every demo stage, even shortened: ~35 s on a loaded 2-core machine
 def test_demo_runs_and_writes_outputs(tmp_path):
     timings = run_demo(tmp_path, frames=2, quiet=True, fit_method="kmeans")
     for name in ("baked.h5", "demo.glb", "frame.png", "sheet.png", "demo.gif", "scene.toml",

@@ -115,16 +115,23 @@ class _Shade:
         return np.zeros((len(vertices), 3))
 
 
-def test_light_inside_a_blocker_is_one_line_and_no_output(tmp_path):
-    scene = tmp_path / "scene.toml"
-    scene.write_text(lamp_scene("ssoc", radius=0.01, position=(0.0, 0.8, 0.0), grid=8))
-    out = tmp_path / "baked.h5"
+@pytest.mark.parametrize(("kw", "message"), [
+    (dict(radius=0.01, position=(0.0, 0.8, 0.0)),
+     "lights[0] ('lamp'): the light centre is inside occluder mesh 0"),
+    (dict(radius=0.0), "lights[0].radius: must be > 0"),
+    (dict(extra="ssoc = { resolution = 100000 }"),
+     "lights[0].ssoc: SSOC map resolution must be an integer in 16..8192"),
+])
+def test_bad_light_is_one_line_and_no_output(tmp_path, kw, message):
     import subprocess
 
+    scene = tmp_path / "scene.toml"
+    scene.write_text(lamp_scene("ssoc", grid=8, **kw))
+    out = tmp_path / "baked.h5"
     proc = subprocess.run([sys.executable, "-m", "shtools", "bake", str(scene), "-o", str(out)],
                           capture_output=True, text=True)
     assert proc.returncode != 0
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ")
-    assert "inside occluder" in lines[0] and "lights[0] ('lamp')" in lines[0]
+    assert len(lines) == 1 and lines[0].startswith(f"error: {scene}: "), lines
+    assert message in lines[0]
     assert not out.exists() and list(tmp_path.iterdir()) == [scene]

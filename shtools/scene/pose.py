@@ -1,0 +1,76 @@
+"""Posing a prepared scene at a time: receivers, blockers (by their kind), lights."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shtools.errors import InputError
+from shtools.scene.animation import (
+    light_at,
+    transform_normals,
+    transform_points,
+    vertex_normals,
+    world_matrices,
+)
+from shtools.scene.blockers import blocker_kinds
+from shtools.scene.prepare import PreparedScene
+
+
+@dataclass
+class FrameState:
+    """The posed scene at one frame (world space)."""
+
+    vertices: np.ndarray  # (V, 3)
+    normals: np.ndarray  # (V, 3)
+    blockers: list  # runtime blockers (SphereBlocker or LogBlocker), one per blocker object
+    lights: list  # list[shtools.runtime.SphereLight]
+    blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
+    light_shadows: list = field(default_factory=list)  # the way of each light (by name)
+
+
+#: Largest world coordinate a posed vertex may have: the runtime works in float32,
+#: whose squares overflow above ~1.8e19.
+MAX_COORDINATE = 1e18
+
+
+def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
+    """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
+
+    Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
+    """
+    from shtools.runtime import SphereLight
+
+    kinds = blocker_kinds()
+    worlds = world_matrices(prepared.scene.objects, t)
+    verts, norms, blockers, meshes = [], [], [], []
+    for o in prepared.objects:
+        m = worlds[o.spec.name]
+        if o.motion is not None:
+            joints = o.motion.joint_matrices(t)
+            local_v = np.asarray(o.motion.model.skin(joints), dtype=float)
+            local_n = vertex_normals(local_v, o.faces)
+        else:
+            joints = None
+            local_v, local_n = o.vertices, o.normals
+        world_v = transform_points(m, local_v)
+        if not np.all(np.abs(world_v) <= MAX_COORDINATE):
+            raise InputError(f"objects '{o.spec.name}': posed vertices at t = {t:g} s are not "
+                             f"finite or beyond +-{MAX_COORDINATE:g} (the runtime computes in "
+                             "float32); check its translate/scale and its parents'",
+                             prepared.scene.path)
+        if o.spec.receives:
+            verts.append(world_v)
+            norms.append(transform_normals(m, local_n))
+        if o.spec.blocks:
+            blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
+            if with_meshes:
+                meshes.append((world_v, o.faces))
+    lights = []
+    for spec in prepared.scene.lights:
+        key = light_at(spec, t)
+        lights.append(SphereLight(position=key.position, radius=float(key.radius),
+                                  color=key.color))
+    return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
+                      [spec.shadows for spec in prepared.scene.lights])

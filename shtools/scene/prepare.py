@@ -1,0 +1,222 @@
+"""Preparing a bake: everything loaded once, before frame 0 (:func:`prepare_scene`).
+
+Meshes (files, primitives, skinned glTF), each blocker by its kind
+(:mod:`shtools.scene.blockers`: sphere assets, trees, skin bindings, fits on
+the fly, or a kind's own data), the environment SH and the log tables, with
+the checks that SH orders agree.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shtools.errors import AssetError, InputError
+from shtools.scene.animation import SkinnedMotion, vertex_normals
+from shtools.scene.blockers import PrepareContext, blocker_kinds
+from shtools.scene.scene import ObjectSpec, Scene
+
+
+@dataclass
+class PreparedObject:
+    """An object with its geometry and blocker spheres in its local frame.
+
+    Attributes
+    ----------
+    spec : ObjectSpec
+    vertices, normals : ndarray, shape (V, 3)
+        Rest geometry (local frame).
+    faces : ndarray, shape (F, 3)
+    centers : ndarray, shape (N, 3) or None
+        Blocker spheres (local frame, rest pose for skinned objects).
+    radii : ndarray, shape (N,) or None
+    tree : tuple of (parent (M,), leaf (M,)) or None
+    motion : SkinnedMotion or None
+    bone_index : ndarray, shape (N, K) or None
+        Skin binding of the spheres (skinned blockers).
+    bone_vectors : ndarray, shape (N, K, 4) or None
+    blocker_data : object
+        What a blocker kind that is not a sphere set prepared (its own type).
+    """
+
+    spec: ObjectSpec
+    vertices: np.ndarray
+    normals: np.ndarray
+    faces: np.ndarray
+    centers: np.ndarray | None = None
+    radii: np.ndarray | None = None
+    tree: tuple[np.ndarray, np.ndarray] | None = None
+    motion: SkinnedMotion | None = None
+    bone_index: np.ndarray | None = None
+    bone_vectors: np.ndarray | None = None
+    blocker_data: Any = None
+
+    @property
+    def moves(self) -> bool:
+        return self.motion is not None or bool(self.spec.keyframes)
+
+
+@dataclass
+class PreparedScene:
+    """Everything a bake needs, loaded and checked."""
+
+    scene: Scene
+    objects: list[PreparedObject]
+    env_sh: np.ndarray | None  # (n*n, 3)
+    tables: dict | None
+    inputs: dict[str, Path] = field(default_factory=dict)
+
+    @property
+    def receivers(self) -> list[PreparedObject]:
+        return [o for o in self.objects if o.spec.receives]
+
+    @property
+    def blockers(self) -> list[PreparedObject]:
+        return [o for o in self.objects if o.spec.blocks]
+
+    @property
+    def n_vertices(self) -> int:
+        return sum(len(o.vertices) for o in self.receivers)
+
+    def receivers_move(self) -> bool:
+        """True when any receiver (or one of its parents) is animated."""
+        by_name = {o.spec.name: o for o in self.objects}
+        for o in self.receivers:
+            cur = o
+            while cur is not None:
+                if cur.moves:
+                    return True
+                cur = by_name.get(cur.spec.parent) if cur.spec.parent else None
+        return False
+
+
+def _object_geometry(obj: ObjectSpec) -> tuple[PreparedObject, object]:
+    """Load or generate an object's mesh; returns it and the skinned model if any."""
+    if obj.primitive is not None:
+        from shtools.scene.primitives import make_primitive
+
+        kind, params = obj.primitive
+        try:
+            prim = make_primitive(kind, params)
+        except InputError as exc:
+            raise InputError(f"objects '{obj.name}': {exc.message}") from None
+        prep = PreparedObject(obj, np.asarray(prim.mesh.vertices, float), prim.normals,
+                              np.asarray(prim.mesh.faces, np.int64))
+        if prim.spheres is not None and obj.blocker is not None and obj.blocker.kind == "exact":
+            prep.centers, prep.radii = prim.spheres
+        return prep, None
+    if obj.skin is not None:
+        from shtools.geometry.skin import load_skinned_gltf
+
+        model = load_skinned_gltf(obj.mesh)
+        v = np.asarray(model.rest_vertices, float)
+        f = np.asarray(model.faces, np.int64)
+        prep = PreparedObject(obj, v, vertex_normals(v, f), f)
+        prep.motion = SkinnedMotion(model, obj.skin.animation, obj.skin.speed, obj.skin.offset)
+        return prep, model
+    from shtools.geometry.mesh import load_mesh
+
+    mesh = load_mesh(obj.mesh)
+    return PreparedObject(obj, np.asarray(mesh.vertices, float),
+                          np.asarray(mesh.vertex_normals, float),
+                          np.asarray(mesh.faces, np.int64)), None
+
+
+def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None:
+    """Prepare the object's blocker with its kind (spheres, tree, skin binding, ...)."""
+    spec = prep.spec.blocker
+    if spec is None:
+        return
+    blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs))
+
+
+def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
+    env = scene.environment
+    order = scene.settings.order
+    if env.kind is None:
+        return None
+    if env.kind == "coeffs":
+        coeffs = env.coeffs
+    elif env.kind == "light":
+        from shtools.data_formats.light import read_light
+
+        coeffs, _ = read_light(env.path)
+        n = math.isqrt(len(coeffs))
+        if n != order:
+            raise AssetError(f"light is SH order {n} but the scene's settings.order is {order}; "
+                             f"re-project it with --order {order} or change the order", env.path)
+        inputs["environment"] = env.path
+    else:
+        from shtools.lighting.environment import project_environment
+
+        # the same code path as `shtools light project`; the runtime windows later
+        coeffs, _ = project_environment(env.path, order, rotate_y=math.degrees(env.rotate))
+        inputs["environment"] = env.path
+    coeffs = np.asarray(coeffs, dtype=float) * env.intensity
+    if env.rotate and env.kind != "image":
+        from shtools.sh import rotate
+
+        c, s = np.cos(env.rotate), np.sin(env.rotate)
+        r_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+        coeffs = rotate(coeffs.T, r_y).T
+    return coeffs
+
+
+def _tables(scene: Scene, inputs: dict) -> dict | None:
+    st = scene.settings
+    if st.tables is None:
+        return None
+    from shtools.data_formats.tables import read_tables
+    from shtools.runtime import ShadowSettings
+
+    tables = read_tables(st.tables)
+    # cap logs are order-specific (an order-8 log truncated is not the order-6 log),
+    # so the tables must be built at exactly the order the runtime accumulates at
+    want = ShadowSettings(order=st.order, acc_order=st.acc_order).resolved_acc_order()
+    if int(tables["order"]) != want:
+        raise AssetError(f"tables are SH order {tables['order']} but the scene accumulates at "
+                         f"order {want}; rebuild them with 'shtools tables log --order {want}'",
+                         st.tables)
+    inputs["tables"] = st.tables
+    return tables
+
+
+def scene_files(scene: Scene) -> list[Path]:
+    """Every file a bake of ``scene`` reads: the scene itself and each file it names.
+
+    Used to refuse an output path that would overwrite one of them.
+    """
+    files = [scene.path, scene.settings.tables, scene.environment.path]
+    for obj in scene.objects:
+        files.append(obj.mesh)
+        if obj.blocker is not None:
+            files.append(obj.blocker.path)
+    return [Path(f) for f in files if f is not None]
+
+
+def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> PreparedScene:
+    """Load meshes, blockers, skins, environment and tables of a parsed scene.
+
+    Raises
+    ------
+    InputError, AssetError
+        A file cannot be used, a skinned glTF has no skin or animation, SH
+        orders disagree between assets, a bound set does not match its rig.
+    """
+    inputs: dict[str, Path] = {}
+    objects = []
+    for obj in scene.objects:
+        if log:
+            log(f"loading {obj.name}")
+        prep, model = _object_geometry(obj)
+        if obj.mesh is not None:
+            inputs[f"{obj.name}.mesh"] = obj.mesh
+        _object_blocker(prep, model, scene.settings, inputs)
+        objects.append(prep)
+    return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
+                         inputs)
