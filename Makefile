@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml
 	  { echo "error: shtools needs Python >= 3.11; run e.g. 'make PYTHON=python3.11 $(MAKECMDGOALS)'" >&2; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[all,test,bench]'
+	$(PY) -m pip install --quiet -e '.[all,distributed,test,bench]'
 	rm -f $(VENV)/.installed-* && touch $@
 
 demo: $(STAMP) ## Set up and bake the bundled demo scene into out/ (baked.h5, GLB, PNGs)

@@ -21,16 +21,28 @@ from shtools.scene.shadows import bake_method_names
 @click.option("--store-visibility", is_flag=True,
               help="Also store the per-vertex visibility SH vectors (T, V, n*n).")
 @click.option("--processes", type=setting_type("processes"), default=None,
-              help="Processes sharing each frame's shadow evaluation (default: one per "
-                   "core; 1 = this process only).")
+              help="Processes sharing ONE frame's shadow evaluation, when frames are "
+                   "evaluated in this process (a single frame, or --workers 1); default one "
+                   "per core.")
+@click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
+              help="Run frames on Dask: 'local' starts a LocalCluster here, an address or a "
+                   "scheduler file joins an existing cluster (pip install "
+                   "'shtools[distributed]'; docs/scale-out.md).  Default: forked workers on "
+                   "this machine's cores.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Local workers for frames (default: one per core; 1 = frames one after "
+                   "the other in this process); with --scheduler local, the cluster's size.")
 @click.option("--force", is_flag=True,
               help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option
-def bake(scene, output, frames_text, method, store_visibility, processes, force, as_json):
+def bake(scene, output, frames_text, method, store_visibility, processes, scheduler, workers,
+         force, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.
 
-    Frames are written as they are computed; the file appears only when every
-    frame is done (an error or Ctrl-C leaves nothing behind).
+    Frames are independent tasks spread over the local cores (or a Dask
+    cluster with --scheduler) and written in frame order by this process; the
+    file appears only when every frame is done (an error or Ctrl-C leaves
+    nothing behind), and is the same bytes however the frames were spread.
     """
     from shtools.cli._outputs import guard_outputs
     from shtools.scene.bake import bake_to_file, parse_frames, scene_files
@@ -43,6 +55,7 @@ def bake(scene, output, frames_text, method, store_visibility, processes, force,
     with progress(total=len(frames), desc="bake") as bar:
         summary = bake_to_file(parsed, output, frames=frames, method=method,
                                store_visibility=store_visibility, processes=processes,
+                               scheduler=scheduler, workers=workers,
                                on_frame=lambda _r: bar.update(1), force=force)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "

@@ -32,6 +32,7 @@ from shtools.errors import ShtoolsError, disk_error_reason
 COMMANDS = {
     "spheres": "shtools.cli.spheres:spheres",
     "tables": "shtools.cli.tables:tables",
+    "transfer": "shtools.cli.transfer:transfer",
     "field": "shtools.cli.field:field",
     "light": "shtools.cli.light:light",
     "bake": "shtools.cli.bake:bake",

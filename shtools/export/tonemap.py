@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Rec. 709 luminance weights of linear RGB.
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+from shtools.runtime.shading import LUMINANCE, desaturate_negative
 
 #: Auto exposure maps this percentile of the luminance to :data:`AUTO_WHITE`.
 AUTO_PERCENTILE = 97.0
@@ -50,32 +49,12 @@ def srgb_encode(x: np.ndarray) -> np.ndarray:
 
 
 def clip_negative(radiance: np.ndarray) -> np.ndarray:
-    """Bring negative channels to 0 while keeping each colour's luminance.
+    """:func:`shtools.runtime.shading.desaturate_negative` (the bake's de-ringing).
 
-    Truncated SH visibility rings, so deep contact shadows can come out slightly
-    negative in some channels (e.g. ``(-0.1, -0.06, 0.06)``).  Clamping per
-    channel would keep the positive one and paint such shadows saturated blue;
-    instead each colour is desaturated toward its luminance ``Y`` just enough
-    that its smallest channel is 0, and colours with ``Y <= 0`` become black.
-
-    Parameters
-    ----------
-    radiance : ndarray, shape (..., 3)
-        Linear RGB.
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
-        Non-negative linear RGB, equal to the input where it had no negative channel.
+    Kept for bakes made with ``deringing = "none"``: the export removes what is
+    left the same way.
     """
-    rgb = np.asarray(radiance, dtype=float)
-    lum = rgb @ LUMINANCE
-    low = rgb.min(axis=-1)
-    # c' = Y + s (c - Y) with s = Y / (Y - min c) puts the smallest channel at 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(low < 0.0, np.clip(lum / (lum - low), 0.0, 1.0), 1.0)
-    out = lum[..., None] + s[..., None] * (rgb - lum[..., None])
-    return np.where(lum[..., None] > 0.0, np.maximum(out, 0.0), 0.0)
+    return desaturate_negative(radiance)
 
 
 def tonemap(radiance: np.ndarray, scale: float, curve: str = "aces") -> np.ndarray:

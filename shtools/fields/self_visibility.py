@@ -77,7 +77,7 @@ def direction_quadrature(n_dirs: int) -> tuple[np.ndarray, np.ndarray]:
 def self_visibility(vertices, normals, meshes, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
                     offset: float | None = None,
                     progress: Callable[[int, int], None] | None = None,
-                    binary: bool = False) -> np.ndarray:
+                    max_distance: float | None = None, binary: bool = False) -> np.ndarray:
     """Binary visibility of triangle meshes at each vertex, projected to SH.
 
     Parameters
@@ -98,6 +98,10 @@ def self_visibility(vertices, normals, meshes, order: int, *, n_dirs: int = DEFA
     progress : callable, optional
         Called as ``progress(vertices_done, vertices_total)`` after every
         chunk of vertices.
+    max_distance : float, optional
+        Only geometry closer than this (world units) occludes: the *local*
+        visibility of fine detail (Ren et al. 2006 Sec. 7's ``g_p``, used for
+        skinned objects whose large-scale self-shadowing changes with the pose).
     binary : bool
         Also return the binary samples and the quadrature (for tests and
         diagnostics; memory ``V x Q`` bytes).
@@ -126,7 +130,8 @@ def self_visibility(vertices, normals, meshes, order: int, *, n_dirs: int = DEFA
     total = p.shape[0]
     for start in range(0, total, step):
         stop = min(total, start + step)
-        vis = caster.visibility(p[start:stop], dirs, normals=nrm[start:stop], offset=offset)
+        vis = caster.visibility(p[start:stop], dirs, normals=nrm[start:stop], offset=offset,
+                                t_far=max_distance)
         out[start:stop] = vis.astype(np.float64) @ proj
         if keep is not None:
             keep[start:stop] = vis
@@ -165,5 +170,41 @@ def self_visibility_log(g, *, floor: float = LOG_FLOOR, eps: float | None = None
     return sh_log(lifted, "eigen", **kwargs)
 
 
-__all__ = ["DEFAULT_DIRECTIONS", "LOG_FLOOR", "direction_quadrature", "self_visibility",
+def mesh_transfer(mesh, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
+                  floor: float = LOG_FLOOR, normals=None, max_distance: float | None = None,
+                  progress: Callable[[int, int], None] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Self-visibility and its log on a mesh's own vertices (the ``transfer`` asset).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The object's real mesh, in its own frame.
+    order : int
+        SH order (the accumulation order the runtime adds it at).
+    n_dirs, floor, max_distance, progress
+        As in :func:`self_visibility` and :func:`self_visibility_log`.
+    normals : array_like, shape (V, 3), optional
+        Receiver normals (default ``mesh.vertex_normals``, what the baker shades with).
+
+    Returns
+    -------
+    visibility, log_visibility : ndarray, shape (V, n*n)
+    parameters : dict
+        What was used (``order``, ``n_dirs`` actual node count, ``floor``,
+        ``offset``, ``max_distance``), for the asset's provenance.
+    """
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    nrm = np.asarray(mesh.vertex_normals if normals is None else normals, dtype=np.float64)
+    g = self_visibility(v, nrm, mesh, order, n_dirs=n_dirs, progress=progress,
+                        max_distance=max_distance)
+    f = self_visibility_log(g, floor=floor)
+    params = {"order": int(order), "n_dirs": int(direction_quadrature(n_dirs)[0].shape[0]),
+              "floor": float(floor), "offset": RAY_OFFSET, "offset_relative_to": "diagonal",
+              "max_distance": max_distance}
+    return g, f, params
+
+
+__all__ = ["DEFAULT_DIRECTIONS", "LOG_FLOOR", "direction_quadrature", "mesh_transfer",
+           "self_visibility",
            "self_visibility_log"]

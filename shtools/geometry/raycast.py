@@ -137,7 +137,7 @@ class RayCaster:
         return t, face
 
     def visibility(self, points, directions, *, normals=None, offset: float = 0.0,
-                   mask=None) -> np.ndarray:
+                   mask=None, t_far: float | None = None) -> np.ndarray:
         """Binary visibility of points over a shared direction set.
 
         Parameters
@@ -154,6 +154,8 @@ class RayCaster:
         mask : array_like of bool, shape (V, Q), optional
             Only these (point, direction) pairs are cast; the others count as
             visible (e.g. directions outside an object's bounding cone).
+        t_far : float, optional
+            Only hits closer than this (world units) occlude (local visibility).
 
         Returns
         -------
@@ -177,6 +179,6 @@ class RayCaster:
             origins = p[s + vi]
             if nrm is not None and offset:
                 origins = origins + offset * nrm[s + vi]
-            blocked = self.occluded(origins, dirs[qi])
+            blocked = self.occluded(origins, dirs[qi], t_far=t_far)
             vis[s + vi[blocked], qi[blocked]] = False
         return vis

@@ -314,6 +314,10 @@ class SkinnedModel:
         out = np.einsum("vji,vj->vi", np.linalg.inv(linear), normals)
         return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
 
+    def blend_matrices(self, joint_matrices) -> np.ndarray:
+        """Each vertex's blended skinning matrix ``sum_k w_vk M[j_vk]``, shape ``(V, 4, 4)``."""
+        return self._blend(joint_matrices)
+
     def _blend(self, joint_matrices) -> np.ndarray:
         mats = np.asarray(joint_matrices, dtype=np.float64)
         if mats.shape != (self.joint_count, 4, 4):

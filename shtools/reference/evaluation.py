@@ -5,6 +5,8 @@ A *method spec* is a name with an optional ``@N`` accumulation order:
 (``hyb``, ``ps*``, ``ps``, ``ol``, ``exact``, ``volterra``), or ``product``
 (product-space accumulation, the baseline).  ``hyb@4`` accumulates at order
 4, ``product@6`` multiplies at order 6; both are truncated to the shading order.
+Without ``@N`` every method uses the same accumulation order (the runtime's
+default, or ``--acc-order``), so baselines are compared at equal order.
 
 Every method is shaded identically (:meth:`shtools.runtime.ShadowRuntime.shade`)
 and compared with ray tracing of the real meshes and of the sphere set (after
@@ -223,8 +225,10 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
     for label, name, acc in specs:
         if name == "product":
             t0 = time.perf_counter()
+            # without @N: the runtime's accumulation order, like the SHEXP rows
             g = product_space_visibility(vertices, normals, (centers, radii), order,
-                                         acc if acc is not None else order)
+                                         acc if acc is not None else
+                                         settings.resolved_acc_order())
             seconds = time.perf_counter() - t0
         else:
             s = dataclasses.replace(settings, exp_method=name,

@@ -76,6 +76,10 @@ vertices_per_cluster=400, threads=1, processes=1, ...)``
 ``LogBlocker`` — protocol: any object with ``log_visibility(points (V,3), normals (V,3),
 order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 ``SphereLight(position (3,), radius, color (3,))``
+``SelfVisibility(log (R, n_acc^2), rows, rotation=None, blocker=None)``
+    An object's precomputed self-visibility (``transfer`` asset) on its own
+    receiver rows, added in log space in place of its own spheres
+    (``visibility(..., self_visibility=[...])``).
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;
     ``.visibility(vertices, normals, blockers, clusters=None) -> (V, n*n)``;
@@ -97,7 +101,7 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 """
 
 from shtools.runtime.accumulate import accumulate_log
-from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
@@ -112,6 +116,7 @@ __all__ = [
     "LogBlocker",
     "ReceiverClusters",
     "ScalingTable",
+    "SelfVisibility",
     "ShadowRuntime",
     "ShadowSettings",
     "SphereBlocker",

@@ -137,3 +137,45 @@ class SphereLight:
             raise InputError("a sphere light needs a finite position and a radius > 0")
         if not np.isfinite(self.color).all() or (self.color < 0).any():
             raise InputError("a sphere light colour must be finite and >= 0")
+
+
+@dataclass
+class SelfVisibility:
+    """Precomputed log visibility of an object's real mesh on its own receiver vertices.
+
+    The runtime adds ``log`` (rotated by ``rotation``) to the accumulated log of
+    the receiver rows ``rows`` and skips the spheres of ``blocker`` there: the
+    object's own spheres then shadow only the other receivers (exact
+    self-shadowing of rigid objects, combined in log space with every other
+    blocker).
+
+    Parameters
+    ----------
+    log : array_like, shape (R, n_acc*n_acc)
+        Log visibility at the runtime's accumulation order, in the object's own
+        frame (from a ``transfer`` asset).
+    rows : array_like of int, shape (R,), or slice
+        The receiver rows of the frame it belongs to.
+    rotation : array_like, shape (3, 3), optional
+        The object's rotation this frame (own frame -> world); None: identity.
+    blocker : int, optional
+        Index, in the ``blockers`` list of the same call, of the object's own
+        sphere blocker, skipped on ``rows``.
+    """
+
+    log: Any
+    rows: Any
+    rotation: Any = None
+    blocker: int | None = None
+
+    def __post_init__(self):
+        self.log = np.asarray(self.log, dtype=np.float32)
+        if self.log.ndim != 2:
+            raise InputError(f"self-visibility log must have shape (R, n*n), got {self.log.shape}")
+        if not np.isfinite(self.log).all():
+            raise InputError("self-visibility log contains NaN or infinite values")
+        if self.rotation is not None:
+            r = np.asarray(self.rotation, dtype=np.float64)
+            if r.shape != (3, 3):
+                raise InputError(f"self-visibility rotation must be (3, 3), got {r.shape}")
+            self.rotation = r

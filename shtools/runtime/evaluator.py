@@ -10,7 +10,7 @@ import numpy as np
 
 from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
-from shtools.runtime.blockers import LogBlocker, SphereBlocker, SphereLight
+from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
@@ -23,10 +23,16 @@ from shtools.runtime.parallel import (
     split_clusters,
 )
 from shtools.runtime.settings import ShadowSettings
-from shtools.runtime.shading import cosine_transfer, environment_matrices, lit_transfer
+from shtools.runtime.shading import (
+    cosine_transfer,
+    desaturate_negative,
+    environment_matrices,
+    lit_transfer,
+)
 from shtools.runtime.shading import shade as _shade
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
+from shtools.sh import rotation_matrix
 
 
 class ShadowRuntime:
@@ -75,6 +81,8 @@ class ShadowRuntime:
         self.table = CapLogTable(tables, self.acc_order)
         self._kernels = [BlockKernel(self.table) for _ in range(self.settings.threads)]
         self._auto_clusters: ReceiverClusters | None = None
+        self._auto_groups: np.ndarray | None = None
+        self._rotated_logs: dict = {}  # id(log) -> (rotation, rotated log), last frame
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
@@ -103,24 +111,27 @@ class ShadowRuntime:
 
     # -- visibility ------------------------------------------------------------
     def log_visibility(self, vertices, normals, blockers: list[SphereBlocker],
-                       clusters: ReceiverClusters | None = None) -> np.ndarray:
+                       clusters: ReceiverClusters | None = None, *,
+                       self_visibility: tuple[SelfVisibility, ...] | list = ()) -> np.ndarray:
         """Accumulated log visibility at the accumulation order, shape ``(V, n_acc^2)`` float32.
 
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
         spheres, others = _check_blockers(blockers)
-        work = self._frame_work(pts, spheres, clusters)
+        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
-        extra = self._other_logs(pts, nrm, others)
+        extra = _add(self._other_logs(pts, nrm, others), own)
         if extra is not None:
             f += extra
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
         return f
 
     def visibility(self, vertices, normals, blockers: list[SphereBlocker],
-                   clusters: ReceiverClusters | None = None) -> np.ndarray:
+                   clusters: ReceiverClusters | None = None, *,
+                   self_visibility: tuple[SelfVisibility, ...] | list = ()) -> np.ndarray:
         """Shadowing visibility per receiver vertex: accumulate logs, exp, truncate.
 
         Parameters
@@ -136,7 +147,12 @@ class ShadowRuntime:
         clusters : ReceiverClusters, optional
             From :meth:`clusters`; with ``hierarchy`` on and none given, clusters
             are computed on the first call and reused while the vertex count
-            stays the same.
+            stays the same (built per object when ``self_visibility`` is given).
+        self_visibility : sequence of SelfVisibility
+            Precomputed log visibility of objects' real meshes on their own
+            receiver rows, added in log space; each skips its object's own
+            sphere blocker (an index into ``blockers``) on those rows.  Clusters
+            must not mix rows of different objects (build them with ``groups``).
 
         Returns
         -------
@@ -154,9 +170,10 @@ class ShadowRuntime:
         """
         pts, nrm = _check_receivers(vertices, normals)
         spheres, others = _check_blockers(blockers)
-        work = self._frame_work(pts, spheres, clusters)
+        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = self._other_logs(pts, nrm, others)
+        extra = _add(self._other_logs(pts, nrm, others), own)
         if stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
             g = self._split_visibility(work, pts, nrm, extra)
@@ -220,37 +237,98 @@ class ShadowRuntime:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _frame_work(self, pts, blockers, clusters) -> FrameWork:
-        """Cuts, ratio weights and per-cluster sphere lists of a frame (this process)."""
+    def _self_terms(self, self_visibility, n_vertices: int, blockers: list):
+        """Rotated self-visibility logs ``(V, n_acc^2)`` and the sphere blocker each row skips.
+
+        Returns ``(None, None)`` without self-visibility; ``exclude (V,)`` indexes
+        the *sphere* blockers (-1: none).  A rotated log is kept while its
+        object's rotation does not change (static objects).
+        """
+        if not self_visibility:
+            self._rotated_logs = {}
+            return None, None
+        size = self.acc_order * self.acc_order
+        sphere_index = {}  # position in `blockers` -> position among the sphere blockers
+        for k, b in enumerate(blockers):
+            if isinstance(b, SphereBlocker):
+                sphere_index[k] = len(sphere_index)
+        extra = np.zeros((n_vertices, size), dtype=np.float32)
+        exclude = np.full(n_vertices, -1, dtype=np.int64)
+        kept = {}
+        for sv in self_visibility:
+            if not isinstance(sv, SelfVisibility):
+                raise InputError(f"self_visibility must hold SelfVisibility objects, got "
+                                 f"{type(sv).__name__}")
+            if sv.log.shape[1] != size:
+                raise InputError(
+                    f"self-visibility log has {sv.log.shape[1]} coefficients but the runtime "
+                    f"accumulates at order {self.acc_order} ({size}); rebuild the transfer "
+                    f"with --order {self.acc_order}")
+            rows = np.arange(n_vertices)[sv.rows]
+            if rows.shape[0] != sv.log.shape[0]:
+                raise InputError(f"self-visibility covers {sv.log.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            log = sv.log
+            if sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
+                cached = self._rotated_logs.get(id(sv.log))
+                if cached is not None and np.array_equal(cached[0], sv.rotation):
+                    log = cached[1]
+                else:
+                    d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
+                    log = sv.log @ d.T
+                kept[id(sv.log)] = (sv.rotation.copy(), log)
+            extra[rows] += log
+            if sv.blocker is not None:
+                if int(sv.blocker) not in sphere_index:
+                    raise InputError(f"self-visibility names blocker {sv.blocker}, which is not "
+                                     f"a SphereBlocker of the {len(blockers)} given")
+                exclude[rows] = sphere_index[int(sv.blocker)]
+        self._rotated_logs = kept
+        return extra, (exclude if (exclude >= 0).any() else None)
+
+    def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:
+        """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
+
+        ``exclude (V,)``: sphere blocker each receiver skips (-1: none).
+        """
         s = self.settings
         stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {},
                  "processes": 1}
         self.last_stats = stats
         t0 = time.process_time()
-        if not s.hierarchy:
+        if not s.hierarchy and exclude is None:
             centers, radii = leaf_spheres(blockers)
             stats["seconds"]["cuts"] = time.process_time() - t0
             stats["pairs"] = stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
             stats["spheres_per_vertex"] = float(centers.shape[0])
             return FrameWork(centers=centers, radii=radii)
-        if clusters is None:
-            clusters = self._clusters_for(pts)
-        if clusters.n_vertices != pts.shape[0]:
-            raise InputError(
-                f"clusters were built for {clusters.n_vertices} vertices but "
-                f"{pts.shape[0]} were given; call clusters() on this receiver set"
-            )
         forest = build_forest(blockers)
-        cl_centers, cl_radii = clusters.bounds(pts)
-        cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
-        weights = ratio_weights(forest, cuts, cl_centers, self.table,
-                                s.resolved_theta_min())
-        sizes = cuts.in_cut.sum(axis=1)
+        if not s.hierarchy:
+            # every leaf everywhere, but per exclusion group: one "cluster" per group
+            clusters = ReceiverClusters.from_labels(exclude)
+            in_cut = np.broadcast_to(forest.is_leaf, (clusters.n_clusters, forest.n_nodes))
+            weights = np.ones((clusters.n_clusters, forest.n_nodes, self.acc_order))
+        else:
+            if clusters is None:
+                clusters = self._clusters_for(pts, exclude)
+            if clusters.n_vertices != pts.shape[0]:
+                raise InputError(
+                    f"clusters were built for {clusters.n_vertices} vertices but "
+                    f"{pts.shape[0]} were given; call clusters() on this receiver set"
+                )
+            cl_centers, cl_radii = clusters.bounds(pts)
+            cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
+            weights = ratio_weights(forest, cuts, cl_centers, self.table,
+                                    s.resolved_theta_min())
+            in_cut = cuts.in_cut
+        if exclude is not None:
+            in_cut = in_cut & ~_excluded_nodes(clusters, exclude, forest.blocker)
+        sizes = in_cut.sum(axis=1)
         s_max = max(1, int(sizes.max(initial=0)))
         # each cluster's cut nodes first (stable), padded with radius 0
-        node_idx = np.argsort(~cuts.in_cut, axis=1, kind="stable")[:, :s_max]
+        node_idx = np.argsort(~in_cut, axis=1, kind="stable")[:, :s_max]
         valid = np.arange(s_max)[None, :] < sizes[:, None]
-        any_inner = bool((cuts.in_cut & ~forest.is_leaf[None, :]).any())
+        any_inner = bool((in_cut & ~forest.is_leaf[None, :]).any())
         work = FrameWork(
             order=clusters.order, offsets=clusters.offsets, sizes=sizes,
             centers=forest.centers[node_idx],
@@ -362,6 +440,10 @@ class ShadowRuntime:
             Baked visibility of static local occluders (Sec. 7).
         form : {"tabulated", "on_the_fly"}
             Environment evaluation (same result).
+
+        Negative radiance left by SH ringing is desaturated toward luminance
+        (``settings.deringing = "desaturate"``;
+        :func:`~shtools.runtime.shading.desaturate_negative`).
         """
         s = self.settings
         pts, nrm = _check_receivers(vertices, normals)
@@ -370,10 +452,13 @@ class ShadowRuntime:
         if (env_sh is not None and local_visibility is None and form == "tabulated"
                 and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
             env_transfer = self._lit_transfer(env_sh, transfer, changed)
-        return _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
-                      window_kind=s.resolved_window(), window_h=s.window_h,
-                      local_visibility=local_visibility, form=form, transfer=transfer,
-                      env_transfer=env_transfer)
+        out = _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
+                     window_kind=s.resolved_window(), window_h=s.window_h,
+                     local_visibility=local_visibility, form=form, transfer=transfer,
+                     env_transfer=env_transfer)
+        if s.deringing == "desaturate":
+            out = desaturate_negative(out)
+        return out
 
     def _cosine_transfer(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
@@ -419,9 +504,14 @@ class ShadowRuntime:
             l_h[changed] = lit_transfer(transfer[changed], mats)
         return l_h
 
-    def _clusters_for(self, pts: np.ndarray) -> ReceiverClusters:
-        if self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]:
-            self._auto_clusters = self.clusters(pts)
+    def _clusters_for(self, pts: np.ndarray, groups=None) -> ReceiverClusters:
+        same_groups = (groups is None and self._auto_groups is None) or (
+            groups is not None and self._auto_groups is not None
+            and np.array_equal(groups, self._auto_groups))
+        if (self._auto_clusters is None or self._auto_clusters.n_vertices != pts.shape[0]
+                or not same_groups):
+            self._auto_clusters = self.clusters(pts, groups=groups)
+            self._auto_groups = None if groups is None else np.array(groups)
         return self._auto_clusters
 
 
@@ -519,3 +609,26 @@ def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
             raise InputError(f"blockers must be SphereBlocker objects or have "
                              f"log_visibility(points, normals, order), got {type(b).__name__}")
     return spheres, others
+
+
+def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """Sum of two optional log arrays (None is zero)."""
+    if a is None:
+        return b
+    if b is None:
+        return a
+    return a + b
+
+
+def _excluded_nodes(clusters: ReceiverClusters, exclude: np.ndarray,
+                    node_blocker: np.ndarray) -> np.ndarray:
+    """``(C, M)`` bool: forest nodes of the blocker each cluster's receivers skip.
+
+    Raises InputError when a cluster mixes receivers that skip different blockers.
+    """
+    counts = np.diff(clusters.offsets)
+    first = exclude[clusters.order[clusters.offsets[:-1]]]
+    if not np.array_equal(exclude[clusters.order], np.repeat(first, counts)):
+        raise InputError("receiver clusters mix vertices of different self-visibility "
+                         "objects; build the clusters with groups = object id per vertex")
+    return (node_blocker[None, :] == first[:, None]) & (first[:, None] >= 0)

@@ -51,6 +51,8 @@ class Forest:
         Node indices by depth, roots first.
     leaf_nodes : ndarray of int, shape (N,)
         Node of each leaf sphere.
+    blocker : ndarray of int, shape (M,)
+        Index of the blocker (in the list given to :func:`build_forest`) of each node.
     """
 
     centers: np.ndarray
@@ -59,6 +61,7 @@ class Forest:
     leaf: np.ndarray
     levels: list
     leaf_nodes: np.ndarray
+    blocker: np.ndarray
 
     @property
     def n_nodes(self) -> int:
@@ -79,9 +82,9 @@ def leaf_spheres(blockers: list[SphereBlocker]) -> tuple[np.ndarray, np.ndarray]
 
 def build_forest(blockers: list[SphereBlocker]) -> Forest:
     """Concatenate the blockers' trees (refitting inner spheres) into one forest."""
-    centers, radii, parents, leaves = [], [], [], []
+    centers, radii, parents, leaves, owners = [], [], [], [], []
     node_off = leaf_off = 0
-    for b in blockers:
+    for k, b in enumerate(blockers):
         n = b.n_spheres
         if b.parent is None:
             centers.append(b.centers)
@@ -96,11 +99,12 @@ def build_forest(blockers: list[SphereBlocker]) -> Forest:
             parents.append(np.where(b.parent >= 0, b.parent + node_off, -1))
             leaves.append(np.where(b.leaf >= 0, b.leaf + leaf_off, -1))
             m = b.parent.shape[0]
+        owners.append(np.full(m, k, dtype=np.int64))
         node_off += m
         leaf_off += n
     if not centers:
         empty = np.zeros(0, dtype=np.int64)
-        return Forest(np.zeros((0, 3)), np.zeros(0), empty, empty, [], empty)
+        return Forest(np.zeros((0, 3)), np.zeros(0), empty, empty, [], empty, empty)
     parent = np.concatenate(parents)
     leaf = np.concatenate(leaves)
     depth = np.zeros(parent.shape[0], dtype=np.int64)
@@ -114,7 +118,7 @@ def build_forest(blockers: list[SphereBlocker]) -> Forest:
     is_leaf = leaf >= 0
     leaf_nodes[leaf[is_leaf]] = np.flatnonzero(is_leaf)
     return Forest(np.concatenate(centers), np.concatenate(radii), parent, leaf, levels,
-                  leaf_nodes)
+                  leaf_nodes, np.concatenate(owners))
 
 
 @dataclass

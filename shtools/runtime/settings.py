@@ -54,6 +54,8 @@ DEFAULT_THETA_MIN = math.radians(1.0)
 EXP_CHOICES = ("auto", *(m.value for m in ExpMethod))
 #: windows a setting accepts: one of :class:`shtools.sh.WindowKind` or "none".
 WINDOW_CHOICES = (*(k.value for k in WindowKind), "none")
+#: Removal of negative radiance left by SH ringing (``shtools.runtime.shading``).
+DERINGING_CHOICES = ("desaturate", "none")
 #: kept for callers of the previous name
 RUNTIME_EXP_METHODS = EXP_CHOICES
 
@@ -316,6 +318,9 @@ class ShadowSettings:
     vertices_per_cluster: int = setting(400, "int", lo=1,
                                         doc="average receiver-cluster size")
     self_shadow: bool = setting(True, "bool", doc="self-shadow rules of Sec. 6.2")
+    deringing: str = setting("none", "choice", choices=DERINGING_CHOICES,
+                             doc="negative radiance from SH ringing: desaturate toward "
+                                 "luminance (0 where it is negative) or keep it")
     chunk_pairs: int = setting(1 << 16, "int", lo=256, scene=False,
                                doc="sphere-vertex pairs per array pass (memory bound)")
     threads: int = setting(1, "int", lo=1, hi=64, scene=False,

@@ -42,6 +42,40 @@ from shtools.runtime.blockers import SphereLight
 from shtools.runtime.fast_exp import QuadratureProducts
 from shtools.sh import band_of, basis, cap_zh_cos, clamped_cosine_zh, product_matrix, window
 
+#: Rec. 709 luminance weights of linear RGB.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def desaturate_negative(radiance) -> np.ndarray:
+    """Bring negative channels to 0 while keeping each colour's luminance (de-ringing).
+
+    Truncated SH rings: under a strong, coloured light (a sun) the order-n
+    product can dip below zero in one channel while the others stay positive,
+    e.g. ``(-0.014, 0.000, 0.035)`` -- a saturated blue blotch.  Clamping per
+    channel would keep that hue; instead each colour is desaturated toward its
+    luminance ``Y`` just enough that its smallest channel is 0, and colours with
+    ``Y <= 0`` become black.  Colours without a negative channel are unchanged.
+
+    Parameters
+    ----------
+    radiance : array_like, shape (..., 3)
+        Linear RGB.
+
+    Returns
+    -------
+    ndarray, shape (..., 3) float64
+        Non-negative linear RGB.
+    """
+    rgb = np.asarray(radiance, dtype=np.float64)
+    lum = rgb @ LUMINANCE
+    low = rgb.min(axis=-1)
+    # c' = Y + s (c - Y) with s = Y / (Y - min c) puts the smallest channel at 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(low < 0.0, np.clip(lum / (lum - low), 0.0, 1.0), 1.0)
+    out = lum[..., None] + s[..., None] * (rgb - lum[..., None])
+    out = np.where(lum[..., None] > 0.0, np.maximum(out, 0.0), 0.0)
+    return np.where((low < 0.0)[..., None], out, rgb)
+
 
 def band_window(order: int, kind: str | None, h: float | None) -> np.ndarray:
     """Window factors expanded to coefficients, shape ``(n*n,)``."""

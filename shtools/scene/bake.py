@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -84,6 +85,106 @@ def runtime_settings(scene: Scene, method: str, processes: int | None = None):
     return replace(st.runtime_only(), exp_method=exp, processes=processes)
 
 
+class FrameBaker:
+    """Evaluates posed frames of a prepared scene; one per process that bakes frames.
+
+    Holds the runtime (and its worker processes) and the per-bake state of the
+    visibility method.  The receiver clusters are fixed up front (from the
+    first frame of the bake) so every process evaluates a frame identically,
+    whichever frames it is given: a bake is the same bytes on one process,
+    a local pool or a Dask cluster.
+
+    Parameters
+    ----------
+    prepared : PreparedScene
+    method : str
+        A registered visibility method.
+    clusters : ndarray or None
+        Receiver clusters of the runtime methods (:func:`bake_clusters`).
+    raytrace_dirs : int, optional
+    processes : int, optional
+        Processes the runtime shares each frame over (1: this process only).
+    store_visibility : bool
+    """
+
+    def __init__(self, prepared: PreparedScene, method: str, clusters=None, *,
+                 raytrace_dirs: int | None = None, processes: int | None = None,
+                 store_visibility: bool = False):
+        from shtools.runtime import ShadowRuntime
+
+        scene = prepared.scene
+        self.method = VISIBILITY_METHODS[method]
+        self.with_meshes = self.method.needs_meshes or any(
+            LIGHT_SHADOWS[spec.shadows].needs_meshes for spec in scene.lights)
+        self.store_visibility = store_visibility
+        self.runtime = ShadowRuntime(runtime_settings(scene, method, processes),
+                                     tables=prepared.tables)
+        self.run = BakeRun(prepared, self.runtime, method, raytrace_dirs)
+        if clusters is not None:
+            self.run.cache["clusters"] = clusters
+
+    def close(self) -> None:
+        """Stop the runtime's worker processes."""
+        self.runtime.close()
+
+    def __enter__(self) -> FrameBaker:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def frame(self, frame: int, t: float) -> FrameResult:
+        """Pose, shadow and shade scene frame ``frame`` at time ``t``."""
+        start = time.perf_counter()
+        state = pose_frame(self.run.prepared, float(t), with_meshes=self.with_meshes)
+        vis = self.method.visibility(self.run, state)
+        setup = self.run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
+        radiance = shade_frame(self.run, state, vis)
+        return FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
+                           np.asarray(vis) if self.store_visibility else None,
+                           state.vertices, state.normals,
+                           time.perf_counter() - start - setup)
+
+
+def bake_clusters(prepared: PreparedScene, method: str, t: float):
+    """Receiver clusters of a runtime method, from the scene posed at time ``t``; else None."""
+    from shtools.scene.shadows import receiver_clusters
+
+    if not VISIBILITY_METHODS[method].uses_runtime:
+        return None
+    state = pose_frame(prepared, float(t))
+    return receiver_clusters(prepared, state.vertices)
+
+
+@dataclass
+class _FrameJob:
+    """What every frame task shares: the prepared scene and how to bake it."""
+
+    prepared: PreparedScene
+    method: str
+    clusters: Any
+    raytrace_dirs: int | None
+    store_visibility: bool
+    token: str  # tells one bake's job from another's in a long-lived worker
+
+
+#: Per-process FrameBaker of the current job (a worker keeps one across its tasks).
+_WORKER_BAKER: dict[str, FrameBaker] = {}
+
+
+def _bake_frame_task(job: _FrameJob, item: tuple[int, float]) -> FrameResult:
+    """Task body: one frame on a worker (one process per frame: ``processes=1``)."""
+    baker = _WORKER_BAKER.get(job.token)
+    if baker is None:
+        for old in _WORKER_BAKER.values():
+            old.close()
+        _WORKER_BAKER.clear()
+        baker = _WORKER_BAKER[job.token] = FrameBaker(
+            job.prepared, job.method, job.clusters, raytrace_dirs=job.raytrace_dirs,
+            processes=1, store_visibility=job.store_visibility)
+    return baker.frame(*item)
+
+
 def bake_scene(
     scene: Scene,
     *,
@@ -94,8 +195,17 @@ def bake_scene(
     prepared: PreparedScene | None = None,
     raytrace_dirs: int | None = None,
     processes: int | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    pool_summary: dict | None = None,
 ) -> Iterator[FrameResult]:
     """Bake ``scene`` frame by frame, yielding a :class:`FrameResult` per frame.
+
+    Frames are independent tasks (:mod:`shtools.tasks`): with several frames
+    and cores they are spread over forked local workers by default, or over a
+    Dask cluster (``scheduler``); results are yielded and written in frame
+    order by this process, the one writer, and the asset is the same bytes
+    whichever way it was computed.
 
     Parameters
     ----------
@@ -116,14 +226,23 @@ def bake_scene(
     raytrace_dirs : int, optional
         Directions per vertex for ``raytrace`` (default: the reference's).
     processes : int, optional
-        Processes sharing each frame of the runtime methods (default: one per
-        core; see :class:`~shtools.runtime.ShadowSettings`).
+        Processes sharing each frame of the runtime methods when frames are
+        evaluated in this process (one frame, or ``workers=1``); default one
+        per core (see :class:`~shtools.runtime.ShadowSettings`).
+    scheduler : str, optional
+        Where frames run: None (local cores), ``"inline"``, ``"local"`` (a Dask
+        LocalCluster), ``"tcp://HOST:PORT"`` or a scheduler file
+        (:func:`shtools.tasks.task_pool`).
+    workers : int, optional
+        Local workers (default: the usable cores).
+    pool_summary : dict, optional
+        Filled with the scheduler's per-worker task counts and times.
 
     Yields
     ------
     FrameResult
     """
-    from shtools.runtime import ShadowRuntime
+    from shtools.tasks import task_pool
 
     method = method or scene.settings.method
     names = bake_method_names()
@@ -134,34 +253,44 @@ def bake_scene(
         raise InputError(f"frames {frames.start}:{frames.stop} are outside the scene's frames "
                          f"0..{scene.settings.frames - 1}", scene.path)
     prepared = prepared or prepare_scene(scene)
-    vis_method = VISIBILITY_METHODS[method]
-    with_meshes = vis_method.needs_meshes or any(
-        LIGHT_SHADOWS[spec.shadows].needs_meshes for spec in scene.lights)
     times = scene.frame_times(frames)
     with ExitStack() as stack:
-        runtime = stack.enter_context(
-            ShadowRuntime(runtime_settings(scene, method, processes), tables=prepared.tables))
+        pool = stack.enter_context(task_pool(scheduler, workers, n_tasks=len(frames)))
         writer = None
         if output is not None:
             writer = stack.enter_context(
                 _writer(prepared, output, frames, times, method, store_visibility,
-                        prepared.receivers_move(), runtime.processes))
-        run = BakeRun(prepared, runtime, method, raytrace_dirs)
-        for k, (frame, t) in enumerate(zip(frames, times, strict=True)):
-            start = time.perf_counter()
-            state = pose_frame(prepared, float(t), with_meshes=with_meshes)
-            vis = vis_method.visibility(run, state)
-            setup = run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
-            radiance = shade_frame(run, state, vis)
-            result = FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
-                                 np.asarray(vis) if store_visibility else None,
-                                 state.vertices, state.normals,
-                                 time.perf_counter() - start - setup)
+                        prepared.receivers_move(), _processes_used(pool, processes)))
+        clusters = bake_clusters(prepared, method, times[0])
+        items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
+        if pool.scheduler == "inline":
+            baker = stack.enter_context(FrameBaker(
+                prepared, method, clusters, raytrace_dirs=raytrace_dirs, processes=processes,
+                store_visibility=store_visibility))
+            results = (baker.frame(*item) for item in items)
+        else:
+            import uuid
+
+            job = _FrameJob(prepared, method, clusters, raytrace_dirs, store_visibility,
+                            uuid.uuid4().hex)
+            results = pool.map_ordered(_bake_frame_task, items, shared=job)
+        for k, result in enumerate(results):
             if writer is not None:
-                writer.write_frame(k, result.radiance, vertices=state.vertices,
-                                   normals=state.normals,
-                                   visibility=vis if store_visibility else None)
+                writer.write_frame(k, result.radiance, vertices=result.vertices,
+                                   normals=result.normals, visibility=result.visibility)
             yield result
+        if pool_summary is not None:
+            pool_summary.update(pool.summary())
+
+
+def _processes_used(pool, processes: int | None) -> int:
+    """Processes that compute the frames: the frame's runtime processes when frames run
+    in this process, else the pool's workers (one process per frame each)."""
+    if pool.scheduler == "inline":
+        from shtools.runtime.parallel import resolve_processes
+
+        return resolve_processes(processes)
+    return int(pool.workers)
 
 
 def _writer(prepared: PreparedScene, output, frames, times, method, store_visibility, moving,
@@ -187,8 +316,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         "method": method,
         "order": st.order,
         # what the runtime actually used (the scene may leave these to it)
-        "acc_order": (resolved.resolved_acc_order() if uses_runtime
-                      else st.acc_order or st.order),
+        "acc_order": VISIBILITY_METHODS[method].acc_order(resolved) or st.order,
         "exp_method": resolved.resolved_exp_method() if uses_runtime else None,
         "window": st.window,
         "window_h": st.window_h,
@@ -236,6 +364,8 @@ def bake_to_file(
     on_frame: Callable[[FrameResult], None] | None = None,
     processes: int | None = None,
     force: bool = False,
+    scheduler: str | None = None,
+    workers: int | None = None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -243,9 +373,9 @@ def bake_to_file(
     ``frame_seconds`` (posing + visibility + shading summed over frames),
     ``setup_seconds`` (loading, fits, tables, clustering, file writes),
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
-    ``output``, ``processes`` (as given; the bytes do not depend on it).
-    ``processes`` as in :func:`bake_scene`; ``force`` bakes past
-    :func:`check_bake_size`'s limits.
+    ``output``, ``pool`` (scheduler, workers, per-worker task counts and
+    seconds).  ``processes``, ``scheduler`` and ``workers`` as in
+    :func:`bake_scene`; ``force`` bakes past :func:`check_bake_size`'s limits.
     """
     parent = Path(output).parent
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
@@ -258,9 +388,11 @@ def bake_to_file(
                         scene.settings.order, scene.path)
     n = 0
     frame_seconds = 0.0
+    pool: dict = {}
     for result in bake_scene(scene, frames=frames, method=method,
                              store_visibility=store_visibility, output=output,
-                             prepared=prepared, processes=processes):
+                             prepared=prepared, processes=processes, scheduler=scheduler,
+                             workers=workers, pool_summary=pool):
         n += 1
         frame_seconds += result.seconds
         if on_frame is not None:
@@ -276,7 +408,7 @@ def bake_to_file(
         "vertex_frames_per_second": round(n * V / max(frame_seconds, 1e-9), 1),
         "method": method or scene.settings.method,
         "output": os.fspath(output),
-        "processes": processes,
+        "pool": pool,
     }
 
 

@@ -28,6 +28,7 @@ class FrameState:
     lights: list  # list[shtools.runtime.SphereLight]
     blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
     light_shadows: list = field(default_factory=list)  # the way of each light (by name)
+    self_visibility: list = field(default_factory=list)  # list[shtools.runtime.SelfVisibility]
 
 
 #: Largest world coordinate a posed vertex may have: the runtime works in float32,
@@ -40,11 +41,13 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
     """
-    from shtools.runtime import SphereLight
+    from shtools.runtime import SelfVisibility, SphereLight
+    from shtools.scene.transfer import posed_local_log, rotation_of
 
     kinds = blocker_kinds()
     worlds = world_matrices(prepared.scene.objects, t)
-    verts, norms, blockers, meshes = [], [], [], []
+    verts, norms, blockers, meshes, selfs = [], [], [], [], []
+    n_rows = 0
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -60,9 +63,19 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
                              f"finite or beyond +-{MAX_COORDINATE:g} (the runtime computes in "
                              "float32); check its translate/scale and its parents'",
                              prepared.scene.path)
+        rotation = rotation_of(m) if o.self_log is not None else None
+        if rotation is not None:
+            # exact self-shadowing: its own spheres (appended next) are skipped on its rows
+            selfs.append(SelfVisibility(o.self_log, slice(n_rows, n_rows + len(world_v)),
+                                        rotation=rotation, blocker=len(blockers)))
+        if o.local_log is not None and joints is not None:
+            selfs.append(SelfVisibility(
+                posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m),
+                slice(n_rows, n_rows + len(world_v))))
         if o.spec.receives:
             verts.append(world_v)
             norms.append(transform_normals(m, local_n))
+            n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
             if with_meshes:
@@ -73,4 +86,4 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
-                      [spec.shadows for spec in prepared.scene.lights])
+                      [spec.shadows for spec in prepared.scene.lights], selfs)

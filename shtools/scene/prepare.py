@@ -42,6 +42,11 @@ class PreparedObject:
     bone_vectors : ndarray, shape (N, K, 4) or None
     blocker_data : object
         What a blocker kind that is not a sphere set prepared (its own type).
+    self_log : ndarray, shape (V, n_acc^2) or None
+        Self-visibility log in the object's frame (exact self-shadowing,
+        :mod:`shtools.scene.transfer`); None when the object uses its spheres.
+    local_log : ndarray, shape (V, n_acc^2) or None
+        Rest-pose local visibility log of a skinned object (``local_visibility``).
     """
 
     spec: ObjectSpec
@@ -55,6 +60,8 @@ class PreparedObject:
     bone_index: np.ndarray | None = None
     bone_vectors: np.ndarray | None = None
     blocker_data: Any = None
+    self_log: np.ndarray | None = None
+    local_log: np.ndarray | None = None
 
     @property
     def moves(self) -> bool:
@@ -218,5 +225,28 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
             inputs[f"{obj.name}.mesh"] = obj.mesh
         _object_blocker(prep, model, scene.settings, inputs)
         objects.append(prep)
+    _self_visibility(scene, objects, inputs, log)
     return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
                          inputs)
+
+
+def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log) -> None:
+    """Self-visibility logs of role-"both" objects (:mod:`shtools.scene.transfer`)."""
+    from shtools.scene.transfer import (
+        object_local_log,
+        object_self_log,
+        uses_local_visibility,
+        uses_self_visibility,
+    )
+
+    st = scene.settings
+    acc = st.resolved_acc_order()
+    for prep in objects:
+        if uses_self_visibility(prep, st.self_visibility):
+            prep.self_log, path = object_self_log(prep, acc, log=log)
+            if path is not None:
+                inputs[f"{prep.spec.name}.transfer"] = path
+        elif uses_local_visibility(prep, st.local_visibility):
+            if log:
+                log(f"ray tracing the local visibility of {prep.spec.name}")
+            prep.local_log = object_local_log(prep, acc)

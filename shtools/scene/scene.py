@@ -63,6 +63,10 @@ class Settings(ShadowSettings):
                                   doc="log tables asset (.h5) of the accumulation order")
     method: str = setting("default", "choice", choices=bake_method_names,
                           doc="visibility method (shtools.scene.shadows)")
+    self_visibility: bool = setting(False, "bool",
+                                    doc="exact self-shadowing of rigid role-\"both\" objects")
+    local_visibility: bool = setting(False, "bool",
+                                     doc="local visibility g_p of skinned role-\"both\" objects")
 
 
 @dataclass
@@ -107,6 +111,8 @@ class ObjectSpec:
     loop: bool = False
     blocker: BlockerSpec | None = None
     skin: SkinSpec | None = None
+    #: exact self-shadowing: None (the settings' default), False, True or a transfer asset
+    self_visibility: bool | Path | None = None
 
     @property
     def receives(self) -> bool:
@@ -340,6 +346,21 @@ def _object(t: schema.Object, index: int, data: dict, settings: Settings, ctx: _
         else:
             raise ctx.error("a blocker needs a representation: add blocker = { fit = 32 } "
                             "or blocker = { spheres = \"file.h5\" }")
+    if t.self_visibility is not None:
+        value, vctx = t.self_visibility, ctx.sub("self_visibility")
+        if obj.role != "both":
+            raise vctx.error("self-shadowing from the real mesh is for objects with "
+                             "role = \"both\"")
+        if isinstance(value, bool):
+            obj.self_visibility = value
+        elif isinstance(value, str) and obj.skin is not None:
+            raise vctx.error("a skinned object deforms: its transfer cannot be precomputed; "
+                             "use true (local visibility) or false")
+        elif isinstance(value, str):
+            obj.self_visibility = _file(value, base, vctx, (".h5",))
+        else:
+            raise vctx.error("must be true, false or a transfer asset "
+                             "('shtools transfer MESH -o x.transfer.h5')")
     return obj
 
 

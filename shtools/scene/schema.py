@@ -289,6 +289,8 @@ class Object(Transform):
     loop: StrictBool = False
     blocker: Any = None  # validated against the blocker-kind registry (blocker_model())
     skin: Skin | None = None
+    #: true, false or a transfer asset; checked in the semantic pass (shtools.scene.scene)
+    self_visibility: Any = None
 
     @model_validator(mode="before")
     @classmethod

@@ -72,6 +72,14 @@ class VisibilityMethod:
         """The exp method the runtime is set up with for this method."""
         return settings.exp_method
 
+    def acc_order(self, settings) -> int | None:
+        """Order the method accumulates blockers at (None: it projects at the shading order).
+
+        Methods compared with each other accumulate at the same order (issue 16:
+        a baseline at a lower order than SHEXP looked twice as bad as it is).
+        """
+        return None
+
     def visibility(self, run: BakeRun, state) -> np.ndarray:
         """SH visibility of the posed frame ``state`` (FrameState), shape ``(V, n*n)``."""
         raise NotImplementedError
@@ -88,16 +96,20 @@ class RuntimeVisibility(VisibilityMethod):
     def exp_method(self, settings) -> str:
         return self._exp or settings.exp_method
 
+    def acc_order(self, settings) -> int:
+        return settings.resolved_acc_order()
+
     def visibility(self, run, state):
         import time
 
         clusters = run.cache.get("clusters")
         if clusters is None:  # one-time setup, not counted as frame time
             start = time.perf_counter()
-            clusters = run.cache["clusters"] = _clusters(run.prepared, state.vertices)
+            clusters = run.cache["clusters"] = receiver_clusters(run.prepared, state.vertices)
             run.cache["setup_seconds"] = time.perf_counter() - start
         return run.runtime.visibility(state.vertices, state.normals, state.blockers,
-                                      clusters=clusters)
+                                      clusters=clusters,
+                                      self_visibility=state.self_visibility)
 
 
 class ProductVisibility(VisibilityMethod):
@@ -105,12 +117,16 @@ class ProductVisibility(VisibilityMethod):
 
     name = "product"
 
+    def acc_order(self, settings) -> int:
+        # the same order as the SHEXP default, so the baseline is compared fairly
+        return settings.resolved_acc_order()
+
     def visibility(self, run, state):
         from shtools.reference import product_space_visibility
 
         st = run.settings
         return product_space_visibility(state.vertices, state.normals, state.blockers,
-                                        st.order, acc_order=st.acc_order)
+                                        st.order, acc_order=self.acc_order(st))
 
 
 class RaytraceVisibility(VisibilityMethod):
@@ -134,7 +150,7 @@ class RaytraceVisibility(VisibilityMethod):
         return raytrace_visibility(state.vertices, state.normals, meshes, order, **kwargs)
 
 
-def _clusters(prepared, vertices: np.ndarray):
+def receiver_clusters(prepared, vertices: np.ndarray):
     """Receiver clusters from the first baked frame, reused for every frame.
 
     Clusters never mix objects, and the runtime recomputes each cluster's bound

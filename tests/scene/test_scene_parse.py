@@ -271,7 +271,8 @@ def test_more_mistakes_give_one_pinned_line(tmp_path, addition, message):
                            "volterra, product, raytrace; did you mean 'raytrace'? got 'raytrac'"),
     ("procesess = 2", "settings: unknown key 'procesess'; allowed: order, acc_order, "
                       "exp_method, exp_degree, window, window_h, theta_max_deg, theta_min_deg, "
-                      "hierarchy, vertices_per_cluster, self_shadow, frames, fps, tables, method"),
+                      "hierarchy, vertices_per_cluster, self_shadow, deringing, frames, fps, "
+                      "tables, method, self_visibility, local_visibility"),
     ("vertices_per_clustr = 2", "settings: unknown key 'vertices_per_clustr'; did you mean "
                                 "'vertices_per_cluster'?"),
     ('tables = "t.h5"', "settings.tables: file 't.h5' not found (paths are relative to the "

@@ -1,0 +1,260 @@
+"""Fidelity against the real meshes (issue 16): the old default vs the new one.
+
+Scenes built from ``../shared/data`` (never committed):
+
+* ``bunny`` — the scanned (open) bunny, 48 spheres, on a ground grid under the
+  Uffizi probe;
+* ``dragon+armadillo`` — two large closed meshes (64 spheres each) shadowing
+  each other under the Mondello beach probe (a hard sun);
+* ``cesiumman`` — the skinned CesiumMan (48 bound spheres) walking under Grace.
+
+Every scene is baked twice with the same assets: the **old default**
+(``self_visibility = false``: every blocker, the objects' own included, as
+spheres with the self-shadow rules) and the **new default**.  The reference is
+the project's ray tracer of the posed **real meshes**
+(:func:`shtools.reference.raytrace_visibility`, >= 3,200 directions, projected
+to the same order and shaded the same way); the sphere union
+(:func:`~shtools.reference.sphere_union_visibility`, with the rules) splits the
+error into "sphere approximation" and "SHEXP".  References are evaluated on a
+random subset of each receiver's vertices (an unbiased estimate of the
+relative RMSE; the bakes cover every vertex).  Per frame bake times of both
+variants come from the same run, side by side; the one-off self-visibility
+precompute (``shtools transfer``) is reported separately.  Negative vertices:
+vertices with any radiance channel < 0 over every baked frame.
+
+Assets (sphere fits, trees, bound sets, transfers) are cached in
+``build/bench_fidelity``.
+
+``python benchmarks/bench_fidelity.py [--quick]`` (quick: the small ``spot``
+mesh on a coarse ground only, fewer directions).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data"
+CACHE = REPO / "build" / "bench_fidelity"
+SHTOOLS = [sys.executable, "-m", "shtools"]
+
+
+def _run(*args) -> float:
+    """Run a shtools stage (cached by the caller); returns its wall seconds."""
+    t0 = time.perf_counter()
+    subprocess.run([*SHTOOLS, *map(str, args)], check=True, env={**os.environ,
+                                                                 "OPENBLAS_NUM_THREADS": "1"})
+    return time.perf_counter() - t0
+
+
+def _ensure(path: Path, *args) -> float:
+    """Build ``path`` with ``shtools args`` unless cached; seconds spent (0 when cached)."""
+    if path.exists():
+        return 0.0
+    return _run(*args, "-o", path)
+
+
+def _placement(mesh_path: Path, height: float, x: float, z: float, yaw: float = 0.0):
+    """TOML transform lines putting a mesh of the given height on the ground at (x, z)."""
+    from shtools.geometry.mesh import load_mesh
+
+    lo, hi = load_mesh(mesh_path).bounds
+    s = height / (hi[1] - lo[1])
+    cx, cz = 0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2])
+    c, sn = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
+    # world = T + R_y (s v): centre the footprint at (x, z) and the lowest point at y = 0
+    tx = x - s * (c * cx + sn * cz)
+    tz = z - s * (-sn * cx + c * cz)
+    return (f"scale = {s:.6g}\ntranslate = [{tx:.6g}, {-s * lo[1]:.6g}, {tz:.6g}]\n"
+            f"rotate = [0.0, {yaw:.6g}, 0.0]\n")
+
+
+def _rigid(name, mesh_key, spheres, height, x, z, yaw, pre: dict) -> str:
+    mesh = DATA / "meshes" / mesh_key
+    sph = CACHE / f"{name}{spheres}.spheres.h5"
+    tree = CACHE / f"{name}{spheres}.tree.h5"
+    tr = CACHE / f"{name}.transfer.h5"
+    pre[f"{name} fit"] = _ensure(sph, "spheres", "fit", mesh, "-n", spheres)
+    _ensure(tree, "spheres", "tree", sph)
+    pre[f"{name} transfer"] = _ensure(tr, "transfer", mesh)
+    return (f'[[objects]]\nname = "{name}"\nmesh = "{mesh}"\nrole = "both"\n'
+            f'blocker = {{ tree = "{tree}" }}\nself_visibility = "{tr}"\n'
+            + _placement(mesh, height, x, z, yaw))
+
+
+def _skinned(name, glb, spheres, pre: dict, local_key: str = "") -> str:
+    rig = DATA / "skinned" / glb
+    sph = CACHE / f"{name}{spheres}.spheres.h5"
+    bound = CACHE / f"{name}{spheres}.bound.h5"
+    pre[f"{name} fit"] = _ensure(sph, "spheres", "fit", rig, "-n", spheres)
+    if not bound.exists():
+        _run("spheres", "bind", sph, rig, "-o", bound)
+    return (f'[[objects]]\nname = "{name}"\nmesh = "{rig}"\nrole = "both"\n'
+            f'blocker = {{ bound = "{bound}" }}\nskin = {{ animation = 0 }}\n{local_key}')
+
+
+def _ground(size, subdivisions) -> str:
+    return (f'[[objects]]\nname = "ground"\nprimitive = {{ type = "plane", size = [{size}, '
+            f'{size}], subdivisions = {subdivisions} }}\nrole = "receiver"\n')
+
+
+def scenes(quick: bool) -> dict[str, dict]:
+    """Scene texts (with ``{SETTINGS}`` for the variant's settings) and precompute times."""
+    CACHE.mkdir(parents=True, exist_ok=True)
+    out = {}
+    if quick:
+        pre = {}
+        text = (_ground(3.0, 40) + _rigid("spot", "spot.obj", 24, 1.0, 0.0, 0.0, 30.0, pre))
+        out["spot"] = {"text": text, "env": DATA / "probes" / "uffizi.hdr", "frames": 1,
+                       "pre": pre}
+        return out
+    pre = {}
+    text = _ground(3.0, 64) + _rigid("bunny", "stanford-bunny.obj", 48, 1.0, 0.0, 0.0, 0.0, pre)
+    out["bunny"] = {"text": text, "env": DATA / "probes" / "uffizi.hdr", "frames": 2,
+                    "pre": pre}
+    pre = {}
+    text = (_ground(5.0, 96)
+            + _rigid("dragon", "dragon.obj", 64, 1.1, -0.9, 0.0, 20.0, pre)
+            + _rigid("armadillo", "armadillo.obj", 64, 1.4, 0.9, 0.2, -30.0, pre))
+    out["dragon+armadillo"] = {"text": text, "env": DATA / "probes" /
+                               "spiaggia_di_mondello_1k.hdr", "frames": 2, "pre": pre}
+    pre = {}
+    text = _ground(3.0, 64) + _skinned("cesiumman", "CesiumMan.glb", 48, pre)
+    out["cesiumman"] = {"text": text, "env": DATA / "probes" / "grace.hdr", "frames": 3,
+                        "fps": 4, "pre": pre}
+    return out
+
+
+def _scene_file(name: str, spec: dict, variant: str, extra_settings: str = "") -> Path:
+    settings = (f'[settings]\norder = 4\nframes = {spec["frames"]}\nfps = {spec.get("fps", 24)}\n'
+                + ('self_visibility = false\nderinging = "none"\n' if variant == "old"
+                   else "self_visibility = true\nderinging = \"desaturate\"\n")
+                + extra_settings)
+    env = f'[environment]\nimage = "{spec["env"]}"\n'
+    path = CACHE / f"{name.replace('+', '_')}.{variant}.toml"
+    text = spec["text"]
+    if variant == "old":  # the objects' own transfers off too
+        import re
+
+        text = re.sub(r'self_visibility = "[^"]*"', "self_visibility = false", text)
+    path.write_text(settings + "\n" + env + "\n" + text)
+    return path
+
+
+def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants=("old", "new"),
+             extra: dict | None = None) -> dict:
+    """Bake each variant, ray-trace the references on vertex subsets, tabulate."""
+    import trimesh
+
+    from shtools.reference import raytrace_visibility, relative_rmse, sphere_union_visibility
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.runtime.hierarchy import leaf_spheres
+    from shtools.scene.bake import bake_scene, pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+
+    extra = extra or {}
+    baked, times, preps = {}, {}, {}
+    for variant in variants:
+        scene = load_scene(_scene_file(name, spec, variant, extra.get(variant, "")))
+        prepared = prepare_scene(scene)
+        preps[variant] = (scene, prepared)
+        frames = list(bake_scene(scene, prepared=prepared))
+        baked[variant] = [f.radiance.astype(np.float64) for f in frames]
+        times[variant] = [f.seconds for f in frames]
+    scene, prepared = preps[variants[0]]
+    # the references are shaded raw (no de-ringing): what order-4 shading of the real
+    # visibility gives, negative lobes included
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+    rng = np.random.default_rng(0)
+    offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
+    rows = []
+    acc = {}
+    for k, t in enumerate(scene.frame_times()):
+        state = pose_frame(prepared, float(t), with_meshes=True)
+        meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
+        centers, radii = leaf_spheres(state.blockers)
+        for o, obj in enumerate(prepared.receivers):
+            a, b = offsets[o], offsets[o + 1]
+            sel = np.sort(rng.choice(np.arange(a, b), min(subset, b - a), replace=False))
+            v, n = state.vertices[sel], state.normals[sel]
+            g_mesh = raytrace_visibility(v, n, meshes, 4, n_dirs)
+            g_sph = sphere_union_visibility(v, n, centers, radii, 4, n_dirs)
+            r_mesh = shader.shade(g_mesh, v, n, prepared.env_sh, state.lights)
+            r_sph = shader.shade(g_sph, v, n, prepared.env_sh, state.lights)
+            entry = acc.setdefault(obj.spec.name, {"mesh": [], "sph": [], "neg_ref": 0,
+                                                   **{vv: [] for vv in variants}})
+            entry["neg_ref"] += int((r_mesh.min(axis=1) < 0).sum())
+            entry["mesh"].append(r_mesh)
+            entry["sph"].append(r_sph)
+            for variant in variants:
+                entry[variant].append(baked[variant][k][sel])
+    for obj_name, e in acc.items():
+        mesh, sph = np.concatenate(e["mesh"]), np.concatenate(e["sph"])
+        row = {"scene": name, "receiver": obj_name,
+               "spheres vs mesh": relative_rmse(sph, mesh)}
+        for variant in variants:
+            r = np.concatenate(e[variant])
+            row[f"{variant} vs mesh"] = relative_rmse(r, mesh)
+            row[f"{variant} vs spheres"] = relative_rmse(r, sph)
+            row[f"{variant} neg (subset)"] = int((r.min(axis=1) < 0).sum())
+        row["mesh neg (subset)"] = e["neg_ref"]
+        rows.append(row)
+    summary = {"scene": name}
+    for variant in variants:
+        rad = np.stack(baked[variant])
+        summary[f"{variant} ms/frame"] = 1e3 * float(np.mean(times[variant][1:] or times[variant]))
+        summary[f"{variant} negative vertices"] = int((rad.min(axis=2) < 0).sum())
+    summary["vertex-frames"] = int(np.stack(baked[variants[0]]).shape[0] *
+                                   np.stack(baked[variants[0]]).shape[1])
+    return {"rows": rows, "summary": summary}
+
+
+def _markdown(rows: list[dict]) -> str:
+    keys = list(rows[0])
+    out = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    for r in rows:
+        out.append("| " + " | ".join(
+            (f"{100 * r[k]:.1f} %" if "vs" in k else f"{r[k]:.4g}")
+            if isinstance(r[k], float) else str(r[k]) for k in keys) + " |")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="spot only, coarse")
+    parser.add_argument("--scene", action="append", help="only these scenes")
+    args = parser.parse_args(argv)
+    if not (DATA / "meshes").is_dir():
+        print(f"bench_fidelity: {DATA} not present; nothing to measure")
+        return 0
+    n_dirs, subset = (1600, 600) if args.quick else (3200, 2500)
+    all_rows, sums, pre = [], [], {}
+    for name, spec in scenes(args.quick).items():
+        if args.scene and name not in args.scene:
+            continue
+        out = evaluate(name, spec, n_dirs=n_dirs, subset=subset)
+        all_rows += out["rows"]
+        sums.append(out["summary"])
+        pre.update(spec["pre"])
+    load = os.getloadavg()
+    print(f"\n### Fidelity vs the real meshes (order 4, {n_dirs}+ directions, "
+          f"{subset} vertices per receiver and frame; load {load[0]:.2f} on "
+          f"{os.cpu_count()} cores)\n")
+    print(_markdown(all_rows))
+    print("\n" + _markdown(sums))
+    built = {k: round(v, 1) for k, v in pre.items() if v}
+    if built:
+        print(f"\nprecompute this run (s): {built}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,166 @@
+"""Exact self-shadowing of rigid objects in a bake (``self_visibility`` scene key).
+
+A rigid object that both receives and casts (``role = "both"``, no skin) is
+shadowed on its own vertices by its **real mesh**: its self-visibility is ray
+traced once in its own frame (:func:`shtools.fields.self_visibility.mesh_transfer`,
+or read from a ``transfer`` asset), and every frame the runtime adds its log,
+rotated with the object, to the log of every *other* blocker
+(:class:`shtools.runtime.SelfVisibility`).  The object's own spheres then shadow
+only the other receivers, so the sphere self-shadow rules no longer apply to its
+own vertices.
+
+A convex mesh cannot shadow itself: its log is zero and nothing is traced.
+Scaling (uniform) does not change visibility; a non-uniform scale does, and is
+approximated by the rotation part of the transform.
+
+Skinned objects (``local_visibility``): their large-scale self-shadowing
+changes with the pose, so they keep their posed spheres; what they add is the
+paper's *local* visibility ``g_p`` (Ren et al. 2006 Sec. 7): the rest-pose
+self-visibility of fine detail, rays limited to :data:`LOCAL_DISTANCE` times
+the mesh's bounding-box diagonal, rotated per vertex with the rotation part of
+its blended skinning matrix and added in log space.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from shtools.errors import AssetError
+
+#: Vertices of the stored transfer may differ from the scene mesh's by this much
+#: (relative to the mesh's bounding-box diagonal) and still be the same mesh.
+VERTEX_MATCH_RTOL = 1e-6
+
+
+def uses_self_visibility(obj, default: bool = True) -> bool:
+    """Whether an object gets exact self-shadowing: rigid, receives and casts, not off."""
+    choice = getattr(obj.spec, "self_visibility", None)
+    if choice is None:
+        choice = default
+    return bool(choice) and obj.spec.receives and obj.spec.blocks and obj.motion is None
+
+
+def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None
+                    ) -> tuple[np.ndarray, Path | None]:
+    """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32.
+
+    Parameters
+    ----------
+    obj : PreparedObject
+        With ``vertices``, ``normals``, ``faces`` (own frame) and ``spec``.
+    acc_order : int
+        The runtime's accumulation order.
+    log : callable, optional
+        Progress messages.
+
+    Returns
+    -------
+    log : ndarray, shape (V, acc_order^2) float32
+    path : Path or None
+        The ``transfer`` asset read (for the bake's inputs), None when computed.
+    """
+    import trimesh
+
+    source = getattr(obj.spec, "self_visibility", None)
+    size = acc_order * acc_order
+    if isinstance(source, str | Path):
+        return _from_asset(obj, Path(source), acc_order), Path(source)
+    mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
+    # convexity on the merged mesh (primitives with flat normals duplicate their edges)
+    if trimesh.Trimesh(obj.vertices, obj.faces, process=True).is_convex:
+        return np.zeros((len(obj.vertices), size), dtype=np.float32), None
+    from shtools.fields.self_visibility import mesh_transfer
+
+    if log:
+        log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
+            "cache it with 'shtools transfer')")
+    _, f, _ = mesh_transfer(mesh, acc_order, normals=obj.normals)
+    return f.astype(np.float32), None
+
+
+def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
+    from shtools.data_formats.transfer import read_transfer
+    from shtools.fields.self_visibility import self_visibility_log
+
+    t = read_transfer(path)
+    name = obj.spec.name
+    if t.vertices.shape != obj.vertices.shape:
+        raise AssetError(f"has {len(t.vertices)} vertices but object '{name}' has "
+                         f"{len(obj.vertices)}; rebuild it with 'shtools transfer' on that mesh",
+                         path)
+    diagonal = float(np.linalg.norm(np.ptp(obj.vertices, axis=0))) or 1.0
+    if np.abs(t.vertices - obj.vertices).max() > VERTEX_MATCH_RTOL * diagonal:
+        raise AssetError(f"was computed for another mesh than object '{name}''s; rebuild it "
+                         "with 'shtools transfer'", path)
+    if t.order < acc_order:
+        raise AssetError(f"is SH order {t.order} but the scene accumulates at order "
+                         f"{acc_order}; rebuild it with 'shtools transfer --order {acc_order}'",
+                         path)
+    if t.order == acc_order:
+        return t.log_visibility
+    # a log is order-specific: truncate the visibility, then take its log at this order
+    floor = float(t.parameters.get("floor", 0.0))
+    vis = t.visibility[:, :acc_order * acc_order].astype(np.float64)
+    return self_visibility_log(vis, floor=floor).astype(np.float32)
+
+
+#: Ray length of the local visibility of skinned objects, relative to the rest mesh's
+#: bounding-box diagonal (``bench_fidelity``, CesiumMan and Fox).
+LOCAL_DISTANCE = 0.02
+
+
+def uses_local_visibility(obj, default: bool) -> bool:
+    """Whether a skinned role-"both" object adds its local visibility ``g_p``."""
+    choice = getattr(obj.spec, "self_visibility", None)
+    if choice is None:
+        choice = default
+    return bool(choice) and obj.spec.receives and obj.spec.blocks and obj.motion is not None
+
+
+def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE) -> np.ndarray:
+    """Rest-pose local visibility log ``(V, acc_order^2)`` float32 of a skinned object."""
+    import trimesh
+
+    from shtools.fields.self_visibility import self_visibility, self_visibility_log
+
+    mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
+    diagonal = float(np.linalg.norm(np.ptp(obj.vertices, axis=0)))
+    g = self_visibility(obj.vertices, obj.normals, mesh, acc_order,
+                        max_distance=distance * diagonal)
+    return self_visibility_log(g).astype(np.float32)
+
+
+def posed_local_log(local_log: np.ndarray, blend: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """The rest-pose local log rotated with each vertex, ``(V, n*n)`` float32.
+
+    ``blend (V, 4, 4)``: blended skinning matrices; ``world (4, 4)``: the object's
+    transform.  Each vertex turns by the rotation part of ``world @ blend``.
+    """
+    from shtools.sh import rotation_matrix
+
+    linear = np.einsum("ij,vjk->vik", np.asarray(world)[:3, :3], blend[:, :3, :3])
+    u, _, vt = np.linalg.svd(linear)
+    r = u @ vt
+    flip = np.linalg.det(r) < 0  # degenerate blends: take the nearest proper rotation
+    if flip.any():
+        u[flip, :, -1] *= -1
+        r[flip] = u[flip] @ vt[flip]
+    order = math.isqrt(local_log.shape[1])
+    d = rotation_matrix(r, order).astype(np.float32)
+    return np.einsum("vij,vj->vi", d, local_log)
+
+
+def rotation_of(matrix: np.ndarray) -> np.ndarray | None:
+    """The rotation part ``(3, 3)`` of a transform's linear part (polar decomposition).
+
+    None for a mirroring transform (no proper rotation carries the visibility).
+    """
+    u, _, vt = np.linalg.svd(np.asarray(matrix, dtype=np.float64)[:3, :3])
+    r = u @ vt
+    if np.linalg.det(r) < 0:
+        return None
+    return r

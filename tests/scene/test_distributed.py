@@ -1,0 +1,253 @@
+"""Frames as tasks: the same bytes inline, on forked local workers and on Dask; faults.
+
+The reference for "correct" here is the one-process bake itself: spreading
+frames over workers must not change a single byte of the asset (the frames
+are pure functions of the scene; only the place they run changes).
+"""
+
+from __future__ import annotations
+
+import filecmp
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from shtools.errors import InputError
+from shtools.scene.bake import bake_to_file
+from shtools.scene.scene import load_scene
+from shtools.tasks import task_pool
+
+# The same tiny scene as the bake tests: a ball rolling over a ground plane.
+from .test_bake import scene_text
+
+
+def _square(shared, item):
+    return shared * item * item
+
+
+def _die_once(marker, item):
+    """Kill this worker process the first time any worker runs item 3."""
+    if item == 3 and not os.path.exists(marker):
+        Path(marker).write_text("died")
+        os._exit(1)
+    return item
+
+
+def _slow_echo(_shared, item):
+    time.sleep(0.02)
+    return item
+
+
+@pytest.mark.parametrize("scheduler, workers", [("inline", 1), (None, 2)])
+def test_results_come_back_in_order(scheduler, workers):
+    with task_pool(scheduler, workers) as pool:
+        out = list(pool.map_ordered(_square, range(20), shared=3))
+    assert out == [3 * i * i for i in range(20)]
+    assert sum(s.tasks for s in pool.stats.values()) == 20
+
+
+def test_window_bounds_tasks_in_flight():
+    pulled = []
+
+    def items():
+        for i in range(12):
+            pulled.append(i)
+            yield i
+
+    with task_pool(None, 2) as pool:
+        for k, result in enumerate(pool.map_ordered(_slow_echo, items(), window=3)):
+            # At most `window` items were taken before result k was handed out:
+            # the caller never holds more than the window.
+            assert result == k
+            assert len(pulled) <= k + 1 + 3
+    assert len(pulled) == 12
+
+
+def test_killed_local_worker_is_replaced_and_nothing_is_lost(tmp_path):
+    marker = str(tmp_path / "died")
+    with task_pool(None, 2) as pool:
+        out = list(pool.map_ordered(_die_once, range(8), shared=marker))
+    assert out == list(range(8))  # no duplicate, no missing result
+    assert Path(marker).exists()  # a worker really died
+
+
+def test_bad_scheduler_values():
+    with pytest.raises(InputError, match="neither 'local'"), task_pool("no-such-file.json"):
+        pass
+    with pytest.raises(InputError, match="--workers"), task_pool(None, 0):
+        pass
+
+
+@pytest.fixture(scope="module")
+def scene_file(tmp_path_factory):
+    d = tmp_path_factory.mktemp("dist")
+    path = d / "scene.toml"
+    path.write_text(scene_text(order=3, frames=6))
+    return path
+
+
+@pytest.fixture(scope="module")
+def inline_bake(scene_file):
+    out = scene_file.parent / "inline.h5"
+    bake_to_file(load_scene(scene_file), out, scheduler="inline", processes=1)
+    return out
+
+
+def test_local_workers_give_identical_bytes(scene_file, inline_bake, tmp_path):
+    out = tmp_path / "pool.h5"
+    summary = bake_to_file(load_scene(scene_file), out, workers=2)
+    assert summary["pool"]["scheduler"] == "processes"
+    assert sum(w["tasks"] for w in summary["pool"]["per_worker"].values()) == 6
+    assert filecmp.cmp(out, inline_bake, shallow=False)
+
+
+#: distributed leaves sockets for the garbage collector when a cluster closes (its
+#: own ResourceWarning, not ours); the tests that start a cluster let it pass.
+DASK_LEAKS = (pytest.mark.filterwarnings("ignore::ResourceWarning"),
+              pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning"))
+
+
+@pytest.mark.slow
+@DASK_LEAKS[0]
+@DASK_LEAKS[1]
+def test_dask_local_cluster_gives_identical_bytes(scene_file, inline_bake, tmp_path):
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    out = tmp_path / "dask.h5"
+    summary = bake_to_file(load_scene(scene_file), out, scheduler="local", workers=2)
+    assert summary["pool"]["scheduler"] == "dask"
+    assert filecmp.cmp(out, inline_bake, shallow=False)
+
+
+@pytest.mark.slow
+@DASK_LEAKS[0]
+@DASK_LEAKS[1]
+def test_dask_worker_killed_mid_bake_still_completes_identically(scene_file, inline_bake,
+                                                                 tmp_path):
+    distributed = pytest.importorskip("distributed",
+                                      reason="the distributed extra is not installed")
+
+    class KillOnce(distributed.WorkerPlugin):
+        """Kills the worker process that starts the third task (once: a marker file)."""
+
+        def __init__(self, marker):
+            self.marker = marker
+
+        def setup(self, worker):
+            self.started = 0
+
+        def transition(self, key, start, finish, **kwargs):
+            if finish == "executing":
+                self.started += 1
+                if self.started == 2 and not os.path.exists(self.marker):
+                    Path(self.marker).write_text("killed")
+                    os._exit(1)
+
+    marker = str(tmp_path / "killed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", silence_logs=50) as cluster, \
+            distributed.Client(cluster) as client:
+        client.register_plugin(KillOnce(marker))
+        out = tmp_path / "killed.h5"
+        bake_to_file(load_scene(scene_file), out, scheduler=cluster.scheduler_address)
+    assert Path(marker).exists()
+    assert filecmp.cmp(out, inline_bake, shallow=False)
+
+
+def _cli(*args, **kwargs):
+    return subprocess.run([sys.executable, "-m", "shtools", *args], capture_output=True,
+                          text=True, **kwargs)
+
+
+@pytest.mark.slow
+def test_unreachable_scheduler_is_one_line_and_no_output(scene_file, tmp_path):
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    out = tmp_path / "x.h5"
+    # Port 9 (discard) on loopback: nothing listens, the connection is refused.
+    proc = _cli("bake", str(scene_file), "-o", str(out), "--scheduler", "tcp://127.0.0.1:9")
+    assert proc.returncode != 0
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "cannot reach the Dask scheduler" in lines[0], proc.stderr
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_workers_and_leaves_no_file(tmp_path):
+    scene = tmp_path / "long.toml"
+    # ~40k ground vertices: each frame takes long enough that the bake is mid-way.
+    scene.write_text(scene_text(order=4, frames=400).replace("subdivisions = 24",
+                                                           "subdivisions = 200"))
+    out = tmp_path / "long.h5"
+    # Test runners (xdist workers) may ignore SIGINT, and a child inherits that:
+    # give the CLI the default disposition, as a shell would.
+    with subprocess.Popen([sys.executable, "-m", "shtools", "bake", str(scene), "-o", str(out),
+                           "--workers", "2"], stderr=subprocess.PIPE, text=True,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)
+                          ) as proc:
+        deadline = time.monotonic() + 120
+        children: list[int] = []
+        while len(children) < 2 and time.monotonic() < deadline:  # workers started
+            assert proc.poll() is None, proc.stderr.read()
+            time.sleep(0.5)
+            children = _children(proc.pid)
+        time.sleep(1.0)
+        os.kill(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    assert proc.returncode != 0
+    assert len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.toml"]  # no file, no temp
+    time.sleep(0.5)
+    assert children and [pid for pid in children if _alive(pid)] == []
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
+    except OSError:
+        return []
+    return [int(c) for c in text.split()]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split()[2]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_batch_fit_writes_one_asset_per_mesh_identically(tmp_path):
+    import trimesh
+
+    from shtools.geometry.assets import fit_many, fit_to_file
+
+    meshes = []
+    for name, mesh in [("box", trimesh.creation.box(extents=[2, 1, 1])),
+                       ("capsule", trimesh.creation.capsule(height=1.0, radius=0.4))]:
+        path = tmp_path / f"{name}.obj"
+        mesh.export(path)
+        meshes.append(path)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    pool: dict = {}
+    rows = list(fit_many(meshes, out_dir, 6, method="kmeans", workers=2, pool_summary=pool))
+    assert [r["mesh"] for r in rows] == [str(m) for m in meshes]
+    assert pool["scheduler"] == "processes"
+    for mesh, row in zip(meshes, rows, strict=True):
+        # The same fit in this process, written by the single-mesh stage.
+        alone = tmp_path / f"{mesh.stem}.alone.h5"
+        fit_to_file(mesh, 6, alone, method="kmeans")
+        assert filecmp.cmp(row["output"], alone, shallow=False)
+
+
+def test_batch_fit_refuses_clashing_names_and_missing_folder(tmp_path):
+    from shtools.geometry.assets import batch_outputs, fit_many
+
+    with pytest.raises(InputError, match=r"would both write a\.spheres\.h5"):
+        batch_outputs([tmp_path / "x" / "a.obj", tmp_path / "y" / "a.obj"], tmp_path)
+    with pytest.raises(InputError, match="is not a folder"):
+        list(fit_many([tmp_path / "a.obj"], tmp_path / "missing", 4))
