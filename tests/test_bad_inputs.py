@@ -19,6 +19,7 @@ import contextlib
 import errno
 import hashlib
 import io
+import json
 import os
 import signal
 import subprocess
@@ -91,7 +92,7 @@ class Kit:
                      ("spheres", "tree", k / "spheres.h5", "-o", k / "tree.h5"),
                      ("tables", "log", "-n", 2, "--samples", 16, "-o", k / "tables.h5"),
                      ("light", "project", k / "env.hdr", "-n", 2, "-o", k / "light.h5"),
-                     ("bake", k / "scene.toml", "-o", k / "baked.h5", "--processes", 1)):
+                     ("bake", k / "scene.toml", "-o", k / "baked.h5", "--processes", 1, "--workers", 1)):
             code, _, err = _run(*args)
             assert code == 0, (args, err)
         # bad meshes
@@ -478,7 +479,7 @@ def test_injected_disk_full_is_one_line_and_keeps_the_old_output(command, kit, t
     out.write_bytes(b"old")
     argv = {"tables": ["tables", "log", "-n", "2", "--samples", "8"],
             "light": ["light", "project", kit.root / "env.hdr", "-n", "2"],
-            "bake": ["bake", kit.root / "scene.toml", "--processes", "1"],
+            "bake": ["bake", kit.root / "scene.toml", "--processes", "1", "--workers", "1"],
             "export": ["export", kit.root / "baked.h5"]}[command]
     code, stdout, err = _run(*argv, "-o", out)
     check_refused(code, stdout, err, want_code=1, named=[out.name, "no space left"],
@@ -560,7 +561,7 @@ FORCE_WORKERS = textwrap.dedent("""
 """)
 
 
-def _long_bake(kit, tmp_path):
+def _long_bake(kit, tmp_path, args=("--processes", "2", "--workers", "1")):
     scene = tmp_path / "long.toml"
     text = SCENE.format(frames=400, subdivisions=24)
     for name in ("mesh.obj", "spheres.h5", "light.h5"):
@@ -568,9 +569,12 @@ def _long_bake(kit, tmp_path):
     scene.write_text(text)
     out = tmp_path / "long.h5"
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    # SIGINT back to its default: a parent that ignores it (pytest-xdist workers do)
+    # passes SIG_IGN on, and Python then installs no KeyboardInterrupt handler
     proc = subprocess.Popen([sys.executable, "-c", FORCE_WORKERS, "bake", str(scene), "-o",
-                             str(out), "--processes", "2"], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                             str(out), *args], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     workers = []
     while time.monotonic() < deadline and proc.poll() is None:
@@ -605,11 +609,19 @@ needs_linux = pytest.mark.skipif(not sys.platform.startswith("linux"),
                                  reason="reads child processes from /proc")
 
 
+#: the two kinds of forked workers of a bake: processes sharing one frame
+#: (shtools.runtime.parallel) and processes baking whole frames (shtools.tasks)
+WORKER_KINDS = {"frame-parts": ("--processes", "2", "--workers", "1"),
+                "frames": ("--processes", "1", "--workers", "2")}
+
+
 @needs_linux
 @pytest.mark.parametrize("sig, want", [(signal.SIGTERM, 143), (signal.SIGINT, 130),
                                        (signal.SIGHUP, 129)])
 def test_signal_stops_bake_workers_and_output(sig, want, kit, tmp_path):
-    proc, workers, out = _long_bake(kit, tmp_path)
+    # the frame-parts workers (shtools.runtime.parallel); the frame pool of
+    # shtools.tasks is covered by tests/scene/test_distributed.py
+    proc, workers, out = _long_bake(kit, tmp_path, WORKER_KINDS["frame-parts"])
     proc.send_signal(sig)
     stdout, stderr = proc.communicate(timeout=60)
     check_refused(proc.returncode, stdout, stderr, want_code=want,
@@ -619,9 +631,10 @@ def test_signal_stops_bake_workers_and_output(sig, want, kit, tmp_path):
 
 
 @needs_linux
-def test_workers_die_with_a_killed_parent(kit, tmp_path):
+@pytest.mark.parametrize("kind", WORKER_KINDS)
+def test_workers_die_with_a_killed_parent(kind, kit, tmp_path):
     """kill -9 of the bake: its forked workers must not run on (holding stdout open)."""
-    proc, workers, out = _long_bake(kit, tmp_path)
+    proc, workers, out = _long_bake(kit, tmp_path, WORKER_KINDS[kind])
     proc.kill()
     proc.communicate(timeout=60)  # returns only once every holder of the pipes is gone
     assert _wait_gone(workers) == []
@@ -638,8 +651,6 @@ def test_bakes_are_the_same_bytes_for_any_process_count(kit, tmp_path, monkeypat
     """Fixed split, fixed reduction order: CI can compare a bake from any machine exactly."""
     import importlib
 
-    import h5py
-
     from shtools.runtime.parallel import fork_supported
 
     monkeypatch.setattr(importlib.import_module("shtools.runtime.evaluator"),
@@ -653,15 +664,13 @@ def test_bakes_are_the_same_bytes_for_any_process_count(kit, tmp_path, monkeypat
     data = {}
     for processes in counts:
         out = tmp_path / f"b{processes}.h5"
-        code, _, err = _run("bake", scene, "-o", out, "--processes", processes)
+        # --workers 1: frames in this process, each shared by `processes` processes
+        code, stdout, err = _run("bake", scene, "-o", out, "--processes", processes,
+                                 "--workers", "1", "--json")
         assert code == 0, err
-        with h5py.File(out, "r") as f:
-            data[processes] = f["radiance"][()].tobytes()
-            assert int(f.attrs["processes"]) == int(processes)  # recorded
-    assert all(d == data["1"] for d in data.values())
-    code, out, err = _run("diff", tmp_path / f"b{counts[-1]}.h5", tmp_path / "b1.h5",
-                          "--rtol", "0", "--atol", "0")
-    assert code == 0, out + err
+        assert json.loads(stdout)["processes"] == int(processes)  # the count is reported
+        data[processes] = out.read_bytes()
+    assert all(d == data["1"] for d in data.values())  # the whole file, byte for byte
 
 
 # ----------------------------------------------------------------- clean stderr

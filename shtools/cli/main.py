@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 import signal
 import sys
 import threading
+import time
 import warnings
 
 import click
@@ -89,8 +91,44 @@ class Terminated(BaseException):
         self.signum = signum
 
 
+#: The stop signal being handled (None when none is): while it is set, the signal
+#: is sent again every RESEND_SECONDS, because Python runs a handler wherever the
+#: main thread is, and an exception raised inside a finaliser or a weakref
+#: callback is printed and dropped ("Exception ignored in ...") instead of
+#: stopping the command.
+_STOPPING: int | None = None
+RESEND_SECONDS = 2.0
+
+
 def _raise_terminated(signum, _frame):
+    global _STOPPING
+    if _STOPPING is None:
+        _STOPPING = signum
+
+        def resend():
+            while _STOPPING == signum:
+                time.sleep(RESEND_SECONDS)
+                if _STOPPING == signum:
+                    os.kill(os.getpid(), signum)
+
+        threading.Thread(target=resend, name="shtools-stop-resend", daemon=True).start()
     raise Terminated(signum)
+
+
+def _default_termination_in_child() -> None:
+    """After fork: SIGTERM/SIGHUP kill a worker again (the handlers above are inherited).
+
+    A forked worker that kept them would turn SIGTERM into an exception, which a
+    process pool's worker loop catches and survives -- pools stop their workers
+    with SIGTERM.
+    """
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is _raise_terminated:
+            signal.signal(sig, signal.SIG_DFL)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_default_termination_in_child)
 
 
 def main(argv=None) -> int:
@@ -120,6 +158,8 @@ def _run(argv: list[str], debug: bool) -> int:
         with one_blas_thread():
             rv = cli.main(args=argv, prog_name="shtools", standalone_mode=False)
     except Terminated as exc:
+        global _STOPPING
+        _STOPPING = None
         name = signal.Signals(exc.signum).name
         click.echo(f"error: stopped by {name}; no output was written", err=True)
         return 128 + exc.signum

@@ -21,9 +21,8 @@ dataset                shape / dtype      meaning
 =====================  =================  ==============================================
 
 Root attributes: the provenance set of every asset plus ``sh_order``,
-``object_names`` (JSON list), ``fps`` and ``processes`` (how many processes
-shared each frame; the datasets are the same bytes for any count, and
-``shtools diff`` ignores it).
+``object_names`` (JSON list) and ``fps``.  The file is the same bytes whatever
+the process count (the count is in ``bake --json``'s summary, not in the file).
 
 :class:`BakeWriter` streams frames into the file as they are computed (memory
 stays bounded by one frame) and renames the temporary file into place only when
@@ -285,7 +284,6 @@ class BakeWriter:
         parameters=None,
         inputs=None,
         fps: float | None = None,
-        processes: int | None = None,
         compression: str | None = "gzip",
     ):
         self.path = Path(path)
@@ -319,7 +317,6 @@ class BakeWriter:
             Path(p).name: sha256_file(p) for p in (inputs or {}).values() if p is not None
         }
         self.fps = fps
-        self.processes = processes
         self.compression = compression
         self._written = np.zeros(T, dtype=bool)
         self._stack: contextlib.ExitStack | None = None
@@ -360,8 +357,6 @@ class BakeWriter:
         }
         if self.fps is not None:
             root["fps"] = float(self.fps)
-        if self.processes is not None:  # provenance only: the bytes do not depend on it
-            root["processes"] = np.int64(self.processes)
         for k in sorted(root):
             f.attrs[k] = root[k]
         T, V = self.n_frames, self.n_vertices

@@ -91,7 +91,7 @@ def _dataset_summary(name, ds) -> dict:
 
 
 #: Root attributes that differ between equivalent builds and are never compared.
-IGNORED_ATTRS = ("generator", "processes")
+IGNORED_ATTRS = ("generator",)
 
 
 def _flatten_parameters(params, prefix="parameters."):

@@ -260,7 +260,7 @@ def bake_scene(
         if output is not None:
             writer = stack.enter_context(
                 _writer(prepared, output, frames, times, method, store_visibility,
-                        prepared.receivers_move(), _processes_used(pool, processes)))
+                        prepared.receivers_move()))
         clusters = bake_clusters(prepared, method, times[0])
         items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
         if pool.scheduler == "inline":
@@ -283,18 +283,7 @@ def bake_scene(
             pool_summary.update(pool.summary())
 
 
-def _processes_used(pool, processes: int | None) -> int:
-    """Processes that compute the frames: the frame's runtime processes when frames run
-    in this process, else the pool's workers (one process per frame each)."""
-    if pool.scheduler == "inline":
-        from shtools.runtime.parallel import resolve_processes
-
-        return resolve_processes(processes)
-    return int(pool.workers)
-
-
-def _writer(prepared: PreparedScene, output, frames, times, method, store_visibility, moving,
-            processes=None):
+def _writer(prepared: PreparedScene, output, frames, times, method, store_visibility, moving):
     from shtools.data_formats.bake import BakeWriter
 
     scene = prepared.scene
@@ -349,7 +338,6 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         object_names=names,
         parameters=parameters,
         inputs=inputs,
-        processes=processes,
         fps=st.fps,
     )
 
@@ -409,6 +397,8 @@ def bake_to_file(
         "method": method or scene.settings.method,
         "output": os.fspath(output),
         "pool": pool,
+        # not stored in the asset: its bytes must not depend on how it was computed
+        "processes": processes,
     }
 
 
