@@ -1,34 +1,51 @@
-"""Sphere-set fitting: outside volume E and wall time, variational vs baselines.
+"""Sphere-set fitting: outside volume E, wall and CPU time, variational vs baselines.
 
 For every mesh and sphere count N the table gives E = Σ V(S_i - T)/V(T) from
 the accurate flux evaluator (what the asset stores), the same E from an
 independent Monte-Carlo estimate (uniform points in each ball and in the box,
-inside T iff libigl's winding number >= 1/2), the surface coverage and the
-wall time of the fit.  A second table compares with the spheretree figures
-quoted in issue 3 (medial-axis method, Bradshaw & O'Sullivan).
+inside T iff libigl's winding number >= 1/2), the coverage of evenly spread
+surface points the fit never saw, the distinct spheres, and the wall and CPU
+time of the fit in this one process (``OPENBLAS_NUM_THREADS=1``), with the
+1-minute load average printed beside each time (the machine may be shared).
+``--baseline DIR`` also fits with another checkout (e.g. the previous
+release) in a fresh single-threaded process, one fit at a time, and scores its
+spheres with the same evaluators: speed-ups are measured side by side.
+A second table compares with the spheretree figures quoted in issue 3
+(medial-axis method, Bradshaw & O'Sullivan).
 
 Usage::
 
-    python benchmarks/bench_spheres.py            # procedural + real meshes, N = 16..128
+    python benchmarks/bench_spheres.py            # real meshes, N = 32, 64, 128
     python benchmarks/bench_spheres.py --quick    # procedural meshes, N = 8, 16
+    python benchmarks/bench_spheres.py --meshes dragon CesiumMan --counts 64 \
+        --methods variational --baseline ../fit-base --no-spheretree
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "meshes"
+DATA = REPO.parent / "shared" / "data"
 
 METHODS = ("variational", "octree", "kmeans")
-REAL_MESHES = {"bunny": "stanford-bunny.obj", "spot": "spot.obj",
-               "armadillo": "armadillo.obj", "dragon": "dragon.obj"}
+REAL_MESHES = {"bunny": "meshes/stanford-bunny.obj", "armadillo": "meshes/armadillo.obj",
+               "dragon": "meshes/dragon.obj", "spot": "meshes/spot.obj",
+               "teapot": "meshes/teapot.obj", "CesiumMan": "skinned/CesiumMan.glb"}
+
+#: Evenly spread surface points for the coverage column (independent of the
+#: fit's own samples: issue 17 found 0.19 % of them outside on the dragon).
+COVERAGE_POINTS = 100_000
 
 #: spheretree (medial axis) results quoted in issue 3: mesh, N, E, seconds.
 SPHERETREE = [("spot", 40, 0.33, 109.0), ("armadillo-9k", 60, 0.86, 191.0),
@@ -45,18 +62,20 @@ def _procedural():
     spec = importlib.util.spec_from_file_location("_sphere_test_meshes", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return {"torus": module.make_torus(), "capsules": module.make_capsule_union(),
-            "character": module.make_character()}
+    return {"torus": (None, module.make_torus()),
+            "capsules": (None, module.make_capsule_union()),
+            "character": (None, module.make_character())}
 
 
 def _real(names):
+    """``{name: (path, mesh)}`` of the shared real meshes that exist."""
     from shtools.geometry.mesh import load_mesh
 
     meshes = {}
     for name in names:
         path = DATA / REAL_MESHES[name]
         if path.exists():
-            meshes[name] = load_mesh(path)
+            meshes[name] = (path, load_mesh(path))
     return meshes
 
 
@@ -81,35 +100,104 @@ def monte_carlo_ratio(mesh, spheres, seed: int = 0) -> float:
     return float(outside.sum() / monte_carlo_volume(mesh, samples=MC_VOLUME, seed=seed + 1))
 
 
-def run(meshes: dict, counts, methods=METHODS, log=print):
-    """Fit every mesh x N x method; returns rows of dicts."""
+def load() -> str:
+    """The 1-minute load average and the core count, e.g. ``"3.2/2"``."""
+    return f"{os.getloadavg()[0]:.1f}/{os.cpu_count()}"
+
+
+def surface_coverage(mesh, centers, radii, seed: int = 5) -> float:
+    """Fraction of evenly spread surface points inside some sphere."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(trimesh.sample.sample_surface_even(mesh, COVERAGE_POINTS, seed=seed)[0])
+    inside = np.zeros(len(pts), dtype=bool)
+    tree = cKDTree(pts)
+    for c, r in zip(centers, radii, strict=True):
+        inside[tree.query_ball_point(c, r)] = True
+    return float(inside.mean())
+
+
+def distinct(centers, radii) -> int:
+    from shtools.geometry.sphere_fit import distinct_spheres
+
+    return distinct_spheres(np.asarray(centers), np.asarray(radii))
+
+
+def fit_here(mesh, n: int, method: str):
+    """(centers, radii, wall, cpu) of a fit in this process."""
     from shtools.geometry.sphere_fit import fit_spheres
 
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = fit_spheres(mesh, n, method=method, seed=0)
+    return (result.centers, result.radii, time.perf_counter() - wall,
+            time.process_time() - cpu)
+
+
+def fit_baseline(code: Path, path: Path, n: int):
+    """(centers, radii, wall, cpu) of the variational fit of another checkout."""
+    out = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "fit_worker.py"), str(path), str(n),
+         "--code", str(code)], check=True, capture_output=True, text=True,
+        env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    r = json.loads(out.stdout)
+    return np.array(r["centers"]), np.array(r["radii"]), r["wall"], r["cpu"]
+
+
+def run(meshes: dict, counts, methods=METHODS, log=print, baseline: Path | None = None):
+    """Fit every mesh x N x method (and the baseline's variational fit); rows of dicts."""
+    from shtools.geometry.outside_volume import OutsideVolume
+
     rows = []
-    for name, mesh in meshes.items():
+    for name, (path, mesh) in meshes.items():
+        evaluator = OutsideVolume(mesh)
         for n in counts:
-            for method in methods:
-                start = time.perf_counter()
-                result = fit_spheres(mesh, n, method=method, seed=0)
-                seconds = time.perf_counter() - start
+            runs = [(m, lambda m=m, mesh=mesh, n=n: fit_here(mesh, n, m)) for m in methods]
+            if baseline is not None and path is not None:
+                runs.insert(0, ("baseline",
+                                lambda path=path, n=n: fit_baseline(baseline, path, n)))
+            for method, fit in runs:
+                before = load()
+                centers, radii, wall, cpu = fit()
+                spheres = SimpleNamespace(centers=centers, radii=radii)
                 row = {"mesh": name, "triangles": len(mesh.faces), "N": n, "method": method,
-                       "spheres": len(result), "E": result.outside_volume_ratio,
-                       "E_mc": monte_carlo_ratio(mesh, result), "coverage": result.coverage,
-                       "seconds": seconds}
+                       "spheres": len(radii), "distinct": distinct(centers, radii),
+                       "E": evaluator.outside_volume_ratio(centers, radii),
+                       "E_mc": monte_carlo_ratio(mesh, spheres),
+                       "coverage": surface_coverage(mesh, centers, radii),
+                       "wall": wall, "cpu": cpu, "load": f"{before} -> {load()}"}
                 rows.append(row)
                 log(f"  {name} N={n} {method}: E={row['E']:.3f} (MC {row['E_mc']:.3f}) "
-                    f"{seconds:.1f} s", file=sys.stderr)
+                    f"wall {wall:.1f} s, CPU {cpu:.1f} s, load {row['load']}",
+                    file=sys.stderr, flush=True)
     return rows
 
 
 def table(rows) -> str:
-    lines = ["| mesh | triangles | N | method | spheres | E (flux) | E (Monte Carlo) | "
-             "coverage | seconds |",
-             "|---|---:|---:|---|---:|---:|---:|---:|---:|"]
+    lines = ["| mesh | triangles | N | method | spheres (distinct) | E (flux) | E (Monte Carlo) "
+             "| surface coverage | wall s | CPU s | load (1 min / cores) |",
+             "|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
         lines.append(f"| {r['mesh']} | {r['triangles']} | {r['N']} | {r['method']} | "
-                     f"{r['spheres']} | {r['E']:.3f} | {r['E_mc']:.3f} | {r['coverage']:.3f} | "
-                     f"{r['seconds']:.1f} |")
+                     f"{r['spheres']} ({r['distinct']}) | {r['E']:.3f} | {r['E_mc']:.3f} | "
+                     f"{r['coverage']:.5f} | {r['wall']:.1f} | {r['cpu']:.1f} | {r['load']} |")
+    return "\n".join(lines)
+
+
+def speedup_table(rows) -> str:
+    """The variational fit against the baseline checkout, side by side."""
+    by_key = {(r["mesh"], r["N"], r["method"]): r for r in rows}
+    lines = ["| mesh | N | CPU s baseline | CPU s now | CPU speed-up | wall speed-up | "
+             "E (MC) baseline | E (MC) now | coverage baseline | coverage now |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for (mesh, n, method), b in by_key.items():
+        v = by_key.get((mesh, n, "variational"))
+        if method != "baseline" or v is None:
+            continue
+        lines.append(f"| {mesh} | {n} | {b['cpu']:.1f} | {v['cpu']:.1f} | "
+                     f"{b['cpu'] / v['cpu']:.2f}x | {b['wall'] / v['wall']:.2f}x | "
+                     f"{b['E_mc']:.3f} | {v['E_mc']:.3f} | {b['coverage']:.5f} | "
+                     f"{v['coverage']:.5f} |")
     return "\n".join(lines)
 
 
@@ -134,37 +222,59 @@ def main(argv=None) -> None:
                         help="procedural meshes only, N = 8 and 16")
     parser.add_argument("--counts", type=int, nargs="*", default=None)
     parser.add_argument("--meshes", nargs="*", default=None,
-                        help="subset of: torus capsules character bunny spot armadillo dragon")
+                        help="subset of: torus capsules character " + " ".join(REAL_MESHES))
+    parser.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
+    parser.add_argument("--baseline", type=Path, default=None,
+                        help="another checkout whose variational fit runs beside this one")
     parser.add_argument("--spheretree-only", action="store_true",
                         help="only the comparison with the spheretree figures")
     parser.add_argument("--no-spheretree", action="store_true",
                         help="skip the comparison with the spheretree figures")
     args = parser.parse_args(argv)
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    print(f"CPU: {_cpu_model()}, {os.cpu_count()} cores; one process, one BLAS thread; "
+          f"load average at start {load()}\n")
     if args.spheretree_only:
         print("## Against spheretree (medial axis) at its sphere counts (target <= 0.5x)\n")
         print(spheretree_table())
         return
-    counts = args.counts or ([8, 16] if args.quick else [16, 32, 64, 128])
-    meshes = _procedural()
+    counts = args.counts or ([8, 16] if args.quick else [32, 64, 128])
+    meshes = _procedural() if args.quick or args.meshes else {}
     if not args.quick:
-        meshes.update(_real(REAL_MESHES))
+        meshes.update(_real([m for m in (args.meshes or REAL_MESHES) if m in REAL_MESHES]))
     if args.meshes:
         meshes = {k: v for k, v in meshes.items() if k in args.meshes}
-    rows = run(meshes, counts)
-    print("## Outside volume E and wall time\n")
+    rows = run(meshes, counts, methods=args.methods, baseline=args.baseline)
+    print("## Outside volume E, coverage and time\n")
     print(table(rows))
-    print("\n## Variational E / baseline E (Monte-Carlo E; target <= 0.5 at N = 64)\n")
-    print(ratio_table(rows))
+    if args.baseline is not None:
+        print(f"\n## Against {args.baseline} (same machine, same run)\n")
+        print(speedup_table(rows))
+    if {"octree", "kmeans"} <= set(args.methods):
+        print("\n## Variational E / baseline E (Monte-Carlo E; target <= 0.5 at N = 64)\n")
+        print(ratio_table(rows))
     if not args.quick and not args.no_spheretree:
         print("\n## Against spheretree (medial axis) at its sphere counts (target <= 0.5x)\n")
         print(spheretree_table())
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    import platform
+
+    return platform.processor() or "unknown"
 
 
 def spheretree_table() -> str:
     """Variational fits at spheretree's counts; Monte-Carlo E as the issue asks."""
     from shtools.geometry.sphere_fit import fit_spheres
 
-    real = _real(["spot", "armadillo", "bunny"])
+    real = {k: mesh for k, (_, mesh) in _real(["spot", "armadillo", "bunny"]).items()}
     cases = []  # (label, mesh, N, spheretree figures, restarts)
     if "spot" in real:
         cases.append(("spot", real["spot"], 40, SPHERETREE[0], 1))

@@ -224,11 +224,15 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--skip-stages", action="store_true")
+    parser.add_argument("--stages-only", action="store_true")
     args = parser.parse_args()
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     load = os.getloadavg()
     print(f"# bench_ssoc — {os.cpu_count()} cores, load average {load[0]:.1f} {load[1]:.1f} "
           f"{load[2]:.1f} (CPU process time per method; side by side in one run)")
+    if args.stages_only:
+        print(_markdown(stages(args.quick)))
+        return
     mesh = _load("stanford-bunny.obj", args.quick)
     t0 = time.perf_counter()
     rows, extra, n = accuracy(mesh, args.quick)

@@ -92,7 +92,8 @@ class Kit:
                      ("spheres", "tree", k / "spheres.h5", "-o", k / "tree.h5"),
                      ("tables", "log", "-n", 2, "--samples", 16, "-o", k / "tables.h5"),
                      ("light", "project", k / "env.hdr", "-n", 2, "-o", k / "light.h5"),
-                     ("bake", k / "scene.toml", "-o", k / "baked.h5", "--processes", 1, "--workers", 1)):
+                     ("bake", k / "scene.toml", "-o", k / "baked.h5", "--processes", 1,
+                      "--workers", 1)):
             code, _, err = _run(*args)
             assert code == 0, (args, err)
         # bad meshes

@@ -91,7 +91,7 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
                                   groups=data.groups)
     out = evaluate(data.vertices, data.normals, data.blockers, data.meshes, data.env,
                    data.lights, settings, methods, clusters=clusters, tables=data.tables,
-                   n_dirs=n_dirs)
+                   n_dirs=n_dirs, self_visibility=data.self_visibility, groups=data.groups)
     refs = out["references"]
     rows = [{"method": r.method, "rmse_vs_mesh": r.rmse_mesh, "rmse_vs_spheres": r.rmse_spheres,
              "seconds": r.seconds} for r in out["results"]]
@@ -105,6 +105,9 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
         "raytrace_mesh_seconds": refs["mesh_seconds"],
         "raytrace_spheres_seconds": refs["spheres_seconds"],
         "methods": rows,
+        # where the first method's error comes from, per receiver object
+        "split_method": rows[0]["method"],
+        "split": [dict(r, receiver=data.receiver_names[r["group"]]) for r in out["split"]],
     }
     if png_path is not None:
         from shtools.reference.maps import write_comparison_png
@@ -130,6 +133,19 @@ def _table(summary: dict) -> str:
     for r in summary["methods"]:
         lines.append(f"| {r['method']} | {r['rmse_vs_mesh']:.4f} | {r['rmse_vs_spheres']:.4f} | "
                      f"{r['seconds']:.4f} |")
+    lines += [
+        "",
+        f"error split of {summary['split_method']} per receiver (relative RMSE of radiance):",
+        "",
+        "| receiver | total vs mesh | sphere approximation | SHEXP (vs spheres) | "
+        "truncation (order n) | ringing (negative part) | negative vertices |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in summary["split"]:
+        trunc = "-" if r["truncation"] is None else f"{r['truncation']:.4f}"
+        lines.append(f"| {r['receiver']} | {r['total']:.4f} | {r['sphere_approximation']:.4f} | "
+                     f"{r['shexp']:.4f} | {trunc} | {r['ringing']:.4f} | "
+                     f"{r['negative_vertices']} |")
     if "png" in summary:
         lines.append(f"\nwrote {summary['png']}")
     return "\n".join(lines)

@@ -167,21 +167,31 @@ class OutsideVolume:
     volume : float
         V(T), the flux of (x - o)/3 through the surface about the box centre o
         (the enclosed volume for a closed mesh).
+    origin : ndarray, shape (3,)
+    scale : float
+        The evaluator works on ``(x - origin) / scale`` (box centre, diagonal).
     """
 
     def __init__(self, mesh: trimesh.Trimesh):
-        self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+        vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+        # work in a frame of unit diagonal about the box centre, so that every
+        # tolerance (here, in trimesh and in the quadrature) is relative to the
+        # mesh: results do not depend on its units (tested from 1e-9 to 1e9)
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        self.origin = 0.5 * (lo + hi)
+        self.scale = float(np.linalg.norm(hi - lo)) or 1.0
+        self.vertices = (vertices - self.origin) / self.scale
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
-        self.triangles = self.vertices[self.faces]  # (F, 3, 3)
+        self.triangles = self.vertices[self.faces]  # (F, 3, 3), unit frame
         self.centroids = self.triangles.mean(axis=1)
         self.tri_radius = np.max(
             np.linalg.norm(self.triangles - self.centroids[:, None], axis=-1), axis=1
         )
         self.max_tri_radius = float(self.tri_radius.max())
         self._tree = cKDTree(self.centroids)
-        origin = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
-        rel = self.triangles - origin
-        self.volume = float(np.sum(triple_product(rel[:, 0], rel[:, 1], rel[:, 2])) / 6.0)
+        rel = self.triangles
+        self.volume = float(np.sum(triple_product(rel[:, 0], rel[:, 1], rel[:, 2])) / 6.0
+                            ) * self.scale**3
 
     def winding_number(self, points: np.ndarray) -> np.ndarray:
         """Exact generalized winding numbers, shape (P, 3) -> (P,).
@@ -190,7 +200,7 @@ class OutsideVolume:
         the result is bit-for-bit reproducible (libigl's parallel
         ``winding_number`` is not, which would break byte-identical assets).
         """
-        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        points = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / self.scale
         out = np.empty(len(points))
         for i, p in enumerate(points):
             rel = self.triangles - p
@@ -209,13 +219,13 @@ class OutsideVolume:
         -------
         ndarray, shape (N,)
         """
-        centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
-        radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+        centers = (np.asarray(centers, dtype=np.float64).reshape(-1, 3) - self.origin) / self.scale
+        radii = np.asarray(radii, dtype=np.float64).reshape(-1) / self.scale
         # The far field Σ_far Ω is continuous at c, but w(c) and the near
         # triangles' Ω are not when c lies on the surface (a sample point).
         # Evaluating both at the same point nudged off c keeps them consistent.
         probe = centers + PROBE_OFFSET * radii[:, None] * _PROBE_DIRECTION
-        wind = self.winding_number(probe)
+        wind = self.winding_number(probe * self.scale + self.origin)
         result = FOUR_PI * wind * radii**3 / 3.0
         lists = self._tree.query_ball_point(centers, radii + self.max_tri_radius)
         owner = np.concatenate([np.full(len(ix), i) for i, ix in enumerate(lists)]).astype(np.int64)
@@ -241,7 +251,7 @@ class OutsideVolume:
             flux[cross] = _flux_crossing(rel[cross], r[cross], CROSSING_LEVELS)
             # replace this triangle's far-field share r³Ω/3 by its true flux
             np.add.at(result, o, flux - r**3 * omega / 3.0)
-        return result
+        return result * self.scale**3
 
     def outside_volume(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
         """V(S_i - T) = V(S_i) - V(S_i ∩ T), clipped at 0, shape (N,)."""

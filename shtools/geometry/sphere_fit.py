@@ -46,10 +46,12 @@ with its minimal bounding sphere).
 
 from __future__ import annotations
 
+import hashlib
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse
 import trimesh
 from scipy.spatial import cKDTree
 
@@ -138,6 +140,23 @@ COARSE_SHARE = 0.5
 #: Radius (fraction of the diagonal) below which a sphere counts as redundant.
 DEAD_RADIUS = 1e-9
 
+#: Smallest radius (fraction of the diagonal) of a sphere made by a split: a
+#: cut that leaves a (near) single point on one side would make a vanishing
+#: sphere, which the fit must not return.
+MIN_CHILD_RADIUS = 1e-6
+
+#: Surface cover: triangles not inside one sphere are split in four up to
+#: COVER_LEVELS times; pieces whose circumradius is below COVER_PIECE (fraction
+#: of the diagonal) are not split further but make a sphere grow.
+COVER_LEVELS = 8
+COVER_PIECE = 2e-4
+
+#: Evenly spread surface points added to the points the spheres must contain.
+COVER_SURFACE_POINTS = 20_000
+
+#: Fresh, evenly spread surface points on which the reported coverage is measured.
+COVERAGE_SAMPLES = 20_000
+
 #: Radius growth added to every sphere at the end (fraction of the diagonal) so
 #: that points on a sphere's boundary are inside after floating-point rounding.
 COVER_SLACK = 1e-9
@@ -163,6 +182,11 @@ class Solid:
         Every point the final spheres must contain (samples and vertices).
     volume : float
     diag : float
+    evaluations : int
+        Outside-volume evaluations of single spheres by the inner loop so far
+        (a radial profile counts once): a deterministic measure of the work.
+    recentred : dict
+        Results of :func:`_recenter` by (start, step, points) digest.
     """
 
     mesh: trimesh.Trimesh
@@ -174,6 +198,8 @@ class Solid:
     cover: np.ndarray
     volume: float
     diag: float
+    evaluations: int = 0
+    recentred: dict = field(default_factory=dict)
 
 
 def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | None = None,
@@ -239,7 +265,12 @@ def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | N
     # spheres shrink as N grows, so the quadrature they need refines with N
     budget = int(np.clip(FLUX_SAMPLES_PER_SPHERE * n, MIN_FLUX_SAMPLES, MAX_FLUX_SAMPLES))
     flux = FluxSamples.from_mesh(mesh, max_edge=diag / FLUX_EDGE_DIVISOR, max_samples=budget)
-    cover = np.vstack([points, v])
+    # the spheres must hold the whole surface (see _cover): dense, evenly
+    # spread surface points keep the shrink steps from opening gaps
+    # between the sparser fitting samples that the final cover must close
+    even = np.asarray(trimesh.sample.sample_surface_even(mesh, COVER_SURFACE_POINTS,
+                                                         seed=seed + 2)[0], dtype=np.float64)
+    cover = np.vstack([points, v, even])
     return Solid(mesh, evaluator, flux, surface, points, np.asarray(nb)[:, 1:], cover,
                  float(volume), diag)
 
@@ -328,7 +359,16 @@ def fit_spheres(
         from shtools.geometry.mesh import thicken
 
         mesh = thicken(mesh, float(thickness))
-    solid = discretize(mesh, n, seed=seed, samples=samples, path=path)
+    # fit in a frame of unit diagonal about the box centre: every tolerance
+    # and step below is then relative to the mesh, so the fit does not depend
+    # on its units (tested on cubes from 1e-9 to 1e9)
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    origin = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+    scale = float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    if not scale > 0 or not np.isfinite(scale):
+        raise InputError("the mesh encloses no volume (all vertices coincide)", path)
+    unit = trimesh.Trimesh((vertices - origin) / scale, np.asarray(mesh.faces), process=False)
+    solid = discretize(unit, n, seed=seed, samples=samples, path=path)
     if n > len(solid.points):
         raise InputError(
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
@@ -344,17 +384,53 @@ def fit_spheres(
             solid, n, rng, max_iterations=max_iterations,
             max_teleport_failures=max_teleport_failures, progress=progress)
         info.update(extra)
+        centers, radii, info["revived"] = _revive(solid, centers, radii)
+        info["evaluations"] = solid.evaluations
     elif method == "octree":
         centers, radii, _ = _octree(solid, n)
     else:
         centers, radii, _ = _kmeans(solid, n, rng)
     radii = _cover(solid, centers, radii)
-    covered = _covered_fraction(centers, radii, np.vstack([solid.surface, solid.mesh.vertices]))
+    info["distinct_spheres"] = distinct_spheres(centers, radii)
+    if method == "variational" and info["distinct_spheres"] < n:
+        # _revive replaces every vanishing or duplicate sphere; reaching this
+        # is a bug, not a property of the input
+        raise RuntimeError(f"the fit returned {n - info['distinct_spheres']} vanishing or "
+                           "duplicate spheres")
+    # coverage on fresh, evenly spread surface points the fit never saw
+    fresh = np.asarray(trimesh.sample.sample_surface_even(unit, COVERAGE_SAMPLES,
+                                                          seed=seed + 1)[0])
+    covered = _covered_fraction(centers, radii, fresh)
     outside = solid.evaluator.outside_volume(centers, radii)
     info["seconds"] = time.perf_counter() - start
-    info["volume"] = solid.volume
-    return SphereSet(centers, radii, outside_volume_ratio=float(outside.sum() / solid.volume),
+    info["volume"] = solid.volume * scale**3
+    return SphereSet(centers * scale + origin, radii * scale,
+                     outside_volume_ratio=float(outside.sum() / solid.volume),
                      coverage=covered, method=method, info=info)
+
+
+def distinct_spheres(centers: np.ndarray, radii: np.ndarray) -> int:
+    """Spheres that neither vanish nor repeat another (centre and radius within
+    DEAD_RADIUS of the set's extent).
+
+    Parameters
+    ----------
+    centers : ndarray, shape (N, 3)
+    radii : ndarray, shape (N,)
+
+    Returns
+    -------
+    int
+    """
+    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+    if len(radii) == 0:
+        return 0
+    extent = float(np.max(np.linalg.norm(centers - centers.mean(axis=0), axis=1) + radii))
+    tol = DEAD_RADIUS * max(extent, np.finfo(float).tiny)
+    live = radii > tol
+    keys = np.round(np.column_stack([centers[live], radii[live]]) / tol)
+    return len(np.unique(keys, axis=0))
 
 
 # --------------------------------------------------------------------------- shared
@@ -365,7 +441,17 @@ def _covered_fraction(centers, radii, points) -> float:
 
 
 def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Grow radii so that every cover point lies in some sphere (least growth)."""
+    """Grow radii (least growth first) until every cover point and every
+    point of the mesh's surface lies in some sphere.
+
+    A ball is convex, so a triangle (or piece of one) whose three corners are
+    in one sphere is inside it: the whole surface is covered, not only its
+    samples (covering samples alone left 0.19 % of the dragon's surface
+    outside).  Growing a sphere to hold a whole large triangle would cost
+    much outside volume (CesiumMan: E 1.50 -> 2.51), so triangles split
+    between spheres are subdivided first and only small pieces make a
+    sphere grow.
+    """
     radii = np.asarray(radii, dtype=np.float64).copy()
     pts = solid.cover
     inside = SphereSet(centers, radii).contains(pts)
@@ -374,7 +460,72 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
         d = np.linalg.norm(rest[:, None, :] - centers[None, :, :], axis=-1)
         j = np.argmin(d - radii[None, :], axis=1)
         np.maximum.at(radii, j, d[np.arange(len(rest)), j])
+    # the surface: a triangle inside one sphere is covered (a ball is convex);
+    # the others are split in four until inside one sphere or smaller than
+    # COVER_PIECE, and those pieces grow the sphere that needs least growth
+    tri = solid.mesh.vertices[solid.mesh.faces]  # (F, 3, 3)
+    per = max(1, 2_000_000 // (3 * len(centers)))
+    for _ in range(COVER_LEVELS + 1):
+        small = np.max(np.linalg.norm(tri - tri.mean(axis=1, keepdims=True), axis=-1),
+                       axis=1) <= COVER_PIECE * solid.diag
+        rest = []
+        for a in range(0, len(tri), per):
+            t = tri[a:a + per]
+            # the radius each sphere needs to hold each piece, (T, N)
+            need = np.sqrt(np.max(np.sum((t[:, :, None, :] - centers[None, None]) ** 2,
+                                         axis=-1), axis=1))
+            short = need - radii[None, :]
+            out = np.all(short > 0, axis=1)
+            grow = np.flatnonzero(out & small[a:a + per])
+            if len(grow):
+                j = np.argmin(short[grow], axis=1)
+                np.maximum.at(radii, j, need[grow, j])
+            rest.append(t[out & ~small[a:a + per]])
+        tri = np.concatenate(rest)
+        if len(tri) == 0:
+            break
+        mid = 0.5 * (tri[:, [0, 1, 2]] + tri[:, [1, 2, 0]])  # edge midpoints 01, 12, 20
+        tri = np.concatenate([np.stack([tri[:, 0], mid[:, 0], mid[:, 2]], axis=1),
+                              np.stack([mid[:, 0], tri[:, 1], mid[:, 1]], axis=1),
+                              np.stack([mid[:, 2], mid[:, 1], tri[:, 2]], axis=1),
+                              mid])
+    if len(tri):  # pieces left after COVER_LEVELS splits: grow for them
+        need = np.sqrt(np.max(np.sum((tri[:, :, None, :] - centers[None, None]) ** 2,
+                                     axis=-1), axis=1))
+        j = np.argmin(need - radii[None, :], axis=1)
+        np.maximum.at(radii, j, need[np.arange(len(tri)), j])
     return radii * (1.0 + 1e-12) + COVER_SLACK * solid.diag
+
+
+def _revive(solid: Solid, centers: np.ndarray, radii: np.ndarray):
+    """Replace vanishing (radius <= DEAD_RADIUS) and duplicate spheres by splits.
+
+    A sphere the search leaves at zero radius (or on top of another) costs no
+    outside volume but wastes one of the N spheres.  Each such slot takes
+    one half of the sphere whose own points (those no other sphere covers)
+    split with the largest gain; the union still covers every point.
+
+    Returns
+    -------
+    centers : ndarray, shape (N, 3)
+    radii : ndarray, shape (N,)
+    revived : int
+        Spheres replaced.
+    """
+    n = len(centers)
+    tol = DEAD_RADIUS * solid.diag
+    keys = np.round(np.column_stack([centers, radii]) / tol)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    keep = np.zeros(n, dtype=bool)
+    keep[first] = True
+    keep &= radii > tol
+    dead = int(n - keep.sum())
+    if dead == 0:
+        return centers, radii, 0
+    # no shrink afterwards: shrinking re-centres a sphere with few points of
+    # its own onto them, which is how spheres vanish in the first place
+    state = _split_clusters(solid, centers[keep], radii[keep], dead)
+    return state.centers, state.radii, dead
 
 
 # --------------------------------------------------------------------------- variational
@@ -432,64 +583,141 @@ def _flood_fill(solid: Solid, centers: np.ndarray, table: np.ndarray, step: floa
     return labels, radii
 
 
-def _sphere_objective(solid: Solid, hull: np.ndarray, p0: np.ndarray, delta: float):
-    """V(S - T) as a function of the centre, radius bounding ``hull``.
+#: Compass directions of the batched centre search (the six axis directions).
+_COMPASS = np.vstack([np.eye(3), -np.eye(3)])
 
-    Samples within reach of any sphere the optimiser may try are summed
-    exactly; the rest (always outside the sphere) enter through a first-order
-    expansion of Σ s_k/ρ_k³ about ``p0``.
+#: Compass-search iterations at most (each evaluates six candidates per sphere);
+#: the step starts at half the box and halves on every failure, so 6 failures
+#: reach POWELL_XTOL and the rest allow moves.
+COMPASS_ITERATIONS = 18
+
+
+def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.ndarray):
+    """Move every centre within its box ``p0 ± delta`` to minimise V(S_i - T), the
+    radius bounding ``hulls[i]``; all spheres in one batched compass search.
+
+    V(S - T) comes from :class:`FluxSamples`: samples within reach of any
+    sphere the search may try are summed exactly; the rest (always outside the
+    sphere) enter through a first-order expansion of Σ s_k/ρ_k³ about ``p0``.
+    Each round evaluates six axis moves of every sphere as one vectorised pass
+    over the concatenated near samples (no Python loop per sphere).
+
+    Parameters
+    ----------
+    solid : Solid
+    hulls : list of ndarray, shape (H_i, 3)
+        Points each sphere must contain (convex-hull vertices suffice).
+    p0 : ndarray, shape (M, 3)
+    delta : ndarray, shape (M,)
+
+    Returns
+    -------
+    centers : ndarray, shape (M, 3)
+    outside : ndarray, shape (M,)
+        V(S_i - T) at the returned centres (inner-loop estimate).
+    outside0 : ndarray, shape (M,)
+        The same at ``p0``.
     """
+    # the search is deterministic: a sphere re-centred before from the same
+    # start for the same points (after a rejected teleport, or once its
+    # cluster has settled) reuses that result (a third of them on CesiumMan)
+    keys = [hashlib.blake2b(b"".join([c.tobytes(), np.float64(d).tobytes(), h.tobytes()]),
+                            digest_size=16).digest()
+            for c, d, h in zip(p0, delta, hulls, strict=True)]
+    todo = [i for i, k in enumerate(keys) if k not in solid.recentred]
+    if len(todo) < len(keys):
+        if todo:
+            _recenter(solid, [hulls[i] for i in todo], p0[todo], delta[todo])
+        got = np.array([solid.recentred[k] for k in keys])  # (M, 5)
+        return got[:, :3].copy(), got[:, 3].copy(), got[:, 4].copy()
     flux = solid.flux
-    r0 = float(np.sqrt(np.max(np.sum((hull - p0) ** 2, axis=1))))
+    m = len(p0)
+    hull = np.concatenate(hulls)
+    hull_starts = np.concatenate([[0], np.cumsum([len(h) for h in hulls])])
+    hull_owner = np.repeat(np.arange(m), np.diff(hull_starts))
+    r0 = np.sqrt(np.maximum.reduceat(np.sum((hull - p0[hull_owner]) ** 2, axis=1),
+                                     hull_starts[:-1]))
     reach = r0 + 2.0 * np.sqrt(3.0) * delta
-    near = np.asarray(flux.tree.query_ball_point(p0, reach), dtype=np.int64)
-    mask = np.ones(len(flux.points), dtype=bool)
-    mask[near] = False
-    xf, qf = flux.points[mask], flux.q[mask]
-    d = xf - p0
-    rho2 = np.sum(d * d, axis=1)
-    rho = np.sqrt(rho2)
-    s = np.sum(d * qf, axis=1)
-    g0 = float(np.sum(s / (rho2 * rho)))
-    grad = -np.sum(qf / (rho2 * rho)[:, None], axis=0) + 3.0 * np.sum(
-        (s / (rho2 * rho2 * rho))[:, None] * d, axis=0)
-    xn, qn = flux.points[near], flux.q[near]
-    # expand |x - p|² and (x - p)·q so that one evaluation is two mat-vecs
-    xx = np.sum(xn * xn, axis=1)
-    xq = np.sum(xn * qn, axis=1)
-    hh = np.sum(hull * hull, axis=1)
+    lists = flux.tree.query_ball_point(p0, reach)
+    near = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
+    near_starts = np.concatenate([[0], np.cumsum([len(ix) for ix in lists])])
+    near_owner = np.repeat(np.arange(m), np.diff(near_starts))
+    # far field about p0: all samples minus the near ones, spheres in chunks
+    g0 = np.empty(m)
+    grad = np.empty((m, 3))
+    per = max(1, 2_000_000 // max(len(flux.points), 1))
+    for a in range(0, m, per):
+        b = min(a + per, m)
+        d = flux.points[None, :, :] - p0[a:b, None, :]  # (m, K, 3)
+        rho2 = np.einsum("mkj,mkj->mk", d, d)
+        far = np.ones(rho2.shape, dtype=bool)
+        sel = (near_owner >= a) & (near_owner < b)
+        far[near_owner[sel] - a, near[sel]] = False
+        inv3 = np.where(far, 1.0 / np.maximum(rho2, 1e-300) ** 1.5, 0.0)
+        sk = np.einsum("mkj,kj->mk", d, flux.q)
+        g0[a:b] = np.sum(sk * inv3, axis=1)
+        grad[a:b] = (-inv3 @ flux.q
+                     + 3.0 * np.einsum("mk,mkj->mj", sk * inv3 / np.maximum(rho2, 1e-300), d))
+    # near samples and hull points relative to p0: a compass move along axis
+    # k by t changes |y|² by -2 t y_k + t² and y·q by -t q_k, so the six
+    # candidates of every sphere cost a few elementwise passes
+    xn = flux.points[near] - p0[near_owner]
+    qn = flux.q[near]
+    hr = hull - p0[hull_owner]
+    segments = scipy.sparse.csr_matrix(
+        (np.ones(len(near)), np.arange(len(near)), near_starts), shape=(m, len(near)))
+    q6 = np.hstack([qn, -qn])
 
-    def outside(p: np.ndarray) -> float:
-        pp = float(p @ p)
-        r2 = float(np.max(hh - 2.0 * (hull @ p))) + pp
-        r3 = max(r2, 0.0) ** 1.5
-        rho2n = np.maximum(xx - 2.0 * (xn @ p) + pp, 1e-300)
-        sn = xq - qn @ p
-        inter = float(sn @ np.minimum(1.0, r3 / (rho2n * np.sqrt(rho2n))))
-        inter += r3 * (g0 + float(grad @ (p - p0)))
-        return FOUR_PI / 3.0 * r3 - inter
+    def outside(e: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """V(S - T) at centres ``p0 + e`` (``e (M, 3)``), shape (M,), and at
+        their six axis moves by ``h (M,)``, shape (M, 6)."""
+        y = xn - e[near_owner]
+        yh = hr - e[hull_owner]
+        t = h[near_owner, None]
+        th = h[hull_owner, None]
+        a = np.einsum("ij,ij->i", y, y)[:, None]
+        ah = np.einsum("ij,ij->i", yh, yh)[:, None]
+        # column 0: no move; 1-6: +x, +y, +z, -x, -y, -z
+        rho2 = np.maximum(np.hstack([a, a - 2.0 * t * np.hstack([y, -y]) + t * t]), 1e-300)
+        sn = np.einsum("ij,ij->i", y, qn)[:, None] - np.hstack([np.zeros((len(y), 1)), t * q6])
+        r2 = np.maximum.reduceat(np.hstack([ah, ah - 2.0 * th * np.hstack([yh, -yh]) + th * th]),
+                                 hull_starts[:-1], axis=0)
+        r3 = np.maximum(r2, 0.0) ** 1.5
+        inter = segments @ (sn * np.minimum(1.0, r3[near_owner] / (rho2 * np.sqrt(rho2))))
+        moves = e[:, None, :] + h[:, None, None] * np.vstack([np.zeros(3), _COMPASS])
+        inter += r3 * (g0[:, None] + np.einsum("mj,mdj->md", grad, moves))
+        solid.evaluations += 7 * m
+        f = FOUR_PI / 3.0 * r3 - inter
+        return f[:, 0], f[:, 1:]
 
-    return outside
-
-
-def _powell(f, p0: np.ndarray, delta: float) -> tuple[np.ndarray, float]:
-    """Powell's method on the centre within ``p0 ± delta``, in units of ``delta``.
-
-    scipy's bounded Powell line search has an absolute tolerance, so the
-    variables are scaled to make the fit independent of the mesh's units.
-    """
-    from scipy.optimize import minimize
-
-    def scaled(u):
-        return f(p0 + delta * u)
-
-    res = minimize(scaled, np.zeros(3), method="Powell", bounds=[(-1.0, 1.0)] * 3,
-                   options={"xtol": POWELL_XTOL, "ftol": 1e-3, "maxiter": 2, "maxfev": 80})
-    return p0 + delta * np.asarray(res.x, dtype=np.float64), float(res.fun)
+    # compass search in units of delta, inside the box [-1, 1]^3
+    u = np.zeros((m, 3))
+    step = np.full(m, 0.5)
+    f0 = None
+    for _ in range(COMPASS_ITERATIONS):
+        active = step >= POWELL_XTOL
+        if not np.any(active):
+            break
+        here, f = outside(delta[:, None] * u, delta * step)
+        if f0 is None:
+            f0 = best = here
+        # moves that would leave the box are not taken
+        cand = u[:, None, :] + step[:, None, None] * _COMPASS  # (M, 6, 3)
+        f = np.where(np.all(np.abs(cand) <= 1.0, axis=-1), f, np.inf)
+        j = np.argmin(f, axis=1)
+        fj = f[np.arange(m), j]
+        better = active & (fj < best - 1e-12 * np.abs(best))
+        u[better] = cand[better, j[better]]
+        best = np.where(better, fj, best)
+        step[active & ~better] *= 0.5
+    centers = p0 + delta[:, None] * u
+    for k, c, b, f in zip(keys, centers, best, f0, strict=True):
+        solid.recentred[k] = (*c, b, f)
+    return centers, best, f0
 
 
 def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
-    """Powell per cluster: minimise V(S_i - T) subject to bounding the cluster.
+    """Move every centre to minimise V(S_i - T) subject to bounding its cluster.
 
     Returns
     -------
@@ -505,24 +733,26 @@ def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
     order = np.argsort(labels, kind="stable")
     bounds_idx = np.searchsorted(labels[order], np.arange(n + 1))
     zero = 1e-9 * solid.volume
+    hulls, which = [], []
     for i in range(n):
         members = solid.points[order[bounds_idx[i]:bounds_idx[i + 1]]]
-        if len(members) == 0:
-            continue
-        hull = hull_vertices(members)
-        p0 = centers[i]
-        r0 = float(np.sqrt(np.max(np.sum((hull - p0) ** 2, axis=1))))
-        delta = CENTER_STEP * r0 + 1e-3 * solid.diag
-        f = _sphere_objective(solid, hull, p0, delta)
-        f0 = f(p0)
-        best_p, best_f = p0, f0
-        if f0 > zero:
-            p, fp = _powell(f, p0, delta)
-            if fp < f0:
-                best_p, best_f = p, fp
-        new_c[i] = best_p
-        radii[i] = float(np.sqrt(np.max(np.sum((hull - best_p) ** 2, axis=1))))
-        outside[i] = max(best_f, 0.0)
+        if len(members):
+            hulls.append(hull_vertices(members))
+            which.append(i)
+    if not which:
+        return new_c, radii, outside
+    which = np.asarray(which)
+    p0 = centers[which]
+    r0 = np.array([np.sqrt(np.max(np.sum((h - c) ** 2, axis=1))) for h, c in zip(hulls, p0,
+                                                                                  strict=True)])
+    p, fp, f0 = _recenter(solid, hulls, p0, CENTER_STEP * r0 + 1e-3 * solid.diag)
+    # a sphere already (almost) inside T stays where it is
+    keep = ~((f0 > zero) & (fp < f0))
+    p[keep], fp[keep] = p0[keep], f0[keep]
+    new_c[which] = p
+    radii[which] = [np.sqrt(np.max(np.sum((h - c) ** 2, axis=1))) for h, c in zip(hulls, p,
+                                                                                   strict=True)]
+    outside[which] = np.maximum(fp, 0.0)
     return new_c, radii, outside
 
 
@@ -544,6 +774,7 @@ def _lloyd_step(solid: Solid, centers: np.ndarray) -> _State:
     """
     r_grid = np.linspace(0.0, solid.diag, PROFILE_BINS)
     table = solid.flux.outside_profiles(centers, r_grid)
+    solid.evaluations += len(centers) * 2  # profiles, then the estimate below
     labels, _ = _flood_fill(solid, centers, table, r_grid[1])
     c, r, _ = _update_centers(solid, centers, labels)
     c, r = _shrink(solid, c, r, rounds=1)
@@ -625,9 +856,9 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
     (inner-loop estimate) undercuts its own by the most.  Splits are applied
     in order of gain, each re-deriving the sphere's own points after the
     earlier ones, so the union still covers every point; a split is only
-    made when it lowers the estimate, so the state's E is at most the input's.
-    Spheres that cannot be split usefully are added with zero radius (they
-    cost nothing; Lloyd steps and teleports put them to use).
+    made when it lowers the estimate.  If fewer than ``splits`` splits lower
+    it, the best remaining ones are made anyway (largest gain first): every
+    sphere of the result bounds points of its own, none has zero radius.
 
     Returns
     -------
@@ -641,6 +872,7 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
         return np.linalg.norm(pts - c, axis=1) <= r * (1 + 1e-9) + slack
 
     def outside(c: np.ndarray, r: float) -> float:
+        solid.evaluations += 1
         return max(FOUR_PI / 3 * r**3 - solid.flux.intersection_volume(c, r), 0.0)
 
     def best_split(own: np.ndarray, parent: float):
@@ -655,6 +887,8 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
             if side.all() or not side.any():
                 continue
             halves = [minimal_bounding_sphere(own[side]), minimal_bounding_sphere(own[~side])]
+            if min(halves[0][1], halves[1][1]) <= MIN_CHILD_RADIUS * solid.diag:
+                continue  # a (near) point-sized child would be a vanishing sphere
             out = [outside(c, r) for c, r in halves]
             if parent - sum(out) > best[0]:
                 best = (parent - sum(out), halves, out)
@@ -666,33 +900,56 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
     gains = np.array([best_split(pts[inside[i] & (count == 1)], parent_out[i])[0]
                       for i in range(len(centers))])
     new_c, new_r, new_o = list(centers), list(radii), list(parent_out)
-    # split in order of gain, re-deriving each sphere's own points after the
-    # earlier splits: a point two spheres shared must stay inside a child
-    for i in np.argsort(-gains, kind="stable")[:splits]:
-        own = pts[inside[i] & (count == 1)]
-        gain, halves, out = best_split(own, new_o[i])
-        if not gain > 0:
-            continue
+
+    def apply(i: int, halves, out) -> None:
+        nonlocal count
         (ca, ra), (cb, rb) = halves
         in_a, in_b = covers(ca, ra), covers(cb, rb)
-        count += in_a.astype(np.int64) + in_b - inside[i]
+        count = count + in_a.astype(np.int64) + in_b - inside[i]
         inside[i] = in_a
         inside.append(in_b)
         new_c[i], new_r[i], new_o[i] = ca, ra, out[0]
         new_c.append(cb)
         new_r.append(rb)
         new_o.append(out[1])
+
+    # split in order of gain, re-deriving each sphere's own points after the
+    # earlier splits: a point two spheres shared must stay inside a child
+    for i in np.argsort(-gains, kind="stable")[:splits]:
+        own = pts[inside[i] & (count == 1)]
+        gain, halves, out = best_split(own, new_o[i])
+        if gain > 0:
+            apply(i, halves, out)
+    # the rest: the best remaining splits even when they do not lower the
+    # estimate (zero-radius placeholders, as before, could survive the search
+    # as vanishing duplicates: the bunny's 64-sphere fit returned 25 of them)
+    def owned() -> np.ndarray:
+        return np.array([np.flatnonzero(inside[i] & (count == 1)).sum()
+                         for i in range(len(inside))])
+
+    pending: dict = {}
+    signature = owned()
     while len(new_c) < len(centers) + splits:
-        # a zero sphere next to the sphere of largest outside volume
-        j = int(np.argmax(new_o))
-        new_c.append(new_c[j] + 1e-3 * solid.diag)
-        new_r.append(0.0)
-        new_o.append(0.0)
+        for i in range(len(new_c)):
+            if i not in pending:
+                pending[i] = best_split(pts[inside[i] & (count == 1)], new_o[i])
+        i = max(pending, key=lambda k: pending[k][0])
+        gain, halves, out = pending[i]
+        if halves is None:
+            raise RuntimeError("no cluster left to split: too many spheres for the points")
+        apply(i, halves, out)
+        # re-derive the splits of the spheres whose own points changed
+        now = owned()
+        for j in np.flatnonzero(now[:len(signature)] != signature):
+            pending.pop(int(j), None)
+        pending.pop(i, None)
+        signature = now
     c = np.asarray(new_c, dtype=np.float64)
     r = np.asarray(new_r, dtype=np.float64)
     o = np.asarray(new_o, dtype=np.float64)
     r_grid = np.linspace(0.0, solid.diag, PROFILE_BINS)
     labels, _ = _flood_fill(solid, c, solid.flux.outside_profiles(c, r_grid), r_grid[1])
+    solid.evaluations += len(c)
     return _State(c, r, labels, o, float(o.sum() / solid.volume))
 
 
@@ -841,26 +1098,34 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
             inside[lost, i] = False
         if not recenter:
             break
-        # sequentially, so that a point two spheres share is dropped by at
-        # most one of them
-        for i in order:
-            own = inside[:, i] & (count == 1)
-            if not np.any(own):
-                continue
-            hull = hull_vertices(pts[own]) + origin
-            p0 = centers[i]
-            delta = CENTER_STEP * radii[i] + 1e-3 * solid.diag
-            f = _sphere_objective(solid, hull, p0, delta)
-            f0 = f(p0)
-            p, fp = _powell(f, p0, delta)
-            if not fp < f0:
-                continue
-            centers[i] = p
-            radii[i] = float(np.sqrt(np.max(np.sum((hull - p) ** 2, axis=1))))
-            dist[:, i] = distances(centers[i:i + 1])[:, 0]
-            now = dist[:, i] <= radii[i] + slack
-            count += now.astype(np.int64) - inside[:, i]
-            inside[:, i] = now
+        # all spheres at once, each for the points only it covers (disjoint sets)
+        owners = np.flatnonzero(count == 1)
+        owner_of = np.argmax(inside[owners], axis=1)
+        movers = [i for i in order if np.any(owner_of == i)]
+        if movers:
+            hulls = [hull_vertices(pts[owners[owner_of == i]]) + origin for i in movers]
+            movers = np.asarray(movers)
+            p0 = centers[movers]
+            p, fp, f0 = _recenter(solid, hulls, p0, CENTER_STEP * radii[movers] + 1e-3 * solid.diag)
+            moved_ok = fp < f0
+            for k in np.flatnonzero(moved_ok):
+                i = movers[k]
+                centers[i] = p[k]
+                radii[i] = float(np.sqrt(np.max(np.sum((hulls[k] - p[k]) ** 2, axis=1))))
+            if np.any(moved_ok):
+                changed = movers[moved_ok]
+                dist[:, changed] = distances(centers[changed])
+                covered = count > 0
+                inside[:, changed] = dist[:, changed] <= radii[changed] + slack
+                count = inside.sum(axis=1)
+                # a point two moved spheres shared may have been left by both:
+                # the sphere that needs the least growth takes it back
+                lost = np.flatnonzero(covered & (count == 0))
+                if len(lost):
+                    j = np.argmin(dist[lost] - radii, axis=1)
+                    np.maximum.at(radii, j, dist[lost, j])
+                    inside = dist <= radii + slack
+                    count = inside.sum(axis=1)
         # a fixed point: no sphere moved or shrank noticeably this round
         moved = np.max(np.linalg.norm(centers - before[0], axis=1) + before[1] - radii)
         if moved <= SHRINK_TOLERANCE * solid.diag:

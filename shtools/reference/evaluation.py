@@ -11,13 +11,21 @@ default, or ``--acc-order``), so baselines are compared at equal order.
 Every method is shaded identically (:meth:`shtools.runtime.ShadowRuntime.shade`)
 and compared with ray tracing of the real meshes and of the sphere set (after
 the self-shadow rules), by relative RMSE of per-vertex radiance.
+
+:func:`error_split` splits a method's error per receiver object into where it
+comes from (issue 16): the **sphere approximation** (sphere union vs real mesh,
+both ray traced), **SHEXP** (the method vs the sphere union it approximates),
+**truncation** (order-``n`` windowed shading of the real visibility vs the
+exact integral of the binary visibility against the same windowed order-``n``
+environment, environment only) and **ringing** (the norm of the negative radiance the
+method leaves, relative to the reference).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +35,6 @@ from shtools.reference.metrics import relative_rmse
 from shtools.reference.product_space import product_space_visibility
 from shtools.reference.raytrace import (
     DEFAULT_DIRECTIONS,
-    raytrace_visibility,
     sphere_union_visibility,
 )
 from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker
@@ -68,6 +75,10 @@ class EvalInputs:
     lights: list
     settings: dict
     tables: dict | None = None
+    #: name of each receiver group (``groups`` indexes it; one "ground" when None)
+    receiver_names: list = field(default_factory=lambda: ["ground"])
+    #: exact self-shadowing of rigid objects (runtime SelfVisibility), for the methods
+    self_visibility: list = field(default_factory=list)
 
 
 def eval_settings(inputs: EvalInputs, *, order: int | None = None,
@@ -79,7 +90,7 @@ def eval_settings(inputs: EvalInputs, *, order: int | None = None,
     """
     base = inputs.settings
     kwargs = {"order": base.get("order", order or 4)}
-    for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster"):
+    for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster", "deringing"):
         if base.get(key) is not None:
             kwargs[key] = base[key]
     kwargs["window"] = base.get("window", "cosine") if window else None
@@ -177,7 +188,8 @@ def parse_methods(text: str) -> list[tuple[str, str, int | None]]:
 
 def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, lights,
              settings: ShadowSettings, methods: str, *, clusters=None,
-             tables: dict | None = None, n_dirs: int = DEFAULT_DIRECTIONS) -> dict:
+             tables: dict | None = None, n_dirs: int = DEFAULT_DIRECTIONS,
+             self_visibility=(), groups=None) -> dict:
     """Run the methods and the two ray-traced references on one frame.
 
     Parameters
@@ -198,29 +210,39 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
         Log tables (used when their order matches a method's accumulation order).
     n_dirs : int
         Ray-tracing directions per vertex.
+    self_visibility : sequence of SelfVisibility
+        Exact self-shadowing of rigid objects, used by the runtime methods.
+    groups : ndarray of int, shape (V,), optional
+        Receiver object of each vertex, for the per-receiver :func:`error_split`
+        (default: one receiver).
 
     Returns
     -------
     dict
         ``references``: {"mesh": seconds, "spheres": (rmse vs mesh, seconds)},
-        ``results``: list of :class:`MethodResult`, and the radiance arrays of the
-        references (``mesh_radiance``, ``spheres_radiance``).
+        ``results``: list of :class:`MethodResult`, the radiance arrays of the
+        references (``mesh_radiance``, ``spheres_radiance``) and ``split``: the
+        first method's :func:`error_split` per receiver.
     """
     specs = parse_methods(methods)
     order = settings.order
-    shader = ShadowRuntime(dataclasses.replace(settings, acc_order=order, exp_method="ol"))
+    # references shaded raw (their negative lobes are part of order-n shading);
+    # methods with the settings' de-ringing
+    plain = dataclasses.replace(settings, acc_order=order, exp_method="ol")
+    ref_shader = ShadowRuntime(dataclasses.replace(plain, deringing="none"))
+    shader = ShadowRuntime(plain)
 
-    def shade(g):
-        return shader.shade(g, vertices, normals, env_sh, lights)
+    def shade(g, runtime=shader):
+        return runtime.shade(g, vertices, normals, env_sh, lights)
 
     t0 = time.perf_counter()
-    g_mesh = raytrace_visibility(vertices, normals, meshes, order, n_dirs)
+    g_mesh, binary, dirs, weights = _raytrace_binary(vertices, normals, meshes, order, n_dirs)
     t_mesh = time.perf_counter() - t0
     centers, radii = leaf_spheres(blockers)
     t0 = time.perf_counter()
     g_sph = sphere_union_visibility(vertices, normals, centers, radii, order, n_dirs)
     t_sph = time.perf_counter() - t0
-    r_mesh, r_sph = shade(g_mesh), shade(g_sph)
+    r_mesh, r_sph = shade(g_mesh, ref_shader), shade(g_sph, ref_shader)
     results = []
     for label, name, acc in specs:
         if name == "product":
@@ -237,17 +259,103 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
             use_tables = tables if tables is not None and np.asarray(
                 tables["log_zh"]).shape[-1] == acc_order else None
             rt = ShadowRuntime(s, tables=use_tables)
-            rt.visibility(vertices, normals, blockers, clusters)  # warm-up (tables, buffers)
+            sv = () if acc_order != settings.resolved_acc_order() else self_visibility
+            rt.visibility(vertices, normals, blockers, clusters,
+                          self_visibility=sv)  # warm-up (tables, buffers)
             t0 = time.perf_counter()
-            g = rt.visibility(vertices, normals, blockers, clusters)
+            g = rt.visibility(vertices, normals, blockers, clusters, self_visibility=sv)
             seconds = time.perf_counter() - t0
         rad = shade(g)
         results.append(MethodResult(label, relative_rmse(rad, r_mesh), relative_rmse(rad, r_sph),
                                     seconds, rad))
+    exact = None
+    if env_sh is not None:
+        env_only = ref_shader.shade(g_mesh, vertices, normals, env_sh)
+        exact = (env_only, _exact_environment(binary, dirs, weights, normals, env_sh, settings))
+    groups = np.zeros(len(vertices), dtype=np.int64) if groups is None else np.asarray(groups)
     return {
         "references": {"mesh_seconds": t_mesh, "spheres_seconds": t_sph,
                        "spheres_rmse_mesh": relative_rmse(r_sph, r_mesh)},
         "results": results,
         "mesh_radiance": r_mesh,
         "spheres_radiance": r_sph,
+        "split": error_split(results[0].radiance, r_mesh, r_sph, groups, exact),
     }
+
+
+def error_split(radiance, mesh_radiance, spheres_radiance, groups, exact=None) -> list[dict]:
+    """Where a method's error comes from, per receiver group (relative RMSEs).
+
+    Parameters
+    ----------
+    radiance : ndarray, shape (V, 3)
+        The method's radiance.
+    mesh_radiance, spheres_radiance : ndarray, shape (V, 3)
+        Ray-traced references of the real meshes and of the sphere union
+        (with the self-shadow rules), shaded raw at order ``n``.
+    groups : ndarray of int, shape (V,)
+        Receiver group of each vertex.
+    exact : tuple of ndarray (V, 3), optional
+        ``(order-n environment-only radiance of the real visibility, exact
+        integral of the binary visibility against the same environment)``.
+
+    Returns
+    -------
+    list of dict
+        Per group: ``group``, ``vertices``, ``total`` (vs mesh),
+        ``sphere_approximation`` (spheres vs mesh), ``shexp`` (method vs
+        spheres), ``truncation`` (None without ``exact``), ``ringing``
+        (``||min(radiance, 0)|| / ||mesh||``) and ``negative_vertices``.
+    """
+    rows = []
+    for g in np.unique(groups):
+        m = groups == g
+        ref = mesh_radiance[m]
+        norm = float(np.linalg.norm(ref)) or 1.0
+        rows.append({
+            "group": int(g), "vertices": int(m.sum()),
+            "total": relative_rmse(radiance[m], ref),
+            "sphere_approximation": relative_rmse(spheres_radiance[m], ref),
+            "shexp": relative_rmse(radiance[m], spheres_radiance[m]),
+            "truncation": (None if exact is None
+                           else relative_rmse(exact[0][m], exact[1][m])),
+            "ringing": float(np.linalg.norm(np.minimum(radiance[m], 0.0))) / norm,
+            "negative_vertices": int((radiance[m].min(axis=1) < 0).sum()),
+        })
+    return rows
+
+
+def _raytrace_binary(vertices, normals, meshes, order, n_dirs):
+    """Ray-traced binary visibility ``(V, Q)`` on the reference's rule, and its projection."""
+    from shtools.geometry.raycast import RayCaster
+    from shtools.reference.raytrace import RAY_OFFSET, quadrature_for
+    from shtools.sh import project
+
+    dirs, w = quadrature_for(n_dirs)
+    p = np.asarray(vertices, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    if not meshes:
+        vis = np.ones((p.shape[0], dirs.shape[0]), dtype=bool)
+    else:
+        caster = RayCaster.from_meshes(list(meshes))
+        vis = caster.visibility(p, dirs, normals=nrm, offset=RAY_OFFSET * caster.diagonal)
+    g = project(vis.astype(np.float64), dirs, w, order)
+    return g, vis, dirs, w
+
+
+def _exact_environment(binary, dirs, weights, normals, env_sh, settings) -> np.ndarray:
+    """``(1/pi) sum_q w_q L(s_q) V(s_q) max(0, N.s_q)``: no truncation of V or H, ``(V, 3)``.
+
+    ``L`` is the order-n environment with the settings' window, as shaded.
+    """
+    from shtools.runtime.shading import band_window
+    from shtools.sh import basis
+
+    order = settings.order
+    env = np.zeros((order * order, 3))
+    e = np.asarray(env_sh, dtype=np.float64)[: order * order]
+    env[: e.shape[0]] = e
+    env *= band_window(order, settings.resolved_window(), settings.window_h)[:, None]
+    radiance_dirs = basis(dirs, order) @ env  # (Q, 3)
+    cos = np.maximum(np.asarray(normals, dtype=np.float64) @ dirs.T, 0.0)  # (V, Q)
+    return ((binary * cos) * weights[None, :]) @ radiance_dirs / np.pi

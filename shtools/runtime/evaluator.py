@@ -442,7 +442,7 @@ class ShadowRuntime:
             Environment evaluation (same result).
 
         Negative radiance left by SH ringing is desaturated toward luminance
-        (``settings.deringing = "desaturate"``;
+        (``settings.deringing = "desaturate"``, the default;
         :func:`~shtools.runtime.shading.desaturate_negative`).
         """
         s = self.settings

@@ -52,7 +52,23 @@ class ScalingTable:
             raise ValueError(f"unknown interpolation {self.interpolation!r}")
         if self.out_of_range not in ("clamp", "error"):
             raise ValueError(f"unknown out_of_range policy {self.out_of_range!r}")
-        self._x = np.log(self.k) if self.interpolation == "linear-log-k" else self.k
+        self._x_k = np.log(self.k) if self.interpolation == "linear-log-k" else self.k
+        n = self.order
+        l = np.repeat(np.arange(n), 2 * np.arange(n) + 1)
+        m = np.arange(n * n) - (l * l + l)
+        self._abs_m = np.abs(m).astype(np.float64)
+        self._sign_m = np.sign(m).astype(np.float64)
+        self._partner = l * l + l - m
+        # X = D(Q), Q the quarter-turn about x taking +y to +z: R_y(b) = Q^T R_z(b) Q
+        quarter = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+        self._x = rotation_matrix(quarter, n)
+        # the pattern is sorted by (m, l_out): each output coefficient is one segment
+        change = np.flatnonzero(np.diff(self.rows)) + 1
+        self._group_starts = np.concatenate([[0], change]).astype(np.intp)
+        self._group_rows = self.rows[self._group_starts]
+        if np.unique(self._group_rows).size != self._group_rows.size:
+            raise ValueError("scaling pattern rows are not grouped (expected the canonical "
+                             "order m, l_out, l_in)")
         #: every metadata entry of the table (function, alpha, energy_preserving, ...)
         self.info = {key: v for key, v in table.items()
                      if key not in ("k", "rows", "cols", "values")}
@@ -88,8 +104,9 @@ class ScalingTable:
                                  f"[{lo:g}, {hi:g}]")
         k = np.clip(k, lo, hi)
         x = np.log(k) if self.interpolation == "linear-log-k" else k
-        i = np.clip(np.searchsorted(self._x, x, side="right") - 1, 0, self.k.size - 2)
-        t = (x - self._x[i]) / (self._x[i + 1] - self._x[i])
+        xs = self._x_k
+        i = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, self.k.size - 2)
+        t = (x - xs[i]) / (xs[i + 1] - xs[i])
         return (1.0 - t)[:, None] * self.values[i] + t[:, None] * self.values[i + 1]
 
     def matrix(self, k) -> np.ndarray:
@@ -100,20 +117,16 @@ class ScalingTable:
         out[:, self.rows, self.cols] = vals
         return out
 
-    def operator(self, k, axes) -> np.ndarray:
-        """Per-receiver linear operator ``D^T M(k) D``, shape ``(V, n*n, n*n)``.
-
-        Parameters
-        ----------
-        k : array_like, shape (V,)
-        axes : array_like, shape (V, 3)
-            Unit scaling axes (the direction that becomes ``+z``).
-        """
-        d = rotation_matrix(rotation_to_z(axes), self.order)  # (V, n^2, n^2)
-        return np.einsum("vji,vjk,vkl->vil", d, self.matrix(k), d, optimize=True)
-
     def apply(self, f, k, axes, *, shared: bool = False) -> np.ndarray:
         """Scale SH vectors about per-receiver axes: ``D^T M(k) D f``.
+
+        The rotation taking the axis (polar angle ``beta``, azimuth ``alpha``)
+        to ``+z`` is ``R_y(-beta) R_z(-alpha)``, and ``R_y(b) = Q^T R_z(b) Q``
+        with ``Q`` the fixed quarter-turn about ``x``; so
+        ``D = X^T Z(-beta) X Z(-alpha)`` with one fixed block-diagonal matrix
+        ``X = D(Q)`` (a BLAS product for all receivers) and z-rotations
+        ``Z`` (a cosine/sine per coefficient).  ``M(k)`` is applied sparsely
+        (one segment sum per output coefficient).
 
         Parameters
         ----------
@@ -130,17 +143,69 @@ class ScalingTable:
         ndarray, shape (V, n*n) or (V, n*n, C)
         """
         f = np.asarray(f, dtype=np.float64)
+        k = np.asarray(k, dtype=np.float64).reshape(-1)
+        size = self.order * self.order
         coeff_axis = 0 if shared else 1
-        if f.ndim <= coeff_axis or f.shape[coeff_axis] != self.order * self.order:
+        if f.ndim <= coeff_axis or f.shape[coeff_axis] != size:
             raise ValueError(f"SH vectors of shape {f.shape} do not match the scaling "
-                             f"table's order {self.order} ({self.order ** 2} coefficients)")
+                             f"table's order {self.order} ({size} coefficients)")
         vec = f.ndim == coeff_axis + 1
         g = f[..., None] if vec else f  # (V, n^2, C) or (n^2, C)
+        if shared:
+            g = np.broadcast_to(g, (k.size, *g.shape))
+        a = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
+        alpha = np.arctan2(a[:, 1], a[:, 0])
+        beta = np.arctan2(np.hypot(a[:, 0], a[:, 1]), a[:, 2])
+        n_c = g.shape[-1]
+        out = np.empty((k.size, n_c, size))
+        vals = self.values_at(k)
+        xt = np.ascontiguousarray(self._x.T)
+        for s in range(0, k.size, APPLY_CHUNK):
+            sl = slice(s, min(s + APPLY_CHUNK, k.size))
+            rows = sl.stop - sl.start
+            # (receiver, channel) rows, coefficients last: X is one GEMM for all rows
+            x = np.swapaxes(g[sl], 1, 2).reshape(rows * n_c, size)
+            ca, sa = self._trig(np.repeat(alpha[sl], n_c))
+            cb, sb = self._trig(np.repeat(beta[sl], n_c))
+            x = self._zrot(x, ca, -sa) @ xt  # D = X^T Z(-beta) X Z(-alpha)
+            x = self._zrot(x, cb, -sb) @ self._x
+            x = self._scale(np.repeat(vals[sl], n_c, axis=0), x)
+            x = self._zrot(x @ xt, cb, sb) @ self._x  # D^T = Z(alpha) X^T Z(beta) X
+            out[sl] = self._zrot(x, ca, sa).reshape(rows, n_c, size)
+        out = np.swapaxes(out, 1, 2)
+        return out[..., 0] if vec else out
+
+    def _trig(self, angle):
+        """``cos(|m| angle)``, ``sin(|m| angle)`` per coefficient, shape ``(R, n*n)``."""
+        ma = angle[:, None] * np.arange(self.order, dtype=np.float64)[None, :]
+        m = self._abs_m.astype(np.intp)
+        return np.cos(ma)[:, m], np.sin(ma)[:, m]
+
+    def _zrot(self, x, cos_m, sin_m):
+        """Rotation about +z of rows ``x (R, n*n)`` by the angle whose
+        ``cos(|m| a)``, ``sin(|m| a)`` are given:
+        ``out[l,m] = cos(|m| a) x[l,m] - sign(m) sin(|m| a) x[l,-m]``."""
+        return cos_m * x - self._sign_m * sin_m * x[:, self._partner]
+
+    def _scale(self, vals, x):
+        """Sparse ``M x`` per row: ``vals (R, P)``, ``x (R, n*n)``."""
+        out = np.zeros_like(x)
+        out[:, self._group_rows] = np.add.reduceat(vals * x[:, self.cols],
+                                                   self._group_starts, axis=1)
+        return out
+
+    def operator(self, k, axes) -> np.ndarray:
+        """Per-receiver dense operator ``D^T M(k) D``, shape ``(V, n*n, n*n)``.
+
+        Built with :func:`shtools.sh.rotation_matrix` (quadrature), independently
+        of the factored rotations of :meth:`apply`; for checks and small batches.
+        """
         d = rotation_matrix(rotation_to_z(axes), self.order)  # (V, n^2, n^2)
-        x = np.matmul(d, g)  # rotate the axis to +z
-        x = np.matmul(self.matrix(k), x)  # scale about +z
-        x = np.matmul(np.swapaxes(d, -1, -2), x)  # rotate back
-        return x[..., 0] if vec else x
+        return np.einsum("vji,vjk,vkl->vil", d, self.matrix(k), d, optimize=True)
+
+
+#: Receivers per pass of :meth:`ScalingTable.apply` (bounds the temporaries).
+APPLY_CHUNK = 8192
 
 
 def rotation_to_z(axes) -> np.ndarray:

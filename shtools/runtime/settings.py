@@ -318,7 +318,7 @@ class ShadowSettings:
     vertices_per_cluster: int = setting(400, "int", lo=1,
                                         doc="average receiver-cluster size")
     self_shadow: bool = setting(True, "bool", doc="self-shadow rules of Sec. 6.2")
-    deringing: str = setting("none", "choice", choices=DERINGING_CHOICES,
+    deringing: str = setting("desaturate", "choice", choices=DERINGING_CHOICES,
                              doc="negative radiance from SH ringing: desaturate toward "
                                  "luminance (0 where it is negative) or keep it")
     chunk_pairs: int = setting(1 << 16, "int", lo=256, scene=False,

@@ -8,4 +8,6 @@ schema and the baker see it:
     import shtools.fields.blocker  # noqa: F401  (registers blocker = { field = ... })
 """
 
+# blocker = { deformable = true } (deformable shadow fields, skinned objects)
+import shtools.scene.deformable
 import shtools.scene.light_shadows  # noqa: F401  (shadows = "ssoc" | "raytrace" | "auto")

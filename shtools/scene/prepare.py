@@ -77,6 +77,8 @@ class PreparedScene:
     env_sh: np.ndarray | None  # (n*n, 3)
     tables: dict | None
     inputs: dict[str, Path] = field(default_factory=dict)
+    #: a finite environment sphere (shtools.scene.midrange), None at infinity
+    midrange: object | None = None
 
     @property
     def receivers(self) -> list[PreparedObject]:
@@ -215,6 +217,8 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
         A file cannot be used, a skinned glTF has no skin or animation, SH
         orders disagree between assets, a bound set does not match its rig.
     """
+    from shtools.scene.midrange import prepare_midrange
+
     inputs: dict[str, Path] = {}
     objects = []
     for obj in scene.objects:
@@ -226,8 +230,9 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
         _object_blocker(prep, model, scene.settings, inputs)
         objects.append(prep)
     _self_visibility(scene, objects, inputs, log)
-    return PreparedScene(scene, objects, _environment(scene, inputs), _tables(scene, inputs),
-                         inputs)
+    env_sh = _environment(scene, inputs)
+    return PreparedScene(scene, objects, env_sh, _tables(scene, inputs), inputs,
+                         prepare_midrange(scene, env_sh, inputs))
 
 
 def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log) -> None:

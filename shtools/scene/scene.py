@@ -63,9 +63,9 @@ class Settings(ShadowSettings):
                                   doc="log tables asset (.h5) of the accumulation order")
     method: str = setting("default", "choice", choices=bake_method_names,
                           doc="visibility method (shtools.scene.shadows)")
-    self_visibility: bool = setting(False, "bool",
+    self_visibility: bool = setting(True, "bool",
                                     doc="exact self-shadowing of rigid role-\"both\" objects")
-    local_visibility: bool = setting(False, "bool",
+    local_visibility: bool = setting(True, "bool",
                                      doc="local visibility g_p of skinned role-\"both\" objects")
 
 
@@ -132,6 +132,11 @@ class EnvironmentSpec:
     coeffs: np.ndarray | None = None
     intensity: float = 1.0
     rotate: float = 0.0  # radians about +Y
+    #: mid-range lighting: the environment lies on a sphere of this radius about
+    #: ``center`` (None: at infinity); ``scaling`` an optional midrange table asset
+    radius: float | None = None
+    center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scaling: Path | None = None
 
 
 @dataclass
@@ -367,6 +372,12 @@ def _object(t: schema.Object, index: int, data: dict, settings: Settings, ctx: _
 def _environment(t: schema.Environment, settings: Settings, ctx: _Ctx,
                  base: Path) -> EnvironmentSpec:
     env = EnvironmentSpec(intensity=float(t.intensity), rotate=math.radians(t.rotate_deg))
+    if t.radius is not None:
+        env.radius = float(t.radius)
+        if t.center is not None:
+            env.center = np.asarray(t.center, dtype=float)
+        if t.scaling is not None:
+            env.scaling = _file(t.scaling, base, ctx.sub("scaling"), (".h5",))
     if t.light is not None:
         env.kind, env.path = "light", _file(t.light, base, ctx.sub("light"), (".h5",))
     elif t.image is not None:

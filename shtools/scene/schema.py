@@ -321,11 +321,18 @@ class Environment(Table):
     coeffs: list[vector(3)] | None = None
     intensity: Annotated[Number, Field(ge=0)] = 1.0
     rotate_deg: Number = 0.0
+    # mid-range lighting (Wang et al. Sec. 3.2): the environment on a finite sphere
+    radius: Annotated[Number, Field(gt=0)] | None = None
+    center: vector(3) | None = None
+    scaling: FilePath | None = None
 
     @model_validator(mode="before")
     @classmethod
     def _known_keys(cls, data):
         data = Table._known_keys.__func__(cls, data)
+        for key in ("center", "scaling"):
+            if key in data and "radius" not in data:
+                raise fail("only applies with 'radius' (a finite environment sphere)", key)
         if sum(k in data for k in ("light", "image", "coeffs")) > 1:
             raise fail("give only one of 'light' (a light asset), 'image' (an HDR "
                        "lat-long map) or 'coeffs' (inline SH)")

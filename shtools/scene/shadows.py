@@ -248,8 +248,11 @@ def shade_frame(run: BakeRun, state, visibility: np.ndarray) -> np.ndarray:
         groups.setdefault(way, []).append(light)
     joined = [light for way, group in groups.items() if LIGHT_SHADOWS[way].joins_environment
               for light in group]
-    radiance = run.runtime.shade(visibility, state.vertices, state.normals,
-                                 run.prepared.env_sh, sphere_lights=joined)
+    env = run.prepared.env_sh
+    if run.prepared.midrange is not None:  # a finite environment sphere: per-vertex SH
+        env = run.prepared.midrange.radiance_sh(state.vertices)
+    radiance = run.runtime.shade(visibility, state.vertices, state.normals, env,
+                                 sphere_lights=joined)
     for way, group in groups.items():
         if not LIGHT_SHADOWS[way].joins_environment:
             radiance = radiance + LIGHT_SHADOWS[way].radiance(run, state, visibility, group)

@@ -70,8 +70,7 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     if isinstance(source, str | Path):
         return _from_asset(obj, Path(source), acc_order), Path(source)
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
-    # convexity on the merged mesh (primitives with flat normals duplicate their edges)
-    if trimesh.Trimesh(obj.vertices, obj.faces, process=True).is_convex:
+    if is_convex(obj.vertices, obj.faces):
         return np.zeros((len(obj.vertices), size), dtype=np.float32), None
     from shtools.fields.self_visibility import mesh_transfer
 
@@ -80,6 +79,26 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
             "cache it with 'shtools transfer')")
     _, f, _ = mesh_transfer(mesh, acc_order, normals=obj.normals)
     return f.astype(np.float32), None
+
+
+#: A closed mesh whose volume is within this fraction of its convex hull's is convex.
+CONVEX_RTOL = 1e-6
+
+
+def is_convex(vertices, faces) -> bool:
+    """Whether a mesh is the boundary of a convex solid (it cannot shadow itself).
+
+    Closed (after merging duplicate vertices: primitives with flat normals split
+    their edges) and with the volume of its convex hull.  ``trimesh``'s own
+    ``is_convex`` calls three overlapping boxes (an arch) convex.
+    """
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices, faces, process=True)
+    if not mesh.is_watertight or not mesh.is_winding_consistent:
+        return False
+    hull = mesh.convex_hull.volume
+    return hull > 0 and abs(hull - mesh.volume) <= CONVEX_RTOL * hull
 
 
 def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:

@@ -210,3 +210,17 @@ def test_shading_with_a_per_vertex_environment():
         for c in range(3):
             ref = triple(h[v], env[v, :, c] * win, g[v] * win)
             assert ours[v, c] == pytest.approx(ref, rel=1e-4, abs=1e-5)
+
+
+@pytest.mark.parametrize("order", [1, 2, 4, 6])
+def test_factored_apply_equals_dense_operator(order):
+    # apply() factors the rotation (z-rotations and a fixed quarter-turn); operator()
+    # builds D^T M D from rotation_matrix's quadrature: two independent routes
+    table = ScalingTable(build_scaling_table(order, "cone", samples=9))
+    rng = np.random.default_rng(order)
+    axes = rng.normal(size=(40, 3))
+    axes[:4] = [[0, 0, 1], [0, 0, -1], [1e-9, 0, 1], [0, 1, 0]]
+    k = np.exp(rng.uniform(-2, 2, 40))
+    f = rng.normal(size=(40, order * order))
+    dense = np.einsum("vij,vj->vi", table.operator(k, axes), f)
+    np.testing.assert_allclose(table.apply(f, k, axes), dense, atol=1e-12 * order**2)

@@ -222,7 +222,7 @@ role = "blocker"
          "did you mean 'kmeans'? got 'kmean'"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, exact = true }'),
          "objects[1] ('ball').blocker: give exactly one of 'spheres', 'tree', 'bound', 'fit', "
-         "'exact' (see docs/scenes.md)"),
+         "'exact', 'deformable' (see docs/scenes.md)"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { exact = false }'),
          "objects[1] ('ball').blocker.exact: must be true (or leave it out)"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nscale = [1, 0, 1]'),

@@ -132,3 +132,21 @@ self_visibility = true
 """
     with pytest.raises(InputError, match="objects with role"):
         parse_scene(text)
+
+
+def test_convexity_test_traces_an_arch_of_overlapping_boxes():
+    """Only a convex mesh may skip the ray tracing: an arch of three overlapping boxes is
+    not (trimesh's is_convex says it is), a capsule and a subdivided box are."""
+    from shtools.scene.primitives import make_primitive
+    from shtools.scene.transfer import is_convex
+
+    parts = [make_primitive("box", {"extents": [0.3, 1.2, 0.3], "center": [-0.65, 0.6, 0.0]}),
+             make_primitive("box", {"extents": [0.3, 1.2, 0.3], "center": [0.65, 0.6, 0.0]}),
+             make_primitive("box", {"extents": [1.6, 0.3, 0.4], "center": [0.0, 1.35, 0.0]})]
+    arch = trimesh.util.concatenate([p.mesh for p in parts])
+    assert not is_convex(arch.vertices, arch.faces)
+    for kind, params in (("capsule", {}), ("box", {"subdivisions": 3}), ("sphere", {})):
+        prim = make_primitive(kind, params).mesh
+        assert is_convex(prim.vertices, prim.faces), kind
+    torus = trimesh.creation.torus(major_radius=0.6, minor_radius=0.25)
+    assert not is_convex(torus.vertices, torus.faces)

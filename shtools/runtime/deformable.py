@@ -1,0 +1,193 @@
+r"""Deformable shadow fields at run time: look up, rotate, scale (Wang et al. Sec. 3.1).
+
+A :class:`DeformableField` holds an object's visibility sampled this frame on
+its bounding sphere (:mod:`shtools.fields.deformable` samples it).  For a
+receiver ``p`` with ``w = (p - c)/|p - c|`` and ``k = |p - c| / r``:
+
+1. ``S_r(w)``: bilinear interpolation of the samples on the polar layout (the
+   poles use the mean of the nearest ring, so the lookup is continuous);
+2. ``S_d = D^T M(k) D S_r(w)`` with ``D`` rotating the direction from ``p``
+   towards ``c`` to ``+z`` and ``M`` the plain **cone** scaling table
+   (:class:`shtools.runtime.scaling.ScalingTable`); ``k < 1`` (receivers inside
+   the bounding sphere, the object's own vertices) expands the occluded region:
+   self-shadowing.
+
+In **log space** the same is done to the sample's SH log: scaling is linear,
+so the scaled logs of several objects add and join the SHEXP accumulation
+with one exp.  Scaling does not commute exactly with the pointwise log after
+truncation; ``benchmarks/bench_scaling.py`` measures the difference.
+
+Receivers farther than the table's largest ``k`` (8 bounding radii by default:
+the sphere subtends < 7.2 degrees) get no contribution (culled); closer than
+its smallest ``k`` the table clamps.
+
+NumPy only (the runtime's import rule).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from shtools.runtime.scaling import ScalingTable
+
+
+def layout_directions(rings: int, azimuths: int) -> np.ndarray:
+    """Unit directions of the polar sample layout, shape ``(rings * azimuths, 3)``.
+
+    Sample ``i * azimuths + j`` is at polar angle ``pi (i + 1/2) / rings`` from
+    ``+z`` and azimuth ``2 pi (j + 1/2) / azimuths`` from ``+x`` towards ``+y``.
+    """
+    theta = math.pi * (np.arange(rings) + 0.5) / rings
+    phi = 2.0 * math.pi * (np.arange(azimuths) + 0.5) / azimuths
+    tt, pp = np.meshgrid(theta, phi, indexing="ij")
+    return np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)],
+                    axis=-1).reshape(-1, 3)
+
+
+@dataclass
+class DeformableField:
+    """One frame's visibility samples of an object on its bounding sphere.
+
+    Attributes
+    ----------
+    center : ndarray, shape (3,)
+    radius : float
+    layout : (int, int)
+        Rings x azimuths of :func:`layout_directions`.
+    visibility : ndarray, shape (S, n*n)
+        SH visibility at each sample point (world frame), ``S = rings * azimuths``.
+    log_visibility : ndarray, shape (S, n*n) or None
+        Its SH log (eigen-inversion), for log-space accumulation.
+    rays : int
+        Rays cast to sample it.
+    occluded_fraction : float
+        Share of those rays that hit.
+    """
+
+    center: np.ndarray
+    radius: float
+    layout: tuple
+    visibility: np.ndarray
+    log_visibility: np.ndarray | None = None
+    rays: int = 0
+    occluded_fraction: float = 0.0
+
+    @property
+    def order(self) -> int:
+        return math.isqrt(self.visibility.shape[1])
+
+
+def interpolate_samples(samples, layout, directions) -> np.ndarray:
+    """Bilinear interpolation of per-sample vectors on the polar layout.
+
+    Parameters
+    ----------
+    samples : ndarray, shape (S, C)
+    layout : (int, int)
+        Rings x azimuths.
+    directions : array_like, shape (V, 3)
+        Unit directions from the centre.
+
+    Returns
+    -------
+    ndarray, shape (V, C)
+    """
+    rings, az = int(layout[0]), int(layout[1])
+    grid = np.asarray(samples).reshape(rings, az, -1)
+    # virtual pole rows (the ring mean) make the lookup continuous across the poles
+    grid = np.concatenate([grid[:1].mean(axis=1, keepdims=True).repeat(az, axis=1), grid,
+                           grid[-1:].mean(axis=1, keepdims=True).repeat(az, axis=1)])
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    theta = np.arccos(np.clip(d[:, 2], -1.0, 1.0))
+    phi = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * math.pi)
+    # row coordinate in the padded grid: pole at 0 (theta 0), ring i at i + 1, the
+    # other pole at rings + 1; the pole is half a ring spacing from the first ring
+    x = theta * rings / math.pi  # ring i at x = i + 1/2
+    u = np.where(x < 0.5, 2.0 * x,
+                 np.where(x > rings - 0.5, rings + 1.0 - 2.0 * (rings - x), x + 0.5))
+    u = np.clip(u, 0.0, rings + 1.0)
+    i0 = np.minimum(np.floor(u).astype(np.intp), rings)
+    tu = (u - i0)[:, None]
+    v = phi * az / (2.0 * math.pi) - 0.5
+    j0f = np.floor(v)
+    tv = (v - j0f)[:, None]
+    j0 = np.mod(j0f.astype(np.intp), az)
+    j1 = np.mod(j0 + 1, az)
+    return ((1 - tu) * ((1 - tv) * grid[i0, j0] + tv * grid[i0, j1])
+            + tu * ((1 - tv) * grid[i0 + 1, j0] + tv * grid[i0 + 1, j1]))
+
+
+def deformable_visibility(field: DeformableField, table: ScalingTable, points, *,
+                          log: bool = False) -> np.ndarray:
+    """Scaled field at receivers: visibility (product space) or its log.
+
+    Parameters
+    ----------
+    field : DeformableField
+    table : ScalingTable
+        A plain ``cone`` table of the field's order.
+    points : array_like, shape (V, 3)
+    log : bool
+        Scale the log samples (sum the result with other logs, exp once);
+        otherwise the visibility samples (multiply with other visibilities).
+
+    Returns
+    -------
+    ndarray, shape (V, n*n)
+        Culled receivers get the unoccluded value (log 0, visibility
+        ``sqrt(4 pi) e0``).
+    """
+    if table.function != "cone":
+        raise ValueError(f"deformable fields need a 'cone' scaling table, got "
+                         f"'{table.function}'")
+    if table.info.get("energy_preserving"):
+        raise ValueError("deformable visibility needs a plain (not energy-preserving) table")
+    if table.order != field.order:
+        raise ValueError(f"scaling table order {table.order} does not match the field's "
+                         f"order {field.order}")
+    samples = field.log_visibility if log else field.visibility
+    if samples is None:
+        raise ValueError("the field was sampled without its log (log=False)")
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    rel = pts - field.center
+    dist = np.linalg.norm(rel, axis=1)
+    k = dist / field.radius
+    out = np.zeros((pts.shape[0], samples.shape[1]))
+    if not log:
+        out[:, 0] = math.sqrt(4.0 * math.pi)
+    near = np.flatnonzero(k <= table.k_range[1])
+    if near.size == 0:
+        return out
+    w = np.where(dist[near, None] > 0, rel[near] / np.maximum(dist[near, None], 1e-300),
+                 [0.0, 0.0, 1.0])
+    s_r = interpolate_samples(samples, field.layout, w)
+    out[near] = table.apply(s_r, k[near], -w)  # axis: from the receiver to the centre
+    return out
+
+
+class DeformableBlocker:
+    """A :class:`~shtools.runtime.LogBlocker` of one frame's deformable field.
+
+    The runtime adds its log to the other blockers' before the one exp.
+
+    Parameters
+    ----------
+    field : DeformableField
+        Sampled with its log, at the runtime's accumulation order.
+    table : ScalingTable
+        Plain cone table of the same order.
+    """
+
+    def __init__(self, field: DeformableField, table: ScalingTable):
+        self.field = field
+        self.table = table
+
+    def log_visibility(self, points, normals, order: int) -> np.ndarray:
+        """Scaled log visibility ``(V, order*order)`` (see :func:`deformable_visibility`)."""
+        if order != self.field.order:
+            raise ValueError(f"the deformable field was sampled at order {self.field.order} "
+                             f"but the runtime accumulates at order {order}")
+        return deformable_visibility(self.field, self.table, points, log=True)
