@@ -52,11 +52,9 @@ def bake(scene, output, frames_text, method, store_visibility, processes, schedu
     parsed = load_scene(scene)
     guard_outputs({"-o": output}, scene_files(parsed))
     frames = parse_frames(frames_text, parsed.settings.frames, scene)
-    with progress(total=len(frames), desc="bake") as bar:
-        summary = bake_to_file(parsed, output, frames=frames, method=method,
-                               store_visibility=store_visibility, processes=processes,
-                               scheduler=scheduler, workers=workers,
-                               on_frame=lambda _r: bar.update(1), force=force)
+    summary = bake_to_file(parsed, output, frames=frames, method=method,
+                           store_visibility=store_visibility, processes=processes,
+                           scheduler=scheduler, workers=workers, progress=progress, force=force)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, report
+from shtools.cli._common import json_option, option_type, output_option, progress, report
 from shtools.cli._outputs import guard_outputs
 from shtools.geometry.fit_methods import SPHERE_SPACES
 
@@ -32,7 +32,8 @@ def tree(spheres_path, output, branching, seed, as_json):
     from shtools.geometry.sphere_tree import tree_statistics
 
     guard_outputs({"-o": output}, [spheres_path])
-    result = tree_to_file(spheres_path, output, branching=branching, seed=seed)
+    result = tree_to_file(spheres_path, output, branching=branching, seed=seed,
+                          progress=progress)
     stats = tree_statistics(result)
     summary = {"output": output, **stats}
     report(

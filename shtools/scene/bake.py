@@ -354,6 +354,7 @@ def bake_to_file(
     force: bool = False,
     scheduler: str | None = None,
     workers: int | None = None,
+    progress=None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -363,13 +364,17 @@ def bake_to_file(
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
     ``output``, ``pool`` (scheduler, workers, per-worker task counts and
     seconds).  ``processes``, ``scheduler`` and ``workers`` as in
-    :func:`bake_scene`; ``force`` bakes past :func:`check_bake_size`'s limits.
+    :func:`bake_scene`; ``progress`` a progress factory
+    (:mod:`shtools.progress`) for the set-up and the frames; ``force`` bakes past
+    :func:`check_bake_size`'s limits.
     """
+    from shtools.progress import silent
+
     parent = Path(output).parent
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
         raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
-    prepared = prepare_scene(scene)
+    prepared = prepare_scene(scene, progress=progress)
     frames = range(scene.settings.frames) if frames is None else frames
     if not force:
         check_bake_size(len(frames), prepared.n_vertices, store_visibility,
@@ -377,14 +382,17 @@ def bake_to_file(
     n = 0
     frame_seconds = 0.0
     pool: dict = {}
-    for result in bake_scene(scene, frames=frames, method=method,
-                             store_visibility=store_visibility, output=output,
-                             prepared=prepared, processes=processes, scheduler=scheduler,
-                             workers=workers, pool_summary=pool):
-        n += 1
-        frame_seconds += result.seconds
-        if on_frame is not None:
-            on_frame(result)
+    total = len(frames) if frames is not None else scene.settings.frames
+    with (progress or silent)(total=total, desc="bake", unit="frames") as bar:
+        for result in bake_scene(scene, frames=frames, method=method,
+                                 store_visibility=store_visibility, output=output,
+                                 prepared=prepared, processes=processes, scheduler=scheduler,
+                                 workers=workers, pool_summary=pool):
+            n += 1
+            frame_seconds += result.seconds
+            bar.update(1)
+            if on_frame is not None:
+                on_frame(result)
     end = time.perf_counter()
     V = prepared.n_vertices
     return {
