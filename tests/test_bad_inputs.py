@@ -624,11 +624,20 @@ def test_signal_stops_bake_workers_and_output(sig, want, kit, tmp_path):
     # shtools.tasks is covered by tests/scene/test_distributed.py
     proc, workers, out = _long_bake(kit, tmp_path, WORKER_KINDS["frame-parts"])
     proc.send_signal(sig)
-    stdout, stderr = proc.communicate(timeout=60)
+    try:
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:  # never leave the bake running when the check fails
+            proc.kill()
+            proc.communicate()
+    left = _wait_gone(workers)
+    for pid in left:  # clean up before failing: never leave a worker running
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
     check_refused(proc.returncode, stdout, stderr, want_code=want,
                   named=["stopped by" if sig != signal.SIGINT else "interrupted"],
                   outputs=[out], kit=kit, folders=[tmp_path])
-    assert _wait_gone(workers) == []
+    assert left == []
 
 
 @needs_linux
@@ -637,8 +646,16 @@ def test_workers_die_with_a_killed_parent(kind, kit, tmp_path):
     """kill -9 of the bake: its forked workers must not run on (holding stdout open)."""
     proc, workers, out = _long_bake(kit, tmp_path, WORKER_KINDS[kind])
     proc.kill()
-    proc.communicate(timeout=60)  # returns only once every holder of the pipes is gone
-    assert _wait_gone(workers) == []
+    try:  # returns only once every holder of the pipes is gone
+        proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        left = workers
+    else:
+        left = _wait_gone(workers)
+    for pid in left:  # clean up before failing: never leave a worker running
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    assert left == []
     assert not out.exists()
     # the killed run's temporary is recognisable and the next write removes it
     left = _temporaries(tmp_path)

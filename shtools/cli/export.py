@@ -64,6 +64,12 @@ def export(baked, output, frame, frames_text, quantity, target, rig, distance, e
     from shtools.export.png import View
     from shtools.export.writer import FORMATS, export_bake
 
+    if rig is not None:
+        name, sep, rig_path = rig.partition("=")
+        if not sep or not name or not rig_path:
+            raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
+        rig = (name, rig_path)
+    guard_outputs({"-o": output}, [baked, rig[1] if rig else None])
     suffix = Path(output).suffix.lower()
     if suffix not in FORMATS:
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
@@ -72,12 +78,6 @@ def export(baked, output, frame, frames_text, quantity, target, rig, distance, e
         raise InputError(f"--size {size[0]} {size[1]} is {size[0] * size[1]:,} pixels "
                          f"({size[0] * size[1] * 16 / 2**30:.1f} GiB of raster buffers), above "
                          f"the limit of {MAX_PIXELS:,}; use a smaller image", output)
-    if rig is not None:
-        name, sep, rig_path = rig.partition("=")
-        if not sep or not name or not rig_path:
-            raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
-        rig = (name, rig_path)
-    guard_outputs({"-o": output}, [baked, rig[1] if rig else None])
     bake_asset = read_bake(baked)
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
                 auto_exposure=not fixed_exposure, curve=curve, distance=distance)
