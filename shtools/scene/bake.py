@@ -90,7 +90,7 @@ class FrameBaker:
 
     Holds the runtime (and its worker processes) and the per-bake state of the
     visibility method.  The receiver clusters are fixed up front (from the
-    first frame of the bake) so every process evaluates a frame identically,
+    scene's frame 0) so every process evaluates a frame identically,
     whichever frames it is given: a bake is the same bytes on one process,
     a local pool or a Dask cluster.
 
@@ -261,7 +261,9 @@ def bake_scene(
             writer = stack.enter_context(
                 _writer(prepared, output, frames, times, method, store_visibility,
                         prepared.receivers_move()))
-        clusters = bake_clusters(prepared, method, times[0])
+        # Clusters from the scene's frame 0, whatever range is baked: a partial
+        # bake (--frames 2:4) gives the same values as those frames of a full one.
+        clusters = bake_clusters(prepared, method, 0.0)
         items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
         if pool.scheduler == "inline":
             baker = stack.enter_context(FrameBaker(
