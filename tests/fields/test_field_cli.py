@@ -109,8 +109,8 @@ def test_shells_as_tasks_give_the_same_bytes(run_cli, tmp_path, box_obj):
     outs = []
     for workers in ("1", "2"):
         out = tmp_path / f"w{workers}.field.h5"
-        code, stdout, err = run_cli("field", "sample", box_obj, "-o", out, *SMALL,
-                                    "--workers", workers, "--no-self-visibility")
+        code, _, err = run_cli("field", "sample", box_obj, "-o", out, *SMALL,
+                              "--workers", workers, "--no-self-visibility")
         assert code == 0, err
         outs.append(out)
     assert filecmp.cmp(*outs, shallow=False)
