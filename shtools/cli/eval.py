@@ -18,7 +18,7 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, report, setting_type
+from shtools.cli._common import json_option, option_type, report, setting_type
 from shtools.errors import InputError
 
 DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
@@ -31,13 +31,18 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
               help="Sphere set of the mesh (spheres asset).")
 @click.option("--tree", "tree_path", type=click.Path(dir_okay=False),
               help="Sphere tree of the set (tree asset); enables the hierarchy.")
+@click.option("--field", "field_path", type=click.Path(dir_okay=False),
+              help="Shadow field of the mesh (field asset), instead of --spheres.")
+@click.option("--field-space", type=click.Choice(["log", "product"]), default=None,
+              help="How shadow fields combine in the runtime methods (default: log, or "
+                   "the scene's).")
 @click.option("--light", "light_path", type=click.Path(dir_okay=False),
               help="Environment light asset (default: a procedural sky).")
-@click.option("--grid", default=64, show_default=True, type=click.IntRange(2, 1024),
+@click.option("--grid", default=64, show_default=True, type=option_type("grid"),
               help="Ground receivers per side (built-in form).")
-@click.option("--gap", default=0.0, show_default=True, type=click.FloatRange(0.0),
+@click.option("--gap", default=0.0, show_default=True, type=option_type("gap"),
               help="Gap between ground and mesh, as a fraction of the mesh height.")
-@click.option("--frame", default=0, show_default=True, type=click.IntRange(0),
+@click.option("--frame", default=0, show_default=True, type=option_type("frame"),
               help="Scene frame to evaluate (scene form).")
 @click.option("--methods", default=DEFAULT_METHODS, show_default=True,
               help="Comma-separated: auto, hyb, ps*, ps, ol, exact, volterra, product; "
@@ -48,37 +53,49 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
               help="Accumulation order of methods without @N (default: the runtime's).")
 @click.option("--no-hierarchy", is_flag=True, help="Accumulate all leaf spheres everywhere.")
 @click.option("--no-window", is_flag=True, help="Shade without windowing.")
-@click.option("--n-dirs", default=2000, show_default=True, type=click.IntRange(16),
+@click.option("--n-dirs", default=2000, show_default=True, type=option_type("n_dirs"),
               help="Ray-tracing directions per vertex.")
 @click.option("--png", "png_path", type=click.Path(dir_okay=False),
               help="Write a false-colour side-by-side comparison image.")
 @json_option
-def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame, methods, order,
-             acc_order, no_hierarchy, no_window, n_dirs, png_path, as_json):
+def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, light_path, grid,
+             gap, frame, methods, order, acc_order, no_hierarchy, no_window, n_dirs, png_path,
+             as_json):
     """Compare shadowing methods with ray tracing (relative RMSE of radiance, time)."""
     from shtools.reference.evaluation import (
         eval_settings,
         evaluate,
+        field_eval_inputs,
         mesh_eval_inputs,
         parse_methods,
     )
 
     parse_methods(methods)  # fail early on a typo
     if png_path is not None:
+        from shtools.cli._outputs import guard_outputs
+
         _check_png_path(png_path)
+        guard_outputs({"--png": png_path},
+                      [scene, mesh, spheres_path, tree_path, light_path])
     if scene is not None:
-        if mesh or spheres_path:
-            raise InputError("give either a scene file or --mesh/--spheres, not both", scene)
+        if mesh or spheres_path or field_path:
+            raise InputError("give either a scene file or --mesh/--spheres/--field, not both",
+                             scene)
         from shtools.scene.evaluation import scene_eval_inputs
 
         data = scene_eval_inputs(scene, frame, order)
     else:
-        if not (mesh and spheres_path):
-            raise InputError("give a scene file, or --mesh MESH --spheres spheres.h5")
-        data = mesh_eval_inputs(mesh, spheres_path, tree_path, light_path, grid=grid, gap=gap,
-                                order=order or 4)
+        if not mesh or (spheres_path is None) == (field_path is None):
+            raise InputError("give a scene file, or --mesh MESH with --spheres spheres.h5 "
+                             "or --field x.field.h5")
+        if field_path is not None:
+            data = field_eval_inputs(mesh, field_path, light_path, grid=grid, gap=gap,
+                                     order=order)
+        else:
+            data = mesh_eval_inputs(mesh, spheres_path, tree_path, light_path, grid=grid,
+                                    gap=gap, order=order or 4)
     settings = eval_settings(data, order=order, acc_order=acc_order, window=not no_window,
-                             hierarchy=not no_hierarchy)
+                             hierarchy=not no_hierarchy, field_space=field_space)
     clusters = None
     if settings.hierarchy:
         from shtools.runtime.clusters import lloyd_clusters
@@ -93,7 +110,9 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
              "seconds": r.seconds} for r in out["results"]]
     summary = {
         "scene": data.name, "vertices": len(data.vertices),
-        "spheres": int(sum(b.n_spheres for b in data.blockers)),
+        "spheres": int(sum(b.n_spheres for b in data.blockers if hasattr(b, "n_spheres"))),
+        "fields": int(sum(not hasattr(b, "n_spheres") for b in data.blockers)),
+        "field_space": settings.field_space,
         "order": settings.order, "acc_order_default": settings.resolved_acc_order(),
         "window": settings.resolved_window(), "hierarchy": settings.hierarchy,
         "n_dirs": n_dirs,
@@ -114,20 +133,24 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
 
 
 def _table(summary: dict) -> str:
+    def num(x, fmt="{:.4f}"):
+        return "-" if x is None else fmt.format(x)
+
     lines = [
         f"scene {summary['scene']}: {summary['vertices']} receivers, {summary['spheres']} "
-        f"spheres, order {summary['order']} (default accumulation order "
+        f"spheres, {summary['fields']} shadow fields ({summary['field_space']} space), "
+        f"order {summary['order']} (default accumulation order "
         f"{summary['acc_order_default']}), window {summary['window']}, hierarchy "
         f"{'on' if summary['hierarchy'] else 'off'}, {summary['n_dirs']} ray directions",
         "",
         "| method | rel. RMSE vs mesh | rel. RMSE vs spheres | time (s) |",
         "|---|---|---|---|",
-        f"| spheres, ray traced | {summary['spheres_vs_mesh_rmse']:.4f} | 0 | "
+        f"| spheres, ray traced | {num(summary['spheres_vs_mesh_rmse'])} | 0 | "
         f"{summary['raytrace_spheres_seconds']:.3f} |",
         f"| mesh, ray traced | 0 | - | {summary['raytrace_mesh_seconds']:.3f} |",
     ]
     for r in summary["methods"]:
-        lines.append(f"| {r['method']} | {r['rmse_vs_mesh']:.4f} | {r['rmse_vs_spheres']:.4f} | "
+        lines.append(f"| {r['method']} | {r['rmse_vs_mesh']:.4f} | {num(r['rmse_vs_spheres'])} | "
                      f"{r['seconds']:.4f} |")
     lines += [
         "",
@@ -139,8 +162,9 @@ def _table(summary: dict) -> str:
     ]
     for r in summary["split"]:
         trunc = "-" if r["truncation"] is None else f"{r['truncation']:.4f}"
-        lines.append(f"| {r['receiver']} | {r['total']:.4f} | {r['sphere_approximation']:.4f} | "
-                     f"{r['shexp']:.4f} | {trunc} | {r['ringing']:.4f} | "
+        lines.append(f"| {r['receiver']} | {r['total']:.4f} | "
+                     f"{num(r['sphere_approximation'])} | "
+                     f"{num(r['shexp'])} | {trunc} | {r['ringing']:.4f} | "
                      f"{r['negative_vertices']} |")
     if "png" in summary:
         lines.append(f"\nwrote {summary['png']}")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
+from shtools.cli._common import json_option, option_type, output_option, progress, report
 from shtools.geometry.fit_methods import FIT_METHODS
 
 
@@ -20,21 +20,21 @@ def spheres():
 
 @spheres.command("fit")
 @click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
-@click.option("-n", "--count", "count", type=int, required=True,
+@click.option("-n", "--count", "count", type=option_type("count"), required=True,
               help="Number of spheres N (>= 1).")
 @output_option
 @click.option("--method", type=click.Choice(FIT_METHODS),
               default="variational", show_default=True,
               help="variational (Wang et al. 2006, minimal outside volume) or a baseline.")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=option_type("seed"), default=0, show_default=True,
               help="Seed of sampling and initialisation (same seed -> identical asset).")
-@click.option("--thickness", type=float, default=None,
+@click.option("--thickness", type=option_type("thickness"), default=None,
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
-@click.option("--iterations", type=click.IntRange(min=1), default=None,
+@click.option("--iterations", type=option_type("iterations"), default=None,
               help="Round budget of the variational fit, counted in rounds at N spheres "
                    "(from N = 64 the coarse stages spend part of it in cheaper rounds) "
                    "[default: scaled to the mesh and N, 40-150].")
-@click.option("--restarts", type=click.IntRange(min=1), default=1, show_default=True,
+@click.option("--restarts", type=option_type("restarts"), default=1, show_default=True,
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
                    "The fit is a non-convex search: a few starts buy a few percent of E.")
 @json_option
@@ -44,8 +44,10 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
     Writes a 'spheres' asset with centers, radii and outside_volume_ratio
     E = sum_i V(S_i - T) / V(T).
     """
+    from shtools.cli._outputs import guard_outputs
     from shtools.geometry.assets import fit_to_file
 
+    guard_outputs({"-o": output}, [mesh_path])
     result = fit_to_file(mesh_path, count, output, method=method, seed=seed,
                          thickness=thickness, iterations=iterations, restarts=restarts,
                          progress=progress)
@@ -68,16 +70,18 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
 @spheres.command("import")
 @click.argument("sph_path", metavar="FILE.sph", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--level", type=int, default=None,
+@click.option("--level", type=option_type("level"), default=None,
               help="Tree level to import (0 = root); default the deepest non-empty level.")
 @click.option("--mesh", "mesh_path", type=click.Path(dir_okay=False), default=None,
               help="Mesh the spheres bound: used to compute outside_volume_ratio.")
 @json_option
 def import_cmd(sph_path, output, level, mesh_path, as_json):
     """Convert a spheretree .sph file into a 'spheres' asset."""
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.spheres import write_spheres
     from shtools.geometry.sph_format import read_sph
 
+    guard_outputs({"-o": output}, [sph_path, mesh_path])
     result = read_sph(sph_path, level=level)
     inputs = {"sph": sph_path}
     if mesh_path is not None:
@@ -102,9 +106,11 @@ def import_cmd(sph_path, output, level, mesh_path, as_json):
 @json_option
 def export_cmd(spheres_path, output, as_json):
     """Write a 'spheres' asset as a two-level spheretree .sph file."""
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.spheres import read_spheres
     from shtools.geometry.sph_format import write_sph
 
+    guard_outputs({"-o": output}, [spheres_path])
     result = read_spheres(spheres_path)
     write_sph(output, result)
     report({"output": output, "spheres": len(result)}, as_json,
