@@ -23,6 +23,25 @@ json_option = click.option(
 )
 
 
+
+
+def scheduler_options(unit: str):
+    """``--scheduler`` and ``--workers`` of a stage whose ``unit`` (frames, shells,
+    meshes) are independent tasks (:mod:`shtools.tasks`, docs/scale-out.md)."""
+    def decorate(f):
+        f = click.option(
+            "--workers", type=click.IntRange(min=1), default=None,
+            help=f"Local worker processes for {unit} (default: one per core; 1 = one after "
+                 "the other in this process); with --scheduler local, the cluster's size.")(f)
+        return click.option(
+            "--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
+            help=f"Run {unit} on Dask: 'local' starts a LocalCluster here, an address or a "
+                 "scheduler file joins an existing cluster (pip install "
+                 "'shtools[distributed]'; docs/scale-out.md).  Default: forked workers on "
+                 "this machine's cores.")(f)
+    return decorate
+
+
 def _default(o):
     if isinstance(o, np.generic):
         return o.item()

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report, setting_type
+from shtools.cli._common import (
+    json_option,
+    output_option,
+    progress,
+    report,
+    scheduler_options,
+    setting_type,
+)
 from shtools.scene.shadows import bake_method_names
 
 
@@ -24,14 +31,7 @@ from shtools.scene.shadows import bake_method_names
               help="Processes sharing ONE frame's shadow evaluation, when frames are "
                    "evaluated in this process (a single frame, or --workers 1); default one "
                    "per core.")
-@click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
-              help="Run frames on Dask: 'local' starts a LocalCluster here, an address or a "
-                   "scheduler file joins an existing cluster (pip install "
-                   "'shtools[distributed]'; docs/scale-out.md).  Default: forked workers on "
-                   "this machine's cores.")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Local workers for frames (default: one per core; 1 = frames one after "
-                   "the other in this process); with --scheduler local, the cluster's size.")
+@scheduler_options("frames")
 @click.option("--force", is_flag=True,
               help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option
