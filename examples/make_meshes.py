@@ -2,6 +2,7 @@
 
     python make_meshes.py arch -o build/meshes/arch.obj
     python make_meshes.py pillar -o build/meshes/pillar.obj
+    python make_meshes.py crate -o build/meshes/crate.obj
     python make_meshes.py sky -o build/sky.hdr
 
 Each call writes one file (atomically), so ``make -j`` can run them in parallel.
@@ -34,7 +35,12 @@ def pillar() -> trimesh.Trimesh:
     return make_primitive("capsule", {"radius": 0.25, "length": 1.2, "center": [0, 0.85, 0]}).mesh
 
 
-MESHES = {"arch": arch, "pillar": pillar}
+def crate() -> trimesh.Trimesh:
+    """A closed box crate, 0.6 x 0.5 x 0.6, resting on the ground (a shadow-field blocker)."""
+    return make_primitive("box", {"extents": [0.6, 0.5, 0.6], "center": [0, 0.25, 0]}).mesh
+
+
+MESHES = {"arch": arch, "pillar": pillar, "crate": crate}
 
 
 def main(argv=None) -> int:

@@ -31,6 +31,11 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
               help="Sphere set of the mesh (spheres asset).")
 @click.option("--tree", "tree_path", type=click.Path(dir_okay=False),
               help="Sphere tree of the set (tree asset); enables the hierarchy.")
+@click.option("--field", "field_path", type=click.Path(dir_okay=False),
+              help="Shadow field of the mesh (field asset), instead of --spheres.")
+@click.option("--field-space", type=click.Choice(["log", "product"]), default=None,
+              help="How shadow fields combine in the runtime methods (default: log, or "
+                   "the scene's).")
 @click.option("--light", "light_path", type=click.Path(dir_okay=False),
               help="Environment light asset (default: a procedural sky).")
 @click.option("--grid", default=64, show_default=True, type=click.IntRange(2, 1024),
@@ -53,12 +58,14 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
 @click.option("--png", "png_path", type=click.Path(dir_okay=False),
               help="Write a false-colour side-by-side comparison image.")
 @json_option
-def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame, methods, order,
-             acc_order, no_hierarchy, no_window, n_dirs, png_path, as_json):
+def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, light_path, grid,
+             gap, frame, methods, order, acc_order, no_hierarchy, no_window, n_dirs, png_path,
+             as_json):
     """Compare shadowing methods with ray tracing (relative RMSE of radiance, time)."""
     from shtools.reference.evaluation import (
         eval_settings,
         evaluate,
+        field_eval_inputs,
         mesh_eval_inputs,
         parse_methods,
     )
@@ -67,18 +74,24 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
     if png_path is not None:
         _check_png_path(png_path)
     if scene is not None:
-        if mesh or spheres_path:
-            raise InputError("give either a scene file or --mesh/--spheres, not both", scene)
+        if mesh or spheres_path or field_path:
+            raise InputError("give either a scene file or --mesh/--spheres/--field, not both",
+                             scene)
         from shtools.scene.evaluation import scene_eval_inputs
 
         data = scene_eval_inputs(scene, frame, order)
     else:
-        if not (mesh and spheres_path):
-            raise InputError("give a scene file, or --mesh MESH --spheres spheres.h5")
-        data = mesh_eval_inputs(mesh, spheres_path, tree_path, light_path, grid=grid, gap=gap,
-                                order=order or 4)
+        if not mesh or (spheres_path is None) == (field_path is None):
+            raise InputError("give a scene file, or --mesh MESH with --spheres spheres.h5 "
+                             "or --field x.field.h5")
+        if field_path is not None:
+            data = field_eval_inputs(mesh, field_path, light_path, grid=grid, gap=gap,
+                                     order=order)
+        else:
+            data = mesh_eval_inputs(mesh, spheres_path, tree_path, light_path, grid=grid,
+                                    gap=gap, order=order or 4)
     settings = eval_settings(data, order=order, acc_order=acc_order, window=not no_window,
-                             hierarchy=not no_hierarchy)
+                             hierarchy=not no_hierarchy, field_space=field_space)
     clusters = None
     if settings.hierarchy:
         from shtools.runtime.clusters import lloyd_clusters
@@ -93,7 +106,9 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
              "seconds": r.seconds} for r in out["results"]]
     summary = {
         "scene": data.name, "vertices": len(data.vertices),
-        "spheres": int(sum(b.n_spheres for b in data.blockers)),
+        "spheres": int(sum(b.n_spheres for b in data.blockers if hasattr(b, "n_spheres"))),
+        "fields": int(sum(not hasattr(b, "n_spheres") for b in data.blockers)),
+        "field_space": settings.field_space,
         "order": settings.order, "acc_order_default": settings.resolved_acc_order(),
         "window": settings.resolved_window(), "hierarchy": settings.hierarchy,
         "n_dirs": n_dirs,
@@ -114,20 +129,24 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, light_path, grid, gap, frame,
 
 
 def _table(summary: dict) -> str:
+    def num(x, fmt="{:.4f}"):
+        return "-" if x is None else fmt.format(x)
+
     lines = [
         f"scene {summary['scene']}: {summary['vertices']} receivers, {summary['spheres']} "
-        f"spheres, order {summary['order']} (default accumulation order "
+        f"spheres, {summary['fields']} shadow fields ({summary['field_space']} space), "
+        f"order {summary['order']} (default accumulation order "
         f"{summary['acc_order_default']}), window {summary['window']}, hierarchy "
         f"{'on' if summary['hierarchy'] else 'off'}, {summary['n_dirs']} ray directions",
         "",
         "| method | rel. RMSE vs mesh | rel. RMSE vs spheres | time (s) |",
         "|---|---|---|---|",
-        f"| spheres, ray traced | {summary['spheres_vs_mesh_rmse']:.4f} | 0 | "
+        f"| spheres, ray traced | {num(summary['spheres_vs_mesh_rmse'])} | 0 | "
         f"{summary['raytrace_spheres_seconds']:.3f} |",
         f"| mesh, ray traced | 0 | - | {summary['raytrace_mesh_seconds']:.3f} |",
     ]
     for r in summary["methods"]:
-        lines.append(f"| {r['method']} | {r['rmse_vs_mesh']:.4f} | {r['rmse_vs_spheres']:.4f} | "
+        lines.append(f"| {r['method']} | {r['rmse_vs_mesh']:.4f} | {num(r['rmse_vs_spheres'])} | "
                      f"{r['seconds']:.4f} |")
     lines += [
         "",
@@ -139,8 +158,9 @@ def _table(summary: dict) -> str:
     ]
     for r in summary["split"]:
         trunc = "-" if r["truncation"] is None else f"{r['truncation']:.4f}"
-        lines.append(f"| {r['receiver']} | {r['total']:.4f} | {r['sphere_approximation']:.4f} | "
-                     f"{r['shexp']:.4f} | {trunc} | {r['ringing']:.4f} | "
+        lines.append(f"| {r['receiver']} | {r['total']:.4f} | "
+                     f"{num(r['sphere_approximation'])} | "
+                     f"{num(r['shexp'])} | {trunc} | {r['ringing']:.4f} | "
                      f"{r['negative_vertices']} |")
     if "png" in summary:
         lines.append(f"\nwrote {summary['png']}")

@@ -109,6 +109,33 @@ class RayCaster:
             out[s:s + RAY_CHUNK] = self._scene.run(oo, dd, query="OCCLUDED", **kwargs) == 0
         return out
 
+    def embree_points(self, points) -> np.ndarray:
+        """Points in Embree's scaled float32 frame, ``(P, 3)``, for :meth:`occluded_embree`."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return ((p - self.origin) * self.scale).astype(np.float32)
+
+    def occluded_embree(self, origins, directions) -> np.ndarray:
+        """:meth:`occluded` for rays already in Embree's frame (no conversion pass).
+
+        Parameters
+        ----------
+        origins : ndarray of float32, shape (R, 3)
+            From :meth:`embree_points` (C-contiguous).
+        directions : ndarray of float32, shape (R, 3)
+            Unit directions (unchanged by the frame's uniform scale).
+
+        Returns
+        -------
+        ndarray of bool, shape (R,)
+            True where the ray hits a triangle.
+        """
+        out = np.empty(origins.shape[0], dtype=bool)
+        for s in range(0, origins.shape[0], RAY_CHUNK):
+            out[s:s + RAY_CHUNK] = self._scene.run(origins[s:s + RAY_CHUNK],
+                                                   directions[s:s + RAY_CHUNK],
+                                                   query="OCCLUDED") == 0
+        return out
+
     def first_hit(self, origins, directions) -> tuple[np.ndarray, np.ndarray]:
         """Nearest hit along each ray.
 

@@ -37,7 +37,13 @@ from shtools.reference.raytrace import (
     DEFAULT_DIRECTIONS,
     sphere_union_visibility,
 )
-from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker
+from shtools.runtime import (
+    FieldBlocker,
+    ShadowRuntime,
+    ShadowSettings,
+    SphereBlocker,
+    field_product_visibility,
+)
 from shtools.runtime.hierarchy import leaf_spheres
 from shtools.runtime.settings import RUNTIME_EXP_METHODS
 
@@ -83,7 +89,7 @@ class EvalInputs:
 
 def eval_settings(inputs: EvalInputs, *, order: int | None = None,
                   acc_order: int | None = None, window: bool = True,
-                  hierarchy: bool = True) -> ShadowSettings:
+                  hierarchy: bool = True, field_space: str | None = None) -> ShadowSettings:
     """The runtime settings of an evaluation: the scene's, overridden by the caller's.
 
     One process (the method times compare with single-process references).
@@ -95,6 +101,7 @@ def eval_settings(inputs: EvalInputs, *, order: int | None = None,
             kwargs[key] = base[key]
     kwargs["window"] = base.get("window", "cosine") if window else None
     kwargs["hierarchy"] = base.get("hierarchy", True) if hierarchy else False
+    kwargs["field_space"] = field_space or base.get("field_space", "log")
     if acc_order is not None:
         kwargs["acc_order"] = acc_order
     elif base.get("acc_order") is not None:
@@ -159,7 +166,7 @@ class MethodResult:
 
     method: str
     rmse_mesh: float
-    rmse_spheres: float
+    rmse_spheres: float | None  # None without sphere blockers
     seconds: float
     radiance: np.ndarray
 
@@ -195,7 +202,10 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
     Parameters
     ----------
     vertices, normals : ndarray, shape (V, 3)
-    blockers : list of SphereBlocker
+    blockers : list of SphereBlocker or FieldBlocker
+        Shadow fields combine as ``settings.field_space`` says (runtime
+        methods) or by products (``product``); the sphere-set reference is
+        only computed when there are sphere blockers.
     meshes : list of trimesh.Trimesh
         Actual blocker geometry.
     env_sh : ndarray, shape (n*n, 3) or None
@@ -238,19 +248,26 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
     t0 = time.perf_counter()
     g_mesh, binary, dirs, weights = _raytrace_binary(vertices, normals, meshes, order, n_dirs)
     t_mesh = time.perf_counter() - t0
-    centers, radii = leaf_spheres(blockers)
+    spheres = [b for b in blockers if isinstance(b, SphereBlocker)]
+    fields = [b for b in blockers if isinstance(b, FieldBlocker)]
+    centers, radii = leaf_spheres(spheres) if spheres else (np.zeros((0, 3)), np.zeros(0))
     t0 = time.perf_counter()
-    g_sph = sphere_union_visibility(vertices, normals, centers, radii, order, n_dirs)
+    g_sph = sphere_union_visibility(vertices, normals, centers, radii, order, n_dirs) \
+        if spheres else None
     t_sph = time.perf_counter() - t0
-    r_mesh, r_sph = shade(g_mesh, ref_shader), shade(g_sph, ref_shader)
+    r_mesh = shade(g_mesh, ref_shader)
+    r_sph = shade(g_sph, ref_shader) if g_sph is not None else None
     results = []
     for label, name, acc in specs:
         if name == "product":
             t0 = time.perf_counter()
             # without @N: the runtime's accumulation order, like the SHEXP rows
-            g = product_space_visibility(vertices, normals, (centers, radii), order,
-                                         acc if acc is not None else
-                                         settings.resolved_acc_order())
+            acc_p = acc if acc is not None else settings.resolved_acc_order()
+            g = None
+            if spheres or not fields:
+                g = product_space_visibility(vertices, normals, (centers, radii), order, acc_p)
+            if fields:
+                g = field_product_visibility(vertices, normals, fields, order, acc_p, base=g)
             seconds = time.perf_counter() - t0
         else:
             s = dataclasses.replace(settings, exp_method=name,
@@ -266,7 +283,8 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
             g = rt.visibility(vertices, normals, blockers, clusters, self_visibility=sv)
             seconds = time.perf_counter() - t0
         rad = shade(g)
-        results.append(MethodResult(label, relative_rmse(rad, r_mesh), relative_rmse(rad, r_sph),
+        results.append(MethodResult(label, relative_rmse(rad, r_mesh),
+                                    relative_rmse(rad, r_sph) if r_sph is not None else None,
                                     seconds, rad))
     exact = None
     if env_sh is not None:
@@ -275,7 +293,8 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
     groups = np.zeros(len(vertices), dtype=np.int64) if groups is None else np.asarray(groups)
     return {
         "references": {"mesh_seconds": t_mesh, "spheres_seconds": t_sph,
-                       "spheres_rmse_mesh": relative_rmse(r_sph, r_mesh)},
+                       "spheres_rmse_mesh": relative_rmse(r_sph, r_mesh)
+                       if r_sph is not None else None},
         "results": results,
         "mesh_radiance": r_mesh,
         "spheres_radiance": r_sph,
@@ -292,7 +311,8 @@ def error_split(radiance, mesh_radiance, spheres_radiance, groups, exact=None) -
         The method's radiance.
     mesh_radiance, spheres_radiance : ndarray, shape (V, 3)
         Ray-traced references of the real meshes and of the sphere union
-        (with the self-shadow rules), shaded raw at order ``n``.
+        (with the self-shadow rules), shaded raw at order ``n``;
+        ``spheres_radiance`` is None without sphere blockers.
     groups : ndarray of int, shape (V,)
         Receiver group of each vertex.
     exact : tuple of ndarray (V, 3), optional
@@ -315,8 +335,11 @@ def error_split(radiance, mesh_radiance, spheres_radiance, groups, exact=None) -
         rows.append({
             "group": int(g), "vertices": int(m.sum()),
             "total": relative_rmse(radiance[m], ref),
-            "sphere_approximation": relative_rmse(spheres_radiance[m], ref),
-            "shexp": relative_rmse(radiance[m], spheres_radiance[m]),
+            # without sphere blockers (shadow fields only) there is no sphere reference
+            "sphere_approximation": (None if spheres_radiance is None
+                                     else relative_rmse(spheres_radiance[m], ref)),
+            "shexp": (None if spheres_radiance is None
+                      else relative_rmse(radiance[m], spheres_radiance[m])),
             "truncation": (None if exact is None
                            else relative_rmse(exact[0][m], exact[1][m])),
             "ringing": float(np.linalg.norm(np.minimum(radiance[m], 0.0))) / norm,
@@ -359,3 +382,33 @@ def _exact_environment(binary, dirs, weights, normals, env_sh, settings) -> np.n
     radiance_dirs = basis(dirs, order) @ env  # (Q, 3)
     cos = np.maximum(np.asarray(normals, dtype=np.float64) @ dirs.T, 0.0)  # (V, Q)
     return ((binary * cos) * weights[None, :]) @ radiance_dirs / np.pi
+
+
+def field_eval_inputs(mesh_path, field_path, light_path=None, *, grid: int = 64,
+                      gap: float = 0.0, order: int | None = None) -> EvalInputs:
+    """The built-in evaluation scene with a shadow-field blocker (no sphere set).
+
+    Parameters are those of :func:`mesh_eval_inputs`, with ``field_path`` (a
+    ``field`` asset of the mesh) instead of the sphere set; ``order`` must be the
+    field's when given.
+    """
+    from shtools.data_formats.field import read_field
+    from shtools.geometry.mesh import load_mesh
+    from shtools.reference.scenes import mesh_scene
+    from shtools.runtime import FieldBlocker
+
+    mesh = load_mesh(mesh_path)
+    fld = read_field(field_path)
+    if order is not None and order != fld.order:
+        raise InputError(f"the field is SH order {fld.order} but --order is {order}; resample "
+                         f"it with `shtools field sample --order {order}`", field_path)
+    env = None
+    if light_path is not None:
+        from shtools.data_formats.light import read_light
+
+        env, _ = read_light(light_path)
+    sc = mesh_scene(mesh, np.zeros((0, 3)), np.zeros(0), grid=grid, order=fld.order,
+                    env_sh=env, gap=gap)
+    return EvalInputs(Path(mesh_path).name, sc.vertices, sc.normals, None,
+                      [FieldBlocker(fld)], sc.meshes, sc.env_sh, [],
+                      {"order": fld.order, "hierarchy": False})

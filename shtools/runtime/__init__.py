@@ -76,6 +76,12 @@ vertices_per_cluster=400, threads=1, processes=1, ...)``
 ``LogBlocker`` — protocol: any object with ``log_visibility(points (V,3), normals (V,3),
 order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
 ``SphereLight(position (3,), radius, color (3,))``
+``FieldBlocker(table, rotation (3,3), translation (3,), scale=1.0, skip_rows=None)``
+    A rigid object's shadow field (``read_field`` of a ``field`` asset) posed
+    for the frame (a ``LogBlocker``); ``FieldBlocker.from_matrix(field, M (4,4))``
+    refuses non-uniform scale and shear.  Pass it in ``blockers`` with the others;
+    ``settings.field_space`` ("log" default, or "product") says how it combines
+    (:mod:`~shtools.runtime.fields`).
 ``SelfVisibility(log (R, n_acc^2), rows, rotation=None, blocker=None)``
     An object's precomputed self-visibility (``transfer`` asset) on its own
     receiver rows, added in log space in place of its own spheres
@@ -105,6 +111,12 @@ from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, 
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.evaluator import ShadowRuntime
 from shtools.runtime.fast_exp import fast_exp
+from shtools.runtime.fields import (
+    FieldBlocker,
+    FieldTable,
+    field_log_visibility,
+    field_product_visibility,
+)
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.scaling import ScalingTable, midrange_lighting
 from shtools.runtime.self_shadow import apply_self_shadow_rules
@@ -113,6 +125,8 @@ from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
 
 __all__ = [
     "CapLogTable",
+    "FieldBlocker",
+    "FieldTable",
     "LogBlocker",
     "ReceiverClusters",
     "ScalingTable",
@@ -125,6 +139,8 @@ __all__ = [
     "apply_self_shadow_rules",
     "cosine_transfer",
     "fast_exp",
+    "field_log_visibility",
+    "field_product_visibility",
     "lloyd_clusters",
     "midrange_lighting",
     "shade",

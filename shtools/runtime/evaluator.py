@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import time
 from dataclasses import dataclass
@@ -13,6 +14,7 @@ from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
+from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.parallel import (
@@ -117,7 +119,7 @@ class ShadowRuntime:
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        spheres, others = _check_blockers(blockers)
+        spheres, others = self._blockers(blockers)
         own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
@@ -166,7 +168,9 @@ class ShadowRuntime:
         (:mod:`shtools.runtime.parallel`); :meth:`close` stops them.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        spheres, others = _check_blockers(blockers)
+        spheres, others = self._blockers(blockers)
+        if any(isinstance(b, FieldBlocker) for b in others):
+            return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
         own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
@@ -193,6 +197,8 @@ class ShadowRuntime:
         runs; see :mod:`shtools.runtime.parallel`), or is ``("with_log", task,
         extra)`` with the part's rows of the other blockers' log sum.
         """
+        if task[0] == "fields":
+            return self._field_part(task), 0
         extra = None
         if task[0] == "with_log":
             _, task, extra = task
@@ -201,6 +207,79 @@ class ShadowRuntime:
         if extra is not None:
             f += extra
         return self.exponentiate(f), stats["pairs_evaluated"]
+
+    def _blockers(self, blockers) -> tuple[list[SphereBlocker], list]:
+        """:func:`_check_blockers`, and shadow fields must have the shading order."""
+        spheres, others = _check_blockers(blockers)
+        for b in others:
+            if isinstance(b, FieldBlocker) and b.table.order != self.order:
+                raise InputError(f"a shadow field has SH order {b.table.order} but the runtime "
+                                 f"shades at order {self.order}; resample it with "
+                                 f"`shtools field sample --order {self.order}`")
+        return spheres, others
+
+    def _visibility_with_fields(self, pts, nrm, blockers, clusters, self_visibility
+                                ) -> np.ndarray:
+        """Visibility of a frame with shadow fields.
+
+        The other blockers' log sum (spheres, other log blockers, self-visibility)
+        is made in this process with :meth:`log_visibility` (field positions are
+        kept in the list so self-visibility blocker indices stay valid); the field
+        lookups and the exp (``field_space = "log"``) or the exp and the products
+        (``"product"``) are split by receiver rows over this process and the
+        workers when the frame has enough (receiver, field) pairs.
+        """
+        fields = [b for b in blockers if isinstance(b, FieldBlocker)]
+        rest = [b for b in blockers if not isinstance(b, FieldBlocker)]
+        if rest or self_visibility:
+            f = self.log_visibility(pts, nrm, [_NoField() if isinstance(b, FieldBlocker)
+                                               else b for b in blockers], clusters,
+                                    self_visibility=self_visibility)
+        else:
+            self.last_stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0,
+                               "seconds": {}, "processes": 1}
+            f = None
+        stats = self.last_stats
+        stats["field_pairs"] = pts.shape[0] * len(fields)
+        parts = self.processes if stats["field_pairs"] >= MIN_PARALLEL_PAIRS else 1
+        bounds = np.linspace(0, pts.shape[0], parts + 1).astype(np.int64)
+        tasks = [(a, b, ("fields", self.settings.field_space, pts[a:b], nrm[a:b],
+                         None if f is None else f[a:b], _field_rows(fields, a, b)))
+                 for a, b in itertools.pairwise(bounds) if b > a]
+        w0 = time.perf_counter()
+        g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
+        if len(tasks) == 1:
+            g[:] = self._field_part(tasks[0][2])
+        else:
+            if self._workers is None:
+                self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables)
+            try:
+                futures = [self._workers.submit(task) for _, _, task in tasks[1:]]
+                a, b, task = tasks[0]
+                g[a:b] = self._field_part(task)
+                for (a, b, _), future in zip(tasks[1:], futures, strict=True):
+                    g[a:b] = self._workers.result(future)[0]
+            except ShtoolsError:
+                self.close()
+                raise
+        stats["processes"] = len(tasks)
+        stats.setdefault("seconds", {})["fields_exp_wall"] = time.perf_counter() - w0
+        return g
+
+    def _field_part(self, task) -> np.ndarray:
+        """Visibility ``(V', n*n)`` of one ``"fields"`` part: add the field logs and exp,
+        or exp the other blockers' logs and multiply the fields' OCVs in."""
+        _, space, pts, nrm, f, fields = task
+        if space == "log":
+            if f is None:
+                f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+            else:
+                f = np.array(f, dtype=np.float32)
+            field_log_visibility(pts, nrm, fields, self.order, self.acc_order, out=f)
+            return self.exponentiate(f)
+        base = None if f is None else self.exponentiate(f)
+        g = field_product_visibility(pts, nrm, fields, self.order, self.acc_order, base=base)
+        return g.astype(np.float32)
 
     def _other_logs(self, pts, nrm, others: list) -> np.ndarray | None:
         """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None."""
@@ -601,3 +680,23 @@ def _excluded_nodes(clusters: ReceiverClusters, exclude: np.ndarray,
         raise InputError("receiver clusters mix vertices of different self-visibility "
                          "objects; build the clusters with groups = object id per vertex")
     return (node_blocker[None, :] == first[:, None]) & (first[:, None] >= 0)
+
+
+class _NoField:
+    """Stands in for a shadow field in :meth:`ShadowRuntime.log_visibility` when the
+    fields are evaluated separately (keeps the other blockers' indices)."""
+
+    def log_visibility(self, points, normals, order):
+        return np.zeros((np.asarray(points).shape[0], order * order), dtype=np.float32)
+
+
+def _field_rows(fields: list[FieldBlocker], a: int, b: int) -> list[FieldBlocker]:
+    """The field blockers for receiver rows ``a:b`` (own-object rows renumbered)."""
+    out = []
+    for fb in fields:
+        skip = None
+        if fb.skip_rows is not None:
+            rows = np.asarray(fb.skip_rows, dtype=np.int64)
+            skip = rows[(rows >= a) & (rows < b)] - a
+        out.append(dataclasses.replace(fb, skip_rows=skip))
+    return out

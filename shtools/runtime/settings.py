@@ -58,6 +58,8 @@ WINDOW_CHOICES = (*(k.value for k in WindowKind), "none")
 DERINGING_CHOICES = ("desaturate", "none")
 #: kept for callers of the previous name
 RUNTIME_EXP_METHODS = EXP_CHOICES
+#: How shadow-field blockers are combined (``ShadowSettings.field_space``).
+FIELD_SPACES = ("log", "product")
 
 
 class Unit(StrEnum):
@@ -293,6 +295,11 @@ class ShadowSettings:
         forked on the first frame with at least ``MIN_PARALLEL_PAIRS``
         sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
         process.
+    field_space : {"log", "product"}
+        How shadow-field blockers combine (:mod:`~shtools.runtime.fields`):
+        ``"log"`` adds their SH logs to the other blockers' log sum before the
+        one exp; ``"product"`` multiplies their visibility vectors in with
+        truncated SH products at the accumulation order (the papers' way).
     """
 
     order: int = setting(4, "int", lo=1, hi=MAX_ORDER, doc="shading SH order n")
@@ -328,6 +335,9 @@ class ShadowSettings:
     processes: int | None = setting(1, "int", lo=1, hi=64, scene=False,
                                     none_means="one per core",
                                     doc="processes sharing each frame")
+    field_space: str = setting("log", "choice", choices=FIELD_SPACES,
+                               doc="how shadow-field blockers combine: log (one exp with "
+                               "every other blocker) or product (truncated SH products)")
 
     def __post_init__(self):
         self.validate()

@@ -36,7 +36,7 @@ def scene_eval_inputs(path, frame: int = 0, order: int | None = None) -> EvalInp
     settings = {"order": order or st.order, "acc_order": st.acc_order, "window": st.window,
                 "window_h": st.window_h, "theta_max": st.theta_max, "theta_min": st.theta_min,
                 "hierarchy": st.hierarchy, "vertices_per_cluster": st.vertices_per_cluster,
-                "deringing": st.deringing}
+                "deringing": st.deringing, "field_space": st.field_space}
     return EvalInputs(Path(path).name, state.vertices, state.normals, groups, state.blockers,
                       meshes, prepared.env_sh, state.lights, settings, prepared.tables,
                       receiver_names=[o.spec.name for o in prepared.receivers],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -67,6 +68,9 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
+            if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
+                _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
+                                selfs, len(blockers) - 1)
             if with_meshes:
                 meshes.append((world_v, o.faces))
     lights = []
@@ -76,3 +80,22 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
                                   color=key.color))
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
+
+
+def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:
+    """A shadow field never shades its own object (its surface lies inside the innermost
+    shells): the posed field skips the object's receiver rows, and the object's
+    self-shadowing comes from ``self_visibility`` when that is on for it, else from the
+    O_v stored in the field asset (its log, rotated with the object)."""
+    from shtools.runtime import SelfVisibility
+    from shtools.scene.transfer import rotation_of
+
+    blocker.skip_rows = rows
+    # the field already skips these rows: its self-visibility names no sphere blocker
+    for k, sv in enumerate(selfs):
+        if sv.blocker == index:
+            selfs[k] = dataclasses.replace(sv, blocker=None)
+    own_log = getattr(o.blocker_data, "self_log", None)
+    if o.self_log is None and own_log is not None:
+        selfs.append(SelfVisibility(own_log, slice(int(rows[0]), int(rows[-1]) + 1),
+                                    rotation=rotation_of(world)))

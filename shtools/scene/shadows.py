@@ -123,10 +123,20 @@ class ProductVisibility(VisibilityMethod):
 
     def visibility(self, run, state):
         from shtools.reference import product_space_visibility
+        from shtools.runtime import FieldBlocker, field_product_visibility
 
         st = run.settings
-        return product_space_visibility(state.vertices, state.normals, state.blockers,
-                                        st.order, acc_order=self.acc_order(st))
+        # shadow fields are multiplied in after the sphere caps (nearest first)
+        fields = [b for b in state.blockers if isinstance(b, FieldBlocker)]
+        spheres = [b for b in state.blockers if not isinstance(b, FieldBlocker)]
+        vis = None
+        if spheres or not fields:
+            vis = product_space_visibility(state.vertices, state.normals, spheres,
+                                           st.order, acc_order=self.acc_order(st))
+        if fields:
+            vis = field_product_visibility(state.vertices, state.normals, fields, st.order,
+                                           acc_order=self.acc_order(st), base=vis)
+        return vis
 
 
 class RaytraceVisibility(VisibilityMethod):

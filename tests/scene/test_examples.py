@@ -13,9 +13,10 @@ import pytest
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 BUILT = [  # every file the pipeline makes, in dependency order
-    "build/meshes/arch.obj", "build/meshes/pillar.obj", "build/sky.hdr",
-    "build/arch_spheres.h5", "build/pillar_spheres.h5", "build/arch_tree.h5",
-    "build/pillar_tree.h5", "build/tables.h5", "build/sky.h5", "build/baked.h5",
+    "build/meshes/arch.obj", "build/meshes/pillar.obj", "build/meshes/crate.obj",
+    "build/sky.hdr", "build/arch_spheres.h5", "build/pillar_spheres.h5", "build/arch_tree.h5",
+    "build/pillar_tree.h5", "build/crate.field.h5", "build/tables.h5", "build/sky.h5",
+    "build/baked.h5",
     "build/frame.png", "build/sheet.png", "build/scene.glb",
 ]
 
@@ -67,3 +68,11 @@ def test_touching_the_sky_reprojects_the_light_only(built_copy):
     os.utime(built_copy / "build/sky.hdr")
     joined = "\n".join(dry_run(built_copy))
     assert "light project build/sky.hdr" in joined and "spheres" not in joined
+
+
+def test_touching_the_crate_resamples_its_field_only(built_copy):
+    os.utime(built_copy / "build/meshes/crate.obj")
+    commands = dry_run(built_copy)
+    joined = "\n".join(commands)
+    assert "field sample build/meshes/crate.obj" in joined and "bake scene.toml" in joined
+    assert "spheres" not in joined

@@ -224,7 +224,7 @@ role = "blocker"
          "did you mean 'kmeans'? got 'kmean'"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, exact = true }'),
          "objects[1] ('ball').blocker: give exactly one of 'spheres', 'tree', 'bound', 'fit', "
-         "'exact', 'deformable' (see docs/scenes.md)"),
+         "'exact', 'deformable', 'field' (see docs/scenes.md)"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { exact = false }'),
          "objects[1] ('ball').blocker.exact: must be true (or leave it out)"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nscale = [1, 0, 1]'),
@@ -273,8 +273,8 @@ def test_more_mistakes_give_one_pinned_line(tmp_path, addition, message):
                            "volterra, product, raytrace; did you mean 'raytrace'? got 'raytrac'"),
     ("procesess = 2", "settings: unknown key 'procesess'; allowed: order, acc_order, "
                       "exp_method, exp_degree, window, window_h, theta_max_deg, theta_min_deg, "
-                      "hierarchy, vertices_per_cluster, self_shadow, deringing, frames, fps, "
-                      "tables, method, self_visibility, local_visibility"),
+                      "hierarchy, vertices_per_cluster, self_shadow, deringing, field_space, "
+                      "frames, fps, tables, method, self_visibility, local_visibility"),
     ("vertices_per_clustr = 2", "settings: unknown key 'vertices_per_clustr'; did you mean "
                                 "'vertices_per_cluster'?"),
     ('tables = "t.h5"', "settings.tables: file 't.h5' not found (paths are relative to the "

@@ -1,0 +1,79 @@
+"""The ``field`` blocker kind: ``blocker = { field = "x.field.h5" }`` (Tamura et al.).
+
+A rigid object carries a precomputed adaptive shadow field (``shtools field
+sample``).  The kind checks that the object can use one (no skin, one uniform
+scale in every pose), loads the asset once (its SH order must be the scene's)
+and poses a :class:`shtools.runtime.FieldBlocker` per frame from the object's
+world matrix.  The runtime combines it as ``settings.field_space`` says (log
+space by default, or product space).  The baker gives the posed blocker the
+object's own receiver rows (``skip_rows``: a surface point lies inside the
+field's innermost shells) and, unless the scene computes the object's
+self-visibility itself (``self_visibility``), adds the log of the O_v stored in
+the asset on those rows (:func:`shtools.scene.pose.pose_frame`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shtools.errors import AssetError, InputError
+from shtools.scene.blockers import BlockerKind, register_blocker_kind
+
+
+class FieldKind(BlockerKind):
+    """``blocker = { field = "x.field.h5" }``: a rigid object's adaptive shadow field."""
+
+    name = "field"
+    value = "asset"
+    hint = "'field' (a field asset)"
+
+    def check(self, spec, obj):
+        if obj.skin is not None:
+            return ("field", "a shadow field is for rigid objects; a skinned object needs "
+                             "'bound' or 'fit' spheres")
+        for pose in [obj.pose] + [k.pose for k in obj.keyframes]:
+            scale = np.asarray(pose.scale, dtype=float)
+            if np.ptp(scale) > 1e-9 * np.max(scale):
+                return ("field", f"a shadow field needs a uniform scale, got "
+                                 f"{scale.tolist()}; use a sphere-set blocker for a stretched "
+                                 "object")
+        return None
+
+    def prepare(self, spec, prep, ctx):
+        from shtools.data_formats.field import read_field
+        from shtools.runtime import FieldTable
+
+        fld = read_field(spec.path)
+        order = ctx.settings.order
+        if fld.order != order:
+            raise AssetError(f"field is SH order {fld.order} but the scene's settings.order is "
+                             f"{order}; resample it with `shtools field sample --order "
+                             f"{order}` or change the order", spec.path)
+        if fld.self_visibility is not None and prep.spec.receives and \
+                len(fld.self_visibility) != len(prep.vertices):
+            raise AssetError(f"field holds self-visibility for {len(fld.self_visibility)} "
+                             f"vertices but '{prep.spec.name}' has {len(prep.vertices)}; "
+                             "resample it from this mesh", spec.path)
+        table = FieldTable(fld)
+        if fld.self_visibility is not None and prep.spec.receives:
+            # the stored O_v as a self-visibility log at the accumulation order (zero above
+            # the field's order), used when the scene does not compute its own
+            from shtools.fields.self_visibility import self_visibility_log
+
+            acc = ctx.settings.resolved_acc_order()
+            log = np.zeros((len(prep.vertices), acc * acc), dtype=np.float32)
+            log[:, :order * order] = self_visibility_log(fld.self_visibility)
+            table.self_log = log
+        prep.blocker_data = table
+        ctx.inputs[f"{prep.spec.name}.field"] = spec.path
+
+    def pose(self, prep, world, joints):
+        from shtools.runtime import FieldBlocker
+
+        try:
+            return FieldBlocker.from_matrix(prep.blocker_data, world)
+        except InputError as exc:
+            raise InputError(f"objects '{prep.spec.name}': {exc.message}") from None
+
+
+register_blocker_kind(FieldKind())
