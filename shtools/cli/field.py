@@ -63,6 +63,9 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         params.validate()
     except InputError as exc:
         raise InputError(exc.message, mesh_path) from None
+    from shtools.cli._outputs import guard_outputs
+
+    guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
     sv = None
     if not no_self_visibility:

@@ -31,10 +31,12 @@ def transfer(mesh_path, output, order, n_dirs, floor, as_json):
     vertices (exact self-shadowing of rigid objects; scene key
     self_visibility = "x.transfer.h5").
     """
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.transfer import write_transfer
     from shtools.fields.self_visibility import mesh_transfer
     from shtools.geometry.mesh import load_mesh
 
+    guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
     start = time.perf_counter()
     bar = progress(total=len(mesh.vertices), desc="transfer", unit="vertices")
