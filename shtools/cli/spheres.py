@@ -7,9 +7,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+    scheduler_options,
+)
 from shtools.geometry.fit_methods import FIT_METHODS
 
 
@@ -19,10 +28,13 @@ def spheres():
 
 
 @spheres.command("fit")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
+@click.argument("mesh_paths", metavar="MESH...", nargs=-1, required=True,
+                type=click.Path(dir_okay=False))
 @click.option("-n", "--count", "count", type=option_type("count"), required=True,
               help="Number of spheres N (>= 1).")
-@output_option
+@click.option("-o", "--output", required=True, type=click.Path(writable=True),
+              help="Output file (written atomically); with several meshes, an existing "
+                   "folder that gets one MESH_STEM.spheres.h5 per mesh.")
 @click.option("--method", type=click.Choice(FIT_METHODS),
               default="variational", show_default=True,
               help="variational (Wang et al. 2006, minimal outside volume) or a baseline.")
@@ -37,16 +49,37 @@ def spheres():
 @click.option("--restarts", type=option_type("restarts"), default=1, show_default=True,
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
                    "The fit is a non-convex search: a few starts buy a few percent of E.")
+@scheduler_options("meshes (several MESH)")
 @json_option
-def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts, as_json):
+def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts, scheduler,
+        workers, as_json):
     """Fit N spheres bounding the solid of MESH with minimal outside volume.
 
     Writes a 'spheres' asset with centers, radii and outside_volume_ratio
-    E = sum_i V(S_i - T) / V(T).
+    E = sum_i V(S_i - T) / V(T).  Several meshes (`meshes/*.obj -o out/`) are
+    fitted as independent tasks on the local cores or a Dask cluster, one
+    asset per mesh in the folder OUTPUT (docs/scale-out.md).
     """
     from shtools.cli._outputs import guard_outputs
-    from shtools.geometry.assets import fit_to_file
+    from shtools.geometry.assets import batch_outputs, fit_many, fit_to_file
 
+    if len(mesh_paths) > 1 or Path(output).is_dir():
+        outputs = batch_outputs(mesh_paths, output)
+        guard_outputs({f"-o ({o.name})": o for o in outputs}, mesh_paths)
+        pool: dict = {}
+        rows = []
+        with progress(total=len(mesh_paths), desc="fit", unit="mesh") as bar:
+            for row in fit_many(mesh_paths, output, count, method=method, seed=seed,
+                                thickness=thickness, iterations=iterations,
+                                restarts=restarts, scheduler=scheduler, workers=workers,
+                                pool_summary=pool):
+                rows.append(row)
+                bar.update(1)
+        report({"fits": rows, "pool": pool}, as_json,
+               "\n".join(f"wrote {r['output']}: {r['spheres']} spheres ({method}), "
+                         f"E = {r['outside_volume_ratio']:.4f}" for r in rows))
+        return
+    mesh_path = mesh_paths[0]
     guard_outputs({"-o": output}, [mesh_path])
     result = fit_to_file(mesh_path, count, output, method=method, seed=seed,
                          thickness=thickness, iterations=iterations, restarts=restarts,
