@@ -191,3 +191,10 @@ class DeformableBlocker:
             raise ValueError(f"the deformable field was sampled at order {self.field.order} "
                              f"but the runtime accumulates at order {order}")
         return deformable_visibility(self.field, self.table, points, log=True)
+
+    def visibility(self, points, normals, order: int) -> np.ndarray:
+        """Scaled visibility ``(V, order*order)`` for product-space accumulation."""
+        if order != self.field.order:
+            raise ValueError(f"the deformable field was sampled at order {self.field.order} "
+                             f"but the products run at order {order}")
+        return deformable_visibility(self.field, self.table, points, log=False)

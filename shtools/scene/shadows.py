@@ -124,18 +124,34 @@ class ProductVisibility(VisibilityMethod):
     def visibility(self, run, state):
         from shtools.reference import product_space_visibility
         from shtools.runtime import FieldBlocker, field_product_visibility
+        from shtools.runtime.deformable import DeformableBlocker
+        from shtools.sh import product
 
         st = run.settings
-        # shadow fields are multiplied in after the sphere caps (nearest first)
+        acc = self.acc_order(st)
+        # shadow fields and deformable fields are multiplied in after the sphere caps
         fields = [b for b in state.blockers if isinstance(b, FieldBlocker)]
-        spheres = [b for b in state.blockers if not isinstance(b, FieldBlocker)]
+        deformables = [b for b in state.blockers if isinstance(b, DeformableBlocker)]
+        spheres = [b for b in state.blockers
+                   if not isinstance(b, FieldBlocker | DeformableBlocker)]
         vis = None
-        if spheres or not fields:
+        if spheres or not (fields or deformables):
             vis = product_space_visibility(state.vertices, state.normals, spheres,
-                                           st.order, acc_order=self.acc_order(st))
+                                           st.order, acc_order=acc)
         if fields:
             vis = field_product_visibility(state.vertices, state.normals, fields, st.order,
-                                           acc_order=self.acc_order(st), base=vis)
+                                           acc_order=acc, base=vis)
+        if deformables:
+            # each deformable field's scaled visibility (sampled at the accumulation
+            # order), multiplied at that order and truncated to the shading order
+            g = np.zeros((len(state.vertices), acc * acc))
+            if vis is None:
+                g[:, 0] = math.sqrt(4 * math.pi)
+            else:
+                g[:, :vis.shape[1]] = vis
+            for blocker in deformables:
+                g = product(g, blocker.visibility(state.vertices, state.normals, acc), acc)
+            vis = g[:, : st.order * st.order]
         return vis
 
 
