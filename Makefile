@@ -8,6 +8,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cksum < pyproject.toml | cut -d' ' -f1)
 OUT    ?= out
 QUICK  ?=
+GLTF_VALIDATOR := 2.0.0-dev.3.10
 
 .DEFAULT_GOAL := help
 .PHONY: help demo test test-slow test-core bench lint clean golden examples
@@ -23,6 +24,10 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[all,distributed,test,bench]'
+	@# the Khronos glTF validator (npm) for the export tests, when npm is there
+	command -v npm >/dev/null && npm install --silent --no-audit --no-fund \
+	  --prefix $(VENV)/node gltf-validator@$(GLTF_VALIDATOR) \
+	  || echo "note: npm not found; the glTF export tests use a strict reader only"
 	rm -f $(VENV)/.installed-* && touch $@
 
 demo: $(STAMP) ## Set up and bake the bundled demo scene into out/ (baked.h5, GLB, PNGs)

@@ -61,14 +61,98 @@ def one_blas_thread():
         yield
 
 
-def progress(iterable=None, *, total=None, desc=None):
-    """A tqdm progress bar on stderr, shown only when stderr is a terminal."""
-    from tqdm.auto import tqdm
+#: Seconds between two progress log lines when stderr is not a terminal
+#: (``SHTOOLS_PROGRESS_INTERVAL`` overrides it, e.g. for tests).
+LOG_INTERVAL = 10.0
 
-    return tqdm(
-        iterable, total=total, desc=desc, file=sys.stderr, disable=not sys.stderr.isatty(),
-        leave=False,
-    )
+#: Set by ``shtools --quiet`` (or ``SHTOOLS_QUIET=1``): no progress output at all.
+_quiet = False
+
+
+def set_quiet(quiet: bool) -> None:
+    """Silence (or re-enable) every progress bar and log line of this process."""
+    global _quiet
+    _quiet = bool(quiet)
+
+
+def _log_class():
+    from tqdm import tqdm
+
+    class LogLines(tqdm):
+        """tqdm that prints a whole line per display (for logs: no carriage returns).
+
+        Nothing for a stage shorter than ``delay``; then at most one line per
+        ``mininterval`` seconds as the work advances and a final one when it
+        ends (not after an error, whose one line must stay the last), e.g.
+        ``fit: 40/120 rounds (33%), 00:12 elapsed, ETA 00:24, E=0.930``.
+        """
+
+        _failed = False
+
+        def __exit__(self, exc_type, exc_value, traceback):
+            self._failed = exc_type is not None
+            return super().__exit__(exc_type, exc_value, traceback)
+
+        def display(self, msg=None, pos=None):
+            if msg == "":  # tqdm clearing the bar: nothing to clear in a log
+                return False
+            self.fp.write((msg if msg is not None else self.__str__()) + "\n")
+            self.fp.flush()
+            return True
+
+        def close(self):
+            # the final count: only after earlier lines, unless the last one showed it
+            shown = getattr(self, "last_print_t", 0.0) >= self.start_t + self.delay
+            if (not self.disable and not self._failed and shown
+                    and getattr(self, "last_print_n", None) != self.n):
+                self._ema_dt = lambda: None  # the final line shows the overall rate
+                self.display()
+            self.leave = False
+            super().close()
+
+        @property
+        def format_dict(self):
+            d = super().format_dict
+            known = d["total"] is not None
+            d["bar_format"] = (
+                "{desc}: {n_fmt}/{total_fmt} {unit} ({percentage:.0f}%), {elapsed} elapsed, "
+                "ETA {remaining}{postfix}" if known
+                else "{desc}: {n_fmt} {unit}, {elapsed} elapsed{postfix}")
+            return d
+
+    return LogLines
+
+
+def progress(iterable=None, *, total=None, desc=None, unit="it"):
+    """Progress of a long stage on stderr: THE one place that decides how it shows.
+
+    * stderr is a terminal: a tqdm bar with count, total, rate and ETA (cleared
+      when done);
+    * otherwise (Makefiles, CI, ``2> log``): a stage that lasts longer than
+      :data:`LOG_INTERVAL` seconds prints a line every :data:`LOG_INTERVAL`
+      seconds while it advances and one when it ends -- each with count/total,
+      elapsed time and ETA (short stages stay silent);
+    * ``shtools --quiet`` or ``SHTOOLS_QUIET=1``: nothing.
+
+    Parameters and the returned object follow tqdm (``update``, ``set_postfix``,
+    ``close``, context manager, iteration); library stages take this function
+    as their ``progress`` argument (see :mod:`shtools.progress`).
+    """
+    import os
+
+    from tqdm import tqdm
+
+    quiet = _quiet or os.environ.get("SHTOOLS_QUIET", "") not in ("", "0")
+    desc = desc or "working"
+    if quiet:
+        return tqdm(iterable, total=total, desc=desc, unit=unit, disable=True)
+    if sys.stderr.isatty():
+        return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=False,
+                    dynamic_ncols=True)
+    interval = float(os.environ.get("SHTOOLS_PROGRESS_INTERVAL", LOG_INTERVAL))
+    return _log_class()(iterable, total=total, desc=desc, unit=unit, file=sys.stderr,
+                        mininterval=interval, maxinterval=max(interval, 1e-3), miniters=1,
+                        delay=interval, ascii=True)
 
 
 def setting_type(name: str, settings_cls=None) -> click.ParamType:

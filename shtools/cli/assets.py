@@ -14,7 +14,7 @@ import click
 
 from shtools.cli._common import json_option, report
 from shtools.data_formats import read_asset
-from shtools.data_formats.compare import compare_assets, short, summarize_asset
+from shtools.data_formats.compare import compare_assets, frame_numbers, short, summarize_asset
 from shtools.errors import AssetError
 
 
@@ -101,16 +101,20 @@ def check(asset, as_json):
               "||a - b|| / ||b|| to be <= R (e.g. for baked radiance).")
 @click.option("--show", type=click.IntRange(0, 1000), default=10, show_default=True,
               help="How many of the worst differing elements to print.")
+@click.option("--frames", "frames_text", metavar="A:B[:S]", default=None,
+              help="Bake assets: compare only these scene frames (both must hold them).")
 @json_option
-def diff(a, b, rtol, atol, rel_rmse, compare_inputs, ignore, show, as_json):
+def diff(a, b, rtol, atol, rel_rmse, compare_inputs, ignore, show, frames_text, as_json):
     """Compare assets A and B dataset by dataset (B is the reference).
 
     An element passes when |a - b| <= atol + rtol*|b|; NaN equals NaN.  The
-    generator version is ignored, input hashes too unless --inputs.  Exit 0
-    when everything is within tolerance, 1 otherwise.
+    generator version is ignored, provenance (input hashes, input file names
+    in the parameters) too unless --inputs.  Exit 0 when everything is within
+    tolerance, 1 otherwise.
     """
+    frames = None if frames_text is None else frame_numbers(frames_text)
     result = compare_assets(a, b, rtol=rtol, atol=atol, compare_inputs=compare_inputs,
-                            ignore=set(ignore), worst=show, rel_rmse=rel_rmse)
+                            ignore=set(ignore), worst=show, rel_rmse=rel_rmse, frames=frames)
     report(result, as_json, _format_diff(result))
     if not result["equal"]:
         n_out = sum(d.get("outside", 0) or 0 for d in result["datasets"])

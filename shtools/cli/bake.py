@@ -47,11 +47,9 @@ def bake(scene, output, frames_text, method, store_visibility, processes, schedu
 
     parsed = load_scene(scene)
     frames = parse_frames(frames_text, parsed.settings.frames, scene)
-    with progress(total=len(frames), desc="bake") as bar:
-        summary = bake_to_file(parsed, output, frames=frames, method=method,
-                               store_visibility=store_visibility, processes=processes,
-                               scheduler=scheduler, workers=workers,
-                               on_frame=lambda _r: bar.update(1))
+    summary = bake_to_file(parsed, output, frames=frames, method=method,
+                           store_visibility=store_visibility, processes=processes,
+                           scheduler=scheduler, workers=workers, progress=progress)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

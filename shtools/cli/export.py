@@ -1,4 +1,4 @@
-"""``shtools export baked.h5 -o out.{ply,glb,png,gif}``: look at a bake."""
+"""``shtools export baked.h5 -o out.{ply,glb,usda,usdc,exr,png,gif}``: hand a bake on."""
 
 from __future__ import annotations
 
@@ -6,10 +6,8 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, output_option, report
+from shtools.cli._common import json_option, output_option, progress, report
 from shtools.export.tonemap import CURVES
-
-FORMATS = (".ply", ".glb", ".png", ".gif")
 
 
 @click.command("export")
@@ -17,8 +15,20 @@ FORMATS = (".ply", ".glb", ".png", ".gif")
 @output_option
 @click.option("--frame", type=int, default=None,
               help="Scene frame number to export (default the bake's first).")
-@click.option("--frames", "frames_text", metavar="A:B",
-              help="Frame range (half-open) for a contact sheet (.png) or animation (.gif).")
+@click.option("--frames", "frames_text", metavar="A:B[:S]",
+              help="Frame range, half-open with step S: a contact sheet (.png), the frames of "
+                   "a .gif/USD/.exr, or a numbered .glb/.ply sequence NAME.<frame>.glb.")
+@click.option("--quantity", type=click.Choice(["radiance", "irradiance", "visibility"]),
+              default="radiance", show_default=True,
+              help="Per-vertex value exported, before albedo (visibility: cosine-weighted, "
+                   "needs a bake with --store-visibility).")
+@click.option("--target", metavar="OBJECT", default=None,
+              help="Frame this receiver object in a .png/.gif preview.")
+@click.option("--rig", metavar="OBJECT=RIG.glb", default=None,
+              help="With .glb and --frame: write skinned OBJECT as its source glTF with skin "
+                   "and clips kept and this frame's baked colours.")
+@click.option("--distance", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Camera distance from the framed centre, scene units (default: fitted).")
 @click.option("--exposure", type=float, default=0.0, show_default=True,
               help="Exposure in stops on top of the automatic exposure.")
 @click.option("--fixed-exposure", is_flag=True,
@@ -36,15 +46,16 @@ FORMATS = (".ply", ".glb", ".png", ".gif")
 @click.option("--columns", type=int, default=None, help="Contact sheet columns.")
 @click.option("--fps", type=float, default=None, help="GIF frame rate (default the bake's).")
 @json_option
-def export(baked, output, frame, frames_text, exposure, fixed_exposure, curve, size, elevation,
-           azimuth, zoom, columns, fps, as_json):
-    """Export a baked frame as PLY/GLB (vertex colours) or a PNG preview; a frame
-    range as a PNG contact sheet or an animated GIF.
+def export(baked, output, frame, frames_text, quantity, target, rig, distance, exposure,
+           fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, as_json):
+    """Export a bake: PLY/GLB frames (one named mesh per object), a time-sampled USD
+    stage, a vertex animation texture (.exr + .glb), PNG previews, a contact
+    sheet or an animated GIF.
     """
     from shtools.data_formats.bake import read_bake
     from shtools.errors import InputError
     from shtools.export.png import View
-    from shtools.export.writer import export_bake
+    from shtools.export.writer import FORMATS, export_bake
 
     suffix = Path(output).suffix.lower()
     if suffix not in FORMATS:
@@ -54,9 +65,17 @@ def export(baked, output, frame, frames_text, exposure, fixed_exposure, curve, s
         raise InputError("--zoom must be > 0")
     if size is not None and (size[0] < 8 or size[1] < 8):
         raise InputError("--size must be at least 8 8 pixels")
+    if rig is not None:
+        name, sep, rig_path = rig.partition("=")
+        if not sep or not name or not rig_path:
+            raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
+        rig = (name, rig_path)
     bake_asset = read_bake(baked)
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
-                auto_exposure=not fixed_exposure, curve=curve)
+                auto_exposure=not fixed_exposure, curve=curve, distance=distance)
     summary = export_bake(bake_asset, output, frame=frame, frames_text=frames_text, view=view,
-                          size=size, columns=columns, fps=fps)
-    report(summary, as_json, f"wrote {output} ({summary['detail']})")
+                          size=size, columns=columns, fps=fps, quantity=quantity,
+                          target=target, rig=rig, progress=progress)
+    files = summary.get("files", [output])
+    written = files[0] if len(files) == 1 else f"{len(files)} files"
+    report(summary, as_json, f"wrote {written} ({summary['detail']})")

@@ -35,6 +35,10 @@ COMMANDS = {
 }
 
 
+#: click >= 8.2 raises this for a bare group; older versions print the help and exit 0
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
+
+
 class LazyGroup(click.Group):
     """A group that imports a subcommand's module only when it is used."""
 
@@ -62,12 +66,17 @@ class LazyGroup(click.Group):
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="shtools")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress output (bars on a terminal, log lines every ~10 s otherwise).")
 @click.pass_context
-def cli(ctx, debug):
+def cli(ctx, debug, quiet):
     """Soft shadows with spherical harmonics: preprocessing stages and baker.
 
     Each stage reads files and writes one HDF5 asset named by -o/--output.
     """
+    from shtools.cli._common import set_quiet
+
+    set_quiet(quiet)
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
 
@@ -81,6 +90,10 @@ def main(argv=None) -> int:
         # one BLAS thread unless the user set a count (see one_blas_thread)
         with one_blas_thread():
             rv = cli.main(args=argv, prog_name="shtools", standalone_mode=False)
+    except _NO_ARGS_IS_HELP as exc:
+        # a bare group (``shtools``, ``shtools spheres``) asks for its help
+        click.echo(exc.ctx.get_help())
+        return 0
     except ShtoolsError as exc:
         if debug:
             raise

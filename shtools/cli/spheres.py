@@ -46,19 +46,9 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
     """
     from shtools.geometry.assets import fit_to_file
 
-    bar = progress(total=iterations, desc="fit")
-
-    def tick(iteration, energy):
-        bar.n = iteration if iterations is None else min(iteration, iterations)
-        bar.set_postfix(E=f"{energy:.3f}")
-        bar.refresh()
-
-    try:
-        result = fit_to_file(mesh_path, count, output, method=method, seed=seed,
-                             thickness=thickness, iterations=iterations, restarts=restarts,
-                             progress=tick)
-    finally:
-        bar.close()
+    result = fit_to_file(mesh_path, count, output, method=method, seed=seed,
+                         thickness=thickness, iterations=iterations, restarts=restarts,
+                         progress=progress)
     summary = {
         "output": output,
         "spheres": len(result),
@@ -119,6 +109,63 @@ def export_cmd(spheres_path, output, as_json):
     write_sph(output, result)
     report({"output": output, "spheres": len(result)}, as_json,
            f"wrote {output}: {len(result)} spheres")
+
+
+@spheres.command("preview")
+@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
+@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@output_option
+@click.option("--size", nargs=2, type=click.IntRange(min=16), default=(480, 360),
+              show_default=True, metavar="W H", help="Size of each of the two PNG panels.")
+@click.option("--elevation", type=float, default=20.0, show_default=True,
+              help="Camera elevation, degrees.")
+@click.option("--azimuth", type=float, default=35.0, show_default=True,
+              help="Camera azimuth of the left panel, degrees (the right one is +90).")
+@json_option
+def preview(mesh_path, spheres_path, output, size, elevation, azimuth, as_json):
+    """Show the spheres of SPHERES (a spheres, tree or bound asset) over MESH.
+
+    .png: two views, the mesh grey and each sphere half-transparent in its own
+    colour.  .glb: the mesh and one node per sphere, for a DCC viewport.
+    """
+    from pathlib import Path
+
+    from shtools.errors import InputError
+    from shtools.export.spheres import render_spheres_png, write_spheres_glb
+    from shtools.geometry.mesh import load_mesh
+
+    suffix = Path(output).suffix.lower()
+    if suffix not in (".png", ".glb"):
+        raise InputError(f"unsupported output format '{suffix or '(none)'}'; use .png or .glb",
+                         output)
+    centers, radii = _blocker_spheres(spheres_path)
+    mesh = load_mesh(mesh_path)
+    if suffix == ".png":
+        from shtools.export.png import save_png
+
+        save_png(render_spheres_png(mesh, centers, radii, width=size[0], height=size[1],
+                                    elevation=elevation, azimuth=azimuth), output)
+    else:
+        write_spheres_glb(output, mesh, centers, radii, mesh_name=Path(mesh_path).stem)
+    report({"output": output, "spheres": len(radii), "mesh_vertices": len(mesh.vertices)},
+           as_json, f"wrote {output}: {len(radii)} spheres over {mesh_path}")
+
+
+def _blocker_spheres(path):
+    """Centres (N, 3) and radii (N,) of a spheres asset, a tree's leaves or a bound set."""
+    import numpy as np
+
+    from shtools.data_formats import read_asset
+    from shtools.errors import InputError
+
+    asset = read_asset(path)
+    d = asset.data
+    if asset.kind in ("spheres", "bound"):
+        return np.asarray(d["centers"], float), np.asarray(d["radii"], float)
+    if asset.kind == "tree":
+        leaves = np.flatnonzero(d["leaf"] >= 0)
+        return np.asarray(d["centers"][leaves], float), np.asarray(d["radii"][leaves], float)
+    raise InputError(f"is a '{asset.kind}' asset; give a spheres, tree or bound asset", path)
 
 
 # the tree engineer's commands (shtools/cli/spheres_tree.py)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, report
+from shtools.cli._common import json_option, output_option, progress, report
 from shtools.geometry.fit_methods import SPHERE_SPACES
 
 
@@ -30,7 +30,8 @@ def tree(spheres_path, output, branching, seed, as_json):
     from shtools.geometry.assets import tree_to_file
     from shtools.geometry.sphere_tree import tree_statistics
 
-    result = tree_to_file(spheres_path, output, branching=branching, seed=seed)
+    result = tree_to_file(spheres_path, output, branching=branching, seed=seed,
+                          progress=progress)
     stats = tree_statistics(result)
     summary = {"output": output, **stats}
     report(

@@ -152,6 +152,17 @@ class Bake:
             )
         return int(hits[0])
 
+    def object_faces(self, o: int) -> np.ndarray:
+        """Triangles ``(F_o, 3)`` of receiver object ``o``, indexing its own vertices.
+
+        Object ``o`` owns vertices ``object_offsets[o]:object_offsets[o+1]``; a
+        face belongs to the object of its first vertex (the baker never joins
+        objects with a face).
+        """
+        lo, hi = int(self.object_offsets[o]), int(self.object_offsets[o + 1])
+        first = self.faces[:, 0]
+        return self.faces[(first >= lo) & (first < hi)] - lo
+
     def frame_vertices(self, t: int) -> np.ndarray:
         """Vertex positions ``(V, 3)`` of asset frame ``t`` (0-based position)."""
         return self.vertices if self.vertices.ndim == 2 else self.vertices[t]

@@ -4,7 +4,8 @@
 the same kind is compared with ``|a - b| <= atol + rtol * |b|`` (``b`` is the
 reference, e.g. the golden file), in blocks of :data:`BLOCK_ELEMENTS` so
 memory stays bounded; provenance that legitimately differs between builds
-(``generator``; ``inputs`` unless asked) is ignored; shape, dtype, kind and
+(``generator``; ``inputs`` and input file names in ``parameters`` unless
+asked) is ignored; ``frames`` restricts two bakes to shared scene frames; shape, dtype, kind and
 parameter mismatches are reported with the worst differences.
 :func:`summarize_asset` validates an asset and gives ranges per dataset.
 """
@@ -17,6 +18,7 @@ import h5py
 import numpy as np
 
 from shtools.data_formats._base import read_asset
+from shtools.errors import AssetError, InputError
 
 
 def short(v, limit: int = 60) -> str:
@@ -92,6 +94,37 @@ def _dataset_summary(name, ds) -> dict:
 
 #: Root attributes that differ between equivalent builds and are never compared.
 IGNORED_ATTRS = ("generator",)
+#: Parameters that name input files: provenance like ``inputs``, compared only with them.
+PROVENANCE_PARAMETERS = ("parameters.scene",)
+#: Datasets of a bake asset indexed by frame along their first axis (vertices and
+#: normals only when they have a frame axis).
+BAKE_FRAME_DATASETS = ("radiance", "visibility", "times", "frame_index", "vertices", "normals")
+
+
+def frame_numbers(text: str) -> range:
+    """``A:B[:S]`` or ``A`` -> scene frame numbers (a one-line error otherwise)."""
+    parts = text.split(":")
+    try:
+        if len(parts) == 1:
+            return range(int(parts[0]), int(parts[0]) + 1)
+        if len(parts) in (2, 3) and parts[0].strip() and parts[1].strip():
+            step = int(parts[2]) if len(parts) == 3 and parts[2].strip() else 1
+            if step >= 1 and int(parts[1]) > int(parts[0]):
+                return range(int(parts[0]), int(parts[1]), step)
+    except ValueError:
+        pass
+    raise InputError(f"--frames '{text}' is not A:B[:S] (half-open, A < B, S >= 1) or A")
+
+
+def _frame_positions(f: h5py.File, frames: range, path) -> np.ndarray:
+    """Positions along the frame axis of scene frames ``frames`` in an open bake asset."""
+    index = f["frame_index"][()] if "frame_index" in f else np.arange(f["radiance"].shape[0])
+    where = {int(k): i for i, k in enumerate(index)}
+    missing = [k for k in frames if k not in where]
+    if missing:
+        raise AssetError(f"does not hold frame {missing[0]} (it holds {int(index.min())}.."
+                         f"{int(index.max())}); pick frames both bakes hold", path)
+    return np.array([where[k] for k in frames])
 
 
 def _flatten_parameters(params, prefix="parameters."):
@@ -109,7 +142,8 @@ def _comparable_attrs(attrs: dict, compare_inputs: bool) -> dict:
         if k in IGNORED_ATTRS or (k == "inputs" and not compare_inputs):
             continue
         if k == "parameters":
-            out.update(_flatten_parameters(v))
+            out.update({name: value for name, value in _flatten_parameters(v).items()
+                        if compare_inputs or name not in PROVENANCE_PARAMETERS})
         elif k == "inputs":
             out.update({f"inputs.{name}": digest for name, digest in (v or {}).items()})
         else:
@@ -123,7 +157,7 @@ def _is_ignored(name: str, ignore: set[str]) -> bool:
 
 
 def compare_assets(path_a, path_b, *, rtol=1e-5, atol=1e-8, compare_inputs=False,
-                   ignore=frozenset(), worst=10, rel_rmse=None) -> dict:
+                   ignore=frozenset(), worst=10, rel_rmse=None, frames=None) -> dict:
     """Compare two assets; B is the reference.
 
     Parameters
@@ -142,6 +176,9 @@ def compare_assets(path_a, path_b, *, rtol=1e-5, atol=1e-8, compare_inputs=False
     rel_rmse : float, optional
         Also fail a numeric dataset whose relative RMSE ``||a - b|| / ||b||``
         (over finite elements) exceeds this.
+    frames : range, optional
+        Bake assets: compare only these scene frame numbers (both must hold
+        them); the baked frame range parameter is then not compared.
 
     Returns
     -------
@@ -160,10 +197,12 @@ def compare_assets(path_a, path_b, *, rtol=1e-5, atol=1e-8, compare_inputs=False
         problems.append(f"kind differs: A is '{a.kind}', B is '{b.kind}'")
         result["equal"] = False
         return result
+    if frames is not None and a.kind != "bake":
+        raise AssetError(f"--frames applies to bake assets; this is a '{a.kind}' asset", path_a)
     attrs_a = _comparable_attrs(a.attrs, compare_inputs)
     attrs_b = _comparable_attrs(b.attrs, compare_inputs)
     for key in sorted(set(attrs_a) | set(attrs_b)):
-        if _is_ignored(key, ignore):
+        if _is_ignored(key, ignore) or (frames is not None and key == "parameters.frames"):
             continue
         va, vb = attrs_a.get(key, "<absent>"), attrs_b.get(key, "<absent>")
         if va != vb:
@@ -172,6 +211,10 @@ def compare_assets(path_a, path_b, *, rtol=1e-5, atol=1e-8, compare_inputs=False
     sets_a, sets_b = _datasets(path_a), _datasets(path_b)
     candidates = []
     with h5py.File(path_a, "r") as fa, h5py.File(path_b, "r") as fb:
+        pos_a = pos_b = None
+        if frames is not None:
+            pos_a = _frame_positions(fa, frames, path_a)
+            pos_b = _frame_positions(fb, frames, path_b)
         for name in sorted(set(sets_a) | set(sets_b)):
             if _is_ignored(name, ignore):
                 continue
@@ -180,7 +223,11 @@ def compare_assets(path_a, path_b, *, rtol=1e-5, atol=1e-8, compare_inputs=False
                 problems.append(f"dataset {name} is missing in {where}")
                 result["datasets"].append({"name": name, "status": f"missing in {where}"})
                 continue
-            entry, worst_here = _compare_dataset(name, fa[name], fb[name], rtol, atol, worst)
+            da, db = fa[name], fb[name]
+            if pos_a is not None and name in BAKE_FRAME_DATASETS and da.ndim == db.ndim and (
+                    name not in ("vertices", "normals") or da.ndim == 3):
+                da, db = da[pos_a], db[pos_b]  # the selected frames only
+            entry, worst_here = _compare_dataset(name, da, db, rtol, atol, worst)
             if (rel_rmse is not None and entry.get("rel_rmse") is not None
                     and entry["rel_rmse"] > rel_rmse):
                 entry["status"] = f"relative RMSE {entry['rel_rmse']:.3g} > {rel_rmse:g}"

@@ -18,7 +18,7 @@ from shtools.data_formats import atomic_path
 from shtools.data_formats.bake import Bake
 from shtools.errors import InputError
 from shtools.export.raster import fit_camera, rasterize
-from shtools.export.tonemap import auto_exposure, to_uint8, tonemap
+from shtools.export.tonemap import srgb_encode, to_uint8
 
 #: Background gradient, sRGB-encoded (top, bottom): a neutral studio grey.
 BACKGROUND_TOP = np.array([0.72, 0.75, 0.80])
@@ -30,7 +30,8 @@ class View:
     """How to look at a bake: image size, camera angles (degrees), zoom, exposure.
 
     ``exposure`` is in stops on top of the automatic exposure (or of 1.0 when
-    ``auto_exposure`` is off); ``curve`` is ``"aces"``, ``"reinhard"`` or ``"clamp"``.
+    ``auto_exposure`` is off); ``curve`` is ``"aces"``, ``"reinhard"`` or ``"clamp"``;
+    ``distance`` (scene units) fixes the camera's distance from the framed centre.
     """
 
     width: int = 800
@@ -42,25 +43,27 @@ class View:
     auto_exposure: bool = True
     curve: str = "aces"
     supersample: int = 2
+    distance: float | None = None
 
 
-def exposure_scale(bake: Bake, positions: list[int], view: View) -> float:
+def exposure_scale(bake: Bake, positions: list[int], view: View,
+                   quantity: str = "radiance") -> float:
     """Linear exposure shared by the frames at ``positions``."""
-    scale = 2.0 ** view.exposure
-    if view.auto_exposure:
-        colored = bake.radiance[positions]
-        if bake.albedo is not None:
-            colored = colored * bake.albedo[None]
-        scale *= auto_exposure(colored)
-    return scale
+    from shtools.export.quantity import display_scale
+
+    return display_scale(bake, positions, quantity, view.exposure, view.auto_exposure)
 
 
-def vertex_colors(bake: Bake, t: int, scale: float, curve: str = "aces") -> np.ndarray:
-    """Display colours (V, 3) in [0, 1] of asset frame ``t``: albedo x radiance, tone-mapped."""
-    rad = bake.radiance[t].astype(float)
-    if bake.albedo is not None:
-        rad = rad * bake.albedo
-    return tonemap(rad, scale, curve)
+def vertex_colors(bake: Bake, t: int, scale: float, curve: str = "aces",
+                  quantity: str = "radiance") -> np.ndarray:
+    """Display colours (V, 3) in [0, 1], sRGB-encoded, of asset frame ``t``.
+
+    For radiance: albedo x radiance, exposed and tone-mapped
+    (:func:`shtools.export.quantity.display_linear`).
+    """
+    from shtools.export.quantity import display_linear
+
+    return srgb_encode(display_linear(bake, t, quantity, scale, curve))
 
 
 def _background(width: int, height: int) -> np.ndarray:
@@ -69,28 +72,54 @@ def _background(width: int, height: int) -> np.ndarray:
     return np.broadcast_to(row, (height, width, 3))
 
 
-def _camera(bake: Bake, positions: list[int], view: View):
+def target_range(bake: Bake, target: str | None) -> tuple[int, int]:
+    """Vertex range ``(lo, hi)`` of receiver object ``target`` (None: every vertex).
+
+    Raises :class:`InputError` naming the bake's objects when there is no such object.
+    """
+    if target is None:
+        return 0, bake.n_vertices
+    if target not in bake.object_names:
+        raise InputError(f"no receiver object '{target}' in this bake; it has "
+                         f"{', '.join(bake.object_names)}", bake.path)
+    o = bake.object_names.index(target)
+    return int(bake.object_offsets[o]), int(bake.object_offsets[o + 1])
+
+
+def _camera(bake: Bake, positions: list[int], view: View, target: str | None = None):
+    lo, hi = target_range(bake, target)
     if bake.vertices.ndim == 3:
-        pts = bake.vertices[positions].reshape(-1, 3)
+        pts = bake.vertices[positions, lo:hi].reshape(-1, 3)
     else:
-        pts = bake.vertices
+        pts = bake.vertices[lo:hi]
     return fit_camera(
         np.asarray(pts, dtype=float),
         elevation=np.radians(view.elevation),
         azimuth=np.radians(view.azimuth),
         aspect=view.width / view.height,
         zoom=view.zoom,
+        fixed_distance=view.distance,
     )
 
 
-def render_frames(bake: Bake, positions: list[int], view: View) -> list[np.ndarray]:
-    """Render asset frames ``positions`` with one camera and exposure; uint8 (H, W, 3) each."""
-    scale = exposure_scale(bake, positions, view)
-    camera = _camera(bake, positions, view)
+def render_frames(bake: Bake, positions: list[int], view: View, progress=None,
+                  quantity: str = "radiance", target: str | None = None) -> list[np.ndarray]:
+    """Render asset frames ``positions`` with one camera and exposure; uint8 (H, W, 3) each.
+
+    ``progress``: a progress factory (:mod:`shtools.progress`), one step per frame;
+    ``quantity``: what the colours show (:mod:`shtools.export.quantity`);
+    ``target``: frame this receiver object (every object stays visible).
+    """
+    from shtools.progress import silent
+
+    scale = exposure_scale(bake, positions, view, quantity)
+    camera = _camera(bake, positions, view, target)
     bg = _background(view.width, view.height)
     images = []
-    for t in positions:
-        colors = vertex_colors(bake, t, scale, view.curve)
+    steps = positions if len(positions) == 1 else (progress or silent)(
+        positions, desc="render", unit="frames")
+    for t in steps:
+        colors = vertex_colors(bake, t, scale, view.curve, quantity)
         img, _ = rasterize(
             np.asarray(bake.frame_vertices(t), dtype=float), bake.faces, colors, camera,
             view.width, view.height, background=bg, supersample=view.supersample,

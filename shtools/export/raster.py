@@ -57,13 +57,16 @@ def fit_camera(
     aspect: float = 4 / 3,
     zoom: float = 1.0,
     margin: float = 0.04,
+    fixed_distance: float | None = None,
 ) -> Camera:
     """A camera that frames ``points`` (N, 3), looking down at ``elevation``.
 
     The camera looks at the centre of the points' bounding box along the given
     direction and backs off just far enough that every point projects inside the
     image (with ``margin`` of the half-size to spare); ``zoom > 1`` moves closer.
-    ``azimuth`` turns the camera about +Y (0 looks along -Z).
+    ``azimuth`` turns the camera about +Y (0 looks along -Z).  ``fixed_distance``
+    (scene units, optional) places the camera that far from the framed centre
+    instead of the fitted distance divided by ``zoom``.
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     if len(pts) > 20000:  # the extent of a subsample frames the same scene
@@ -92,7 +95,8 @@ def fit_camera(
         shift_u = (u.max() + u.min()) / 2 * distance
         shift_v = (v.max() + v.min()) / 2 * distance
         target = target + shift_u * right + shift_v * up
-    return Camera(target + distance / zoom * direction, target, fov_y)
+    backoff = distance / zoom if fixed_distance is None else float(fixed_distance)
+    return Camera(target + backoff * direction, target, fov_y)
 
 
 def rasterize(

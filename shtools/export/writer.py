@@ -1,7 +1,16 @@
-"""Export a bake asset to the format its output suffix names (.ply, .glb, .png, .gif)."""
+"""Export a bake asset to the format its output suffix names.
+
+``.ply``/``.glb`` hold one frame each; with a frame range they are written as a
+numbered sequence ``NAME.<frame>.glb`` (four digits, the scene frame number) --
+see :func:`sequence_paths`.  ``.usda``/``.usdc``/``.usd`` hold every exported
+frame in one time-sampled stage.  ``.png`` is one frame or a contact sheet,
+``.gif`` an animation.  ``.exr`` is a vertex animation texture
+(:mod:`shtools.export.vat`).
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -13,36 +22,93 @@ from shtools.errors import InputError
 from shtools.export.png import (
     View,
     contact_sheet,
-    exposure_scale,
     render_frames,
     save_gif,
     save_png,
-    vertex_colors,
 )
-from shtools.export.tonemap import CURVES
+from shtools.export.quantity import QUANTITIES, check_quantity, display_linear, display_scale
 
 #: Default image sizes (width, height): a single frame, and one tile of a sheet or GIF.
 FRAME_SIZE = (800, 600)
 TILE_SIZE = (320, 240)
 
+FORMATS = (".ply", ".glb", ".png", ".gif", ".usda", ".usdc", ".usd", ".exr")
+#: formats holding every exported frame in one file (default: all the bake's frames)
+ANIMATED = (".gif", ".usda", ".usdc", ".usd", ".exr")
 
-def _positions(bake: Bake, frame: int | None, frames_text: str | None) -> list[int]:
+
+def parse_frame_range(bake: Bake, text: str) -> list[int]:
+    """``"A:B[:S]"`` (half-open, step S), ``"A:"``, ``":B"`` or ``"A"`` -> asset positions.
+
+    Frame numbers are the scene's; every selected frame must be in the bake.
+
+    Raises
+    ------
+    InputError
+        Malformed, empty, a step < 1, or frames the bake does not hold.
+    """
+    lo, hi = int(bake.frame_index.min()), int(bake.frame_index.max()) + 1
+    parts = text.split(":")
+    try:
+        if len(parts) == 1:
+            start = int(parts[0])
+            stop, step = start + 1, 1
+        elif len(parts) in (2, 3):
+            start = int(parts[0]) if parts[0].strip() else lo
+            stop = int(parts[1]) if parts[1].strip() else hi
+            step = int(parts[2]) if len(parts) == 3 and parts[2].strip() else 1
+        else:
+            raise ValueError
+    except ValueError:
+        raise InputError(f"--frames '{text}' is not A:B[:S], A: or A (frame numbers)",
+                         bake.path) from None
+    if step < 1:
+        raise InputError(f"--frames {text}: the step must be >= 1", bake.path)
+    frames = range(start, stop, step)
+    if len(frames) == 0:
+        raise InputError(f"--frames {text} selects no frame; A:B is half-open like Python",
+                         bake.path)
+    return [bake.frame_position(f) for f in frames]
+
+
+def _positions(bake: Bake, suffix: str, frame: int | None, frames_text: str | None):
     if frames_text is not None:
         if frame is not None:
             raise InputError("give --frame or --frames, not both")
-        from shtools.data_formats.bake import parse_frames
+        return parse_frame_range(bake, frames_text)
+    if frame is not None:
+        return [bake.frame_position(frame)]
+    return list(range(bake.n_frames)) if suffix in ANIMATED else [0]
 
-        lo = int(bake.frame_index.min())
-        hi = int(bake.frame_index.max()) + 1
-        text = frames_text
-        rng = parse_frames(text, hi, bake.path)
-        if rng.start < lo:
-            raise InputError(f"--frames {text} starts before the bake's first frame {lo}",
-                             bake.path)
-        return [bake.frame_position(f) for f in rng]
-    if frame is None:
-        return [0]
-    return [bake.frame_position(frame)]
+
+def sequence_paths(output: str | os.PathLike, frames: list[int]) -> list[Path]:
+    """``out.glb`` and frames ``[0, 2]`` -> ``out.0000.glb``, ``out.0002.glb``.
+
+    One frame keeps ``output`` as given.  The ``NAME.####.ext`` pattern is what
+    Houdini, Blender and Nuke read as an image/geometry sequence.
+    """
+    out = Path(output)
+    if len(frames) == 1:
+        return [out]
+    return [out.with_name(f"{out.stem}.{f:04d}{out.suffix}") for f in frames]
+
+
+def mesh_objects(bake: Bake, t: int, quantity: str, scale: float, curve: str, uv1=None):
+    """The bake's receiver objects at asset frame ``t`` as :class:`GlbObject` s."""
+    from shtools.export.gltf import GlbObject
+    from shtools.export.quantity import raw_values
+
+    verts = np.asarray(bake.frame_vertices(t), dtype=np.float64)
+    normals = np.asarray(bake.frame_normals(t), dtype=np.float64)
+    display = display_linear(bake, t, quantity, scale, curve)
+    raw = raw_values(bake, t, quantity)
+    out = []
+    for o, name in enumerate(bake.object_names):
+        lo, hi = int(bake.object_offsets[o]), int(bake.object_offsets[o + 1])
+        out.append(GlbObject(name, verts[lo:hi], bake.object_faces(o), display[lo:hi],
+                             normals[lo:hi], raw[lo:hi], f"_{quantity.upper()}",
+                             None if uv1 is None else uv1[lo:hi]))
+    return out
 
 
 def export_bake(
@@ -55,62 +121,128 @@ def export_bake(
     size: tuple[int, int] | None = None,
     columns: int | None = None,
     fps: float | None = None,
+    quantity: str = "radiance",
+    target: str | None = None,
+    rig: tuple[str, str] | None = None,
+    progress=None,
 ) -> dict:
     """Write ``bake`` to ``output`` (format from the suffix); returns a summary dict.
 
-    ``.ply``/``.glb`` take one frame (``frame``, a scene frame number; default
-    the first baked).  ``.png`` renders one frame, or a contact sheet when
-    ``frames_text`` (``"A:B"``) is given; ``.gif`` animates ``frames_text``
-    (default every baked frame).
+    Parameters
+    ----------
+    frame : int, optional
+        One scene frame number (default the first baked; every frame for the
+        animated formats ``.gif``, USD and ``.exr``).
+    frames_text : str, optional
+        ``"A:B[:S]"``: a contact sheet (``.png``), the frames of an animated
+        format, or a numbered sequence of ``.glb``/``.ply`` files.
+    view : View
+        Camera, exposure and tone curve.
+    quantity : {"radiance", "irradiance", "visibility"}
+        What the raw attribute/primvar holds and the display colour shows
+        (:mod:`shtools.export.quantity`).
+    target : str, optional
+        Frame this receiver object with the preview camera (``.png``/``.gif``).
+    rig : (object name, glTF path), optional
+        ``.glb`` of one frame: write that skinned object's source glTF with
+        its skin and clips and this frame's colours (:mod:`shtools.export.rig`).
+    progress : callable, optional
+        Progress factory (:mod:`shtools.progress`) for frame sequences.
     """
+    from shtools.progress import silent
+
     view = view or View()
     suffix = Path(output).suffix.lower()
-    if suffix == ".gif" and frames_text is None and frame is None:
-        positions = list(range(bake.n_frames))
-    else:
-        positions = _positions(bake, frame, frames_text)
-    if suffix in (".ply", ".glb"):
-        if len(positions) != 1:
-            raise InputError(f"{suffix} holds one frame; use --frame F (or export a .png "
-                             "sheet / .gif for a range)", output)
-        t = positions[0]
-        scale = exposure_scale(bake, [t], view)
-        verts = np.asarray(bake.frame_vertices(t), dtype=float)
-        normals = np.asarray(bake.frame_normals(t), dtype=float)
-        if suffix == ".ply":
-            from shtools.export.ply import write_ply
+    if suffix not in FORMATS:
+        raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
+                         f"{', '.join(FORMATS)}", output)
+    if quantity not in QUANTITIES:
+        raise InputError(f"unknown quantity '{quantity}'; use one of {', '.join(QUANTITIES)}")
+    check_quantity(bake, quantity)
+    if target is not None and suffix not in (".png", ".gif"):
+        raise InputError("--target frames the preview camera; it applies to .png and .gif")
+    positions = _positions(bake, suffix, frame, frames_text)
+    frames = [int(bake.frame_index[t]) for t in positions]
+    scale = display_scale(bake, positions, quantity, view.exposure, view.auto_exposure)
+    summary = {"output": os.fspath(output), "format": suffix[1:], "frames": frames,
+               "quantity": quantity}
+    if rig is not None:
+        if suffix != ".glb" or len(positions) != 1:
+            raise InputError("--rig writes one .glb of one frame (--frame F): the skin and "
+                             "clips animate it, the colours are that frame's", output)
+        from shtools.export.rig import write_rig_glb
 
-            write_ply(output, verts, bake.faces, vertex_colors(bake, t, scale, view.curve),
-                      normals)
-        else:
-            from shtools.export.gltf import write_glb
+        info = write_rig_glb(output, bake, positions[0], rig[0], rig[1], quantity=quantity,
+                             scale=scale, curve=view.curve)
+        summary.update(info)
+        summary["detail"] = (f"'{rig[0]}' with its skin and {len(info['animations'])} "
+                             f"clip(s), colours of frame {frames[0]}")
+    elif suffix in (".ply", ".glb"):
+        paths = sequence_paths(output, frames)
+        steps = positions if len(positions) == 1 else (progress or silent)(
+            positions, desc=suffix[1:], unit="frames")
+        with contextlib.ExitStack() as stack:  # every file appears only if all were written
+            from shtools.data_formats import atomic_path
 
-            rad = bake.radiance[t].astype(float)
-            shaded = rad * bake.albedo if bake.albedo is not None else rad
-            linear = CURVES[view.curve](shaded * scale)
-            write_glb(output, verts, bake.faces, linear, normals, bake.radiance[t])
-        detail = f"frame {int(bake.frame_index[t])}, {bake.n_vertices} vertices"
+            for t, path in zip(steps, paths, strict=True):
+                tmp = stack.enter_context(atomic_path(path))
+                _write_mesh_frame(tmp, suffix, bake, t, quantity, scale, view.curve)
+        summary["files"] = [os.fspath(p) for p in paths]
+        what = "objects" if len(bake.object_names) > 1 else "object"
+        detail = (f"frame {frames[0]}" if len(frames) == 1
+                  else f"{len(frames)} files {paths[0].name} .. {paths[-1].name}")
+        summary["detail"] = (f"{detail}, {len(bake.object_names)} {what}, "
+                             f"{bake.n_vertices} vertices")
+    elif suffix in (".usda", ".usdc", ".usd"):
+        from shtools.export.usd import write_usd
+
+        info = write_usd(output, bake, positions, quantity=quantity, scale=scale,
+                         curve=view.curve, progress=progress)
+        summary.update(info)
+        summary["detail"] = (f"{len(frames)} frame(s), {len(info['prims'])} prim(s), "
+                             f"{len(info['animated'])} with animated points")
+    elif suffix == ".exr":
+        from shtools.export.vat import write_vat
+
+        info = write_vat(output, bake, positions, quantity=quantity, scale=scale,
+                         curve=view.curve, progress=progress)
+        summary.update(info)
+        summary["detail"] = (f"{len(frames)} frames x {bake.n_vertices} vertices, "
+                             f"GLB {info['glb']}")
     elif suffix == ".png" and len(positions) == 1:
         w, h = size or FRAME_SIZE
-        (img,) = render_frames(bake, positions, replace(view, width=w, height=h))
+        (img,) = render_frames(bake, positions, replace(view, width=w, height=h),
+                               quantity=quantity, target=target)
         save_png(img, output)
-        detail = f"frame {int(bake.frame_index[positions[0]])}, {w}x{h}"
+        summary["detail"] = f"frame {frames[0]}, {w}x{h}"
     else:
         w, h = size or TILE_SIZE
         # GIF frames are palette-quantised anyway: skip the supersampling (4x faster)
         ss = 1 if suffix == ".gif" else view.supersample
-        images = render_frames(bake, positions, replace(view, width=w, height=h, supersample=ss))
+        images = render_frames(bake, positions, replace(view, width=w, height=h, supersample=ss),
+                               progress=progress, quantity=quantity, target=target)
         if suffix == ".png":
-            labels = [f"frame {int(bake.frame_index[t])}" for t in positions]
+            labels = [f"frame {f}" for f in frames]
             save_png(contact_sheet(images, labels, columns), output)
-            detail = f"contact sheet of {len(positions)} frames"
+            summary["detail"] = f"contact sheet of {len(positions)} frames"
         else:
             rate = fps or float(bake.attrs.get("fps", 24.0))
             save_gif(images, output, rate)
-            detail = f"{len(positions)} frames at {rate:g} fps"
-    return {
-        "output": os.fspath(output),
-        "format": suffix[1:],
-        "frames": [int(bake.frame_index[t]) for t in positions],
-        "detail": detail,
-    }
+            summary["detail"] = f"{len(positions)} frames at {rate:g} fps"
+    return summary
+
+
+def _write_mesh_frame(path, suffix, bake: Bake, t: int, quantity: str, scale: float,
+                      curve: str) -> None:
+    """One frame as PLY (sRGB-encoded bytes, all objects in one mesh) or GLB (per object)."""
+    if suffix == ".ply":
+        from shtools.export.ply import write_ply
+        from shtools.export.tonemap import srgb_encode
+
+        colors = srgb_encode(display_linear(bake, t, quantity, scale, curve))
+        write_ply(path, np.asarray(bake.frame_vertices(t), dtype=float), bake.faces, colors,
+                  np.asarray(bake.frame_normals(t), dtype=float))
+    else:
+        from shtools.export.gltf import write_glb_objects
+
+        write_glb_objects(path, mesh_objects(bake, t, quantity, scale, curve))

@@ -8,7 +8,6 @@ inputs and parameters recorded, so the same call gives the same bytes.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 
 import numpy as np
 
@@ -18,12 +17,12 @@ from shtools.errors import InputError
 def fit_to_file(mesh_path: str | os.PathLike, count: int, output: str | os.PathLike, *,
                 method: str = "variational", seed: int = 0, thickness: float | None = None,
                 iterations: int | None = None, restarts: int = 1,
-                progress: Callable[[int, float], None] | None = None):
+                progress=None):
     """Fit ``count`` spheres to the mesh file and write a ``spheres`` asset.
 
     Parameters are those of :func:`shtools.geometry.sphere_fit.fit_spheres`
-    (``iterations`` is its ``max_iterations``); ``progress(iteration, energy)``
-    is called as the fit goes.
+    (``iterations`` is its ``max_iterations``); ``progress`` is a progress
+    factory (:mod:`shtools.progress`).
 
     Returns
     -------
@@ -138,8 +137,10 @@ def read_sphere_set(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
 
 def tree_to_file(spheres_path: str | os.PathLike, output: str | os.PathLike, *,
-                 branching: int = 4, seed: int = 0):
+                 branching: int = 4, seed: int = 0, progress=None):
     """Build the sphere tree of a ``spheres`` asset and write a ``tree`` asset.
+
+    ``progress`` is a progress factory (:mod:`shtools.progress`).
 
     Returns
     -------
@@ -150,7 +151,7 @@ def tree_to_file(spheres_path: str | os.PathLike, output: str | os.PathLike, *,
     from shtools.geometry.sphere_tree import build_tree
 
     centers, radii = read_sphere_set(spheres_path)
-    result = build_tree(centers, radii, branching=branching, seed=seed)
+    result = build_tree(centers, radii, branching=branching, seed=seed, progress=progress)
     write_tree(output, result, inputs={"spheres": spheres_path},
                parameters={"branching": branching, "seed": seed})
     return result

@@ -173,6 +173,9 @@ class SkinnedModel:
         Rest global transform of the skinned mesh node: where viewers and
         ``trimesh.load`` put the unskinned mesh ("scene space" =
         ``mesh_transform @ bind space``).  Skinning ignores it (glTF spec).
+    primitives : list of (mesh, primitive, start, count)
+        Where the vertices come from: glTF mesh and primitive indices and the
+        range ``start:start+count`` of ``rest_vertices`` each one fills, in order.
     path : str
     """
 
@@ -186,6 +189,7 @@ class SkinnedModel:
     joint_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     joint_names: list[str] = field(default_factory=list)
     mesh_transform: np.ndarray = field(default_factory=lambda: np.eye(4))
+    primitives: list[tuple[int, int, int, int]] = field(default_factory=list)
     path: str = ""
     _node_parent: np.ndarray = field(default=None, repr=False)
     _node_order: np.ndarray = field(default=None, repr=False)
@@ -487,10 +491,11 @@ def load_skinned_gltf(path: str | os.PathLike) -> SkinnedModel:
     else:
         inverse_bind = np.tile(np.eye(4), (n_joints, 1, 1))
 
-    vertices, faces, joints, weights, normals = [], [], [], [], []
+    vertices, faces, joints, weights, normals, sources = [], [], [], [], [], []
     offset = 0
     for node_index in skinned_nodes:
-        for prim in gltf.meshes[gltf.nodes[node_index].mesh].primitives:
+        mesh_index = gltf.nodes[node_index].mesh
+        for prim_index, prim in enumerate(gltf.meshes[mesh_index].primitives):
             mode = _TRIANGLES if prim.mode is None else prim.mode
             if mode != _TRIANGLES or prim.attributes.POSITION is None:
                 continue
@@ -516,6 +521,7 @@ def load_skinned_gltf(path: str | os.PathLike) -> SkinnedModel:
             joints.append(np.concatenate(j_sets, axis=1))
             weights.append(np.concatenate(w_sets, axis=1))
             normals.append(nrm)
+            sources.append((int(mesh_index), prim_index, offset, int(pos.shape[0])))
             offset += pos.shape[0]
     if not vertices:
         raise InputError("the skinned mesh has no triangle primitives", path)
@@ -578,6 +584,7 @@ def load_skinned_gltf(path: str | os.PathLike) -> SkinnedModel:
         normals=normals,
         joint_nodes=np.asarray(skin.joints, dtype=np.int64),
         joint_names=[gltf.nodes[j].name or f"joint{k}" for k, j in enumerate(skin.joints)],
+        primitives=sources,
         path=str(path),
         _node_parent=parent,
         _node_order=np.asarray(order, dtype=np.int64),

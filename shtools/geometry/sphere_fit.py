@@ -288,6 +288,7 @@ def fit_spheres(
     path=None,
     progress=None,
     restarts: int = 1,
+    _desc: str = "fit",
 ) -> SphereSet:
     """Fit ``n`` spheres bounding the solid of ``mesh`` with minimal outside volume.
 
@@ -318,7 +319,9 @@ def fit_spheres(
     path : path-like, optional
         Mesh file, named in error messages.
     progress : callable, optional
-        Called as ``progress(iteration, E_estimate)`` after each round.
+        A progress factory (:mod:`shtools.progress`): the fit shows one bar
+        over its round budget, counted in rounds at ``n`` spheres (coarse
+        rounds count by their share of the work), with the current E.
     restarts : int
         Independent starts with seeds ``seed, seed + 1, ...``; the fit with the
         lowest E is returned (the search is non-convex: on spot at N = 40,
@@ -348,12 +351,24 @@ def fit_spheres(
         fits = [fit_spheres(mesh, n, method=method, seed=seed + k, thickness=thickness,
                             max_iterations=max_iterations,
                             max_teleport_failures=max_teleport_failures, samples=samples,
-                            path=path, progress=progress)
+                            path=path, progress=progress, _desc=f"fit {k + 1}/{restarts}")
                 for k in range(int(restarts))]
         best = min(fits, key=lambda f: f.outside_volume_ratio)  # first of equals
         best.info["restart_E"] = [f.outside_volume_ratio for f in fits]
         best.info["seconds"] = time.perf_counter() - start
         return best
+    from shtools.progress import silent
+
+    with (progress or silent)(desc=_desc, unit="rounds") as bar:
+        return _fit_once(mesh, n, method=method, seed=seed, thickness=thickness,
+                         max_iterations=max_iterations,
+                         max_teleport_failures=max_teleport_failures, samples=samples,
+                         path=path, bar=bar)
+
+
+def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_failures,
+              samples, path, bar) -> SphereSet:
+    """One start of :func:`fit_spheres`, reporting to the progress object ``bar``."""
     start = time.perf_counter()
     if thickness is not None:
         from shtools.geometry.mesh import thicken
@@ -376,6 +391,12 @@ def fit_spheres(
     if max_iterations is None:
         max_iterations = int(np.clip(ITERATION_WORK / (len(solid.cover) * n), MIN_ITERATIONS,
                                      MAX_ITERATIONS))
+    bar.total = max_iterations  # known once the solid is sampled; shown at the next update
+
+    def progress(rounds: float, energy: float) -> None:
+        bar.set_postfix(E=f"{energy:.3f}", refresh=False)
+        bar.update(min(int(rounds), max_iterations) - bar.n)
+
     rng = np.random.default_rng(seed)
     info: dict = {"points": len(solid.points), "surface_points": len(solid.surface),
                   "flux_samples": len(solid.flux.points)}
@@ -961,16 +982,18 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
         # at ``half`` spheres at a proportionally higher count
         half = (n + 1) // 2
         work = max_iterations * n
+        # progress counts rounds at n: a coarse round is half a round
         c, r, _, coarse = _variational(
             solid, half, rng, max_iterations=max(1, int(COARSE_SHARE * work / half)),
-            max_teleport_failures=max_teleport_failures, progress=progress)
+            max_teleport_failures=max_teleport_failures,
+            progress=None if progress is None else (lambda i, e: progress(i * half / n, e)))
         start = _split_clusters(solid, c, r, n - half)
-        used = coarse["iterations"]
         fine_rounds = max(1, int((work - coarse["work"]) / n))
         centers, radii, labels, info = _lloyd_search(
             solid, start, max_iterations=fine_rounds,
             max_teleport_failures=max_teleport_failures,
-            progress=None if progress is None else (lambda i, e: progress(used + i, e)))
+            progress=None if progress is None else (
+                lambda i, e: progress(coarse["work"] / n + i, e)))
         for key in ("iterations", "teleports_tried", "teleports_accepted", "work"):
             info[key] += coarse[key]
         return centers, radii, labels, info

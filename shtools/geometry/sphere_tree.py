@@ -110,7 +110,7 @@ def _lloyd_level(centers, radii, k, rng) -> tuple[np.ndarray, np.ndarray, np.nda
     return remap[labels], cc[used], cr[used]
 
 
-def build_tree(centers, radii, branching: int = 4, seed: int = 0) -> SphereTree:
+def build_tree(centers, radii, branching: int = 4, seed: int = 0, progress=None) -> SphereTree:
     """Build a sphere hierarchy whose leaves are the given spheres.
 
     Parameters
@@ -121,6 +121,9 @@ def build_tree(centers, radii, branching: int = 4, seed: int = 0) -> SphereTree:
         Target average number of children per inner node (>= 2).
     seed : int
         Seed of the k-means++ initialisation; same seed -> identical tree.
+    progress : callable, optional
+        A progress factory (:mod:`shtools.progress`); counts spheres clustered
+        over all levels (a level's Lloyd work grows with its sphere count).
 
     Returns
     -------
@@ -144,16 +147,24 @@ def build_tree(centers, radii, branching: int = 4, seed: int = 0) -> SphereTree:
     all_c, all_r = [centers], [radii]
     parents = [np.full(n, -1, dtype=np.int64)]
     level_c, level_r, offset = centers, radii, 0
+    sizes = [n]  # sphere count of every level that gets clustered, known up front
+    while sizes[-1] > 1:
+        sizes.append(int(np.ceil(sizes[-1] / branching)))
+    from shtools.progress import silent
+
+    bar = (progress or silent)(total=sum(sizes[:-1]), desc="tree", unit="spheres")
     while level_c.shape[0] > 1:
         count = level_c.shape[0]
         k = int(np.ceil(count / branching))
         labels, cc, cr = _lloyd_level(level_c, level_r, k, rng)
+        bar.update(count)
         next_offset = offset + count
         parents[-1] = next_offset + labels
         all_c.append(cc)
         all_r.append(cr)
         parents.append(np.full(cc.shape[0], -1, dtype=np.int64))
         level_c, level_r, offset = cc, cr, next_offset
+    bar.close()
     m = sum(p.size for p in parents)
     leaf = np.full(m, -1, dtype=np.int32)
     leaf[:n] = np.arange(n)

@@ -89,7 +89,7 @@ class FrameBaker:
 
     Holds the runtime (and its worker processes) and the per-bake state of the
     visibility method.  The receiver clusters are fixed up front (from the
-    first frame of the bake) so every process evaluates a frame identically,
+    scene's frame 0) so every process evaluates a frame identically,
     whichever frames it is given: a bake is the same bytes on one process,
     a local pool or a Dask cluster.
 
@@ -260,7 +260,9 @@ def bake_scene(
             writer = stack.enter_context(
                 _writer(prepared, output, frames, times, method, store_visibility,
                         prepared.receivers_move()))
-        clusters = bake_clusters(prepared, method, times[0])
+        # Clusters from the scene's frame 0, whatever range is baked: a partial
+        # bake (--frames 2:4) gives the same values as those frames of a full one.
+        clusters = bake_clusters(prepared, method, 0.0)
         items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
         if pool.scheduler == "inline":
             baker = stack.enter_context(FrameBaker(
@@ -352,6 +354,7 @@ def bake_to_file(
     processes: int | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
+    progress=None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -361,24 +364,30 @@ def bake_to_file(
     ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
     ``output``, ``pool`` (scheduler, workers, per-worker task counts and
     seconds).  ``processes``, ``scheduler`` and ``workers`` as in
-    :func:`bake_scene`.
+    :func:`bake_scene`; ``progress`` a progress factory
+    (:mod:`shtools.progress`) for the set-up and the frames.
     """
+    from shtools.progress import silent
+
     parent = Path(output).parent
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
         raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
-    prepared = prepare_scene(scene)
+    prepared = prepare_scene(scene, progress=progress)
     n = 0
     frame_seconds = 0.0
     pool: dict = {}
-    for result in bake_scene(scene, frames=frames, method=method,
-                             store_visibility=store_visibility, output=output,
-                             prepared=prepared, processes=processes, scheduler=scheduler,
-                             workers=workers, pool_summary=pool):
-        n += 1
-        frame_seconds += result.seconds
-        if on_frame is not None:
-            on_frame(result)
+    total = len(frames) if frames is not None else scene.settings.frames
+    with (progress or silent)(total=total, desc="bake", unit="frames") as bar:
+        for result in bake_scene(scene, frames=frames, method=method,
+                                 store_visibility=store_visibility, output=output,
+                                 prepared=prepared, processes=processes, scheduler=scheduler,
+                                 workers=workers, pool_summary=pool):
+            n += 1
+            frame_seconds += result.seconds
+            bar.update(1)
+            if on_frame is not None:
+                on_frame(result)
     end = time.perf_counter()
     V = prepared.n_vertices
     return {

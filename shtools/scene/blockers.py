@@ -80,11 +80,14 @@ class PrepareContext:
         The object's skinned model (skinned objects only).
     inputs : dict
         ``name -> path`` of the files read; a kind adds its assets for provenance.
+    progress : callable or None
+        Progress factory (:mod:`shtools.progress`) for long preparations (fits, trees).
     """
 
     settings: Any
     model: Any = None
     inputs: dict[str, Path] = field(default_factory=dict)
+    progress: Any = None
 
 
 class BlockerKind:
@@ -144,7 +147,8 @@ class SphereSetKind(BlockerKind):
         if prep.tree is None and ctx.settings.hierarchy and len(prep.radii) > 1:
             from shtools.geometry.sphere_tree import build_tree
 
-            t = build_tree(prep.centers, prep.radii, branching=self.branching(spec), seed=0)
+            t = build_tree(prep.centers, prep.radii, branching=self.branching(spec), seed=0,
+                           progress=ctx.progress)
             prep.tree = (np.asarray(t.parent), np.asarray(t.leaf))
         if ctx.model is not None and prep.bone_index is None:
             from shtools.geometry.binding import bind_spheres
@@ -248,7 +252,8 @@ class FitSpheres(SphereSetKind):
 
         mesh = trimesh.Trimesh(prep.vertices, prep.faces, process=False)
         s = fit_spheres(mesh, spec.count, method=spec.options["method"],
-                        seed=spec.options["seed"])
+                        seed=spec.options["seed"], progress=ctx.progress,
+                        _desc=f"fit {prep.spec.name}")
         prep.centers, prep.radii = s.centers, s.radii
 
 

@@ -136,12 +136,13 @@ def _object_geometry(obj: ObjectSpec) -> tuple[PreparedObject, object]:
                           np.asarray(mesh.faces, np.int64)), None
 
 
-def _object_blocker(prep: PreparedObject, model, settings, inputs: dict) -> None:
+def _object_blocker(prep: PreparedObject, model, settings, inputs: dict, progress=None) -> None:
     """Prepare the object's blocker with its kind (spheres, tree, skin binding, ...)."""
     spec = prep.spec.blocker
     if spec is None:
         return
-    blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs))
+    blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs,
+                                                                  progress))
 
 
 def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
@@ -154,11 +155,20 @@ def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
     elif env.kind == "light":
         from shtools.data_formats.light import read_light
 
-        coeffs, _ = read_light(env.path)
+        coeffs, attrs = read_light(env.path)
         n = math.isqrt(len(coeffs))
         if n != order:
             raise AssetError(f"light is SH order {n} but the scene's settings.order is {order}; "
                              f"re-project it with --order {order} or change the order", env.path)
+        # the runtime windows the light with settings.window; a light projected
+        # with a window of its own would be windowed twice
+        own = (attrs.get("parameters") or {}).get("window") or "none"
+        if own != "none" and scene.settings.window is not None:
+            raise AssetError(f"light was projected with --window {own} and the scene's "
+                             f"settings.window is '{scene.settings.window}', so the bake would "
+                             "window it twice; re-project it without --window (the bake "
+                             "windows lighting and visibility together) or set "
+                             "window = \"none\"", env.path)
         inputs["environment"] = env.path
     else:
         from shtools.lighting.environment import project_environment
@@ -195,8 +205,13 @@ def _tables(scene: Scene, inputs: dict) -> dict | None:
     return tables
 
 
-def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> PreparedScene:
+def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
+                  progress=None) -> PreparedScene:
     """Load meshes, blockers, skins, environment and tables of a parsed scene.
+
+    ``progress`` is a progress factory (:mod:`shtools.progress`): one bar over
+    the objects, the environment and the tables, plus the bars of sphere fits
+    and trees built on the fly.
 
     Raises
     ------
@@ -204,21 +219,29 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None) -> 
         A file cannot be used, a skinned glTF has no skin or animation, SH
         orders disagree between assets, a bound set does not match its rig.
     """
+    from shtools.progress import silent
     from shtools.scene.midrange import prepare_midrange
 
     inputs: dict[str, Path] = {}
     objects = []
-    for obj in scene.objects:
-        if log:
-            log(f"loading {obj.name}")
-        prep, model = _object_geometry(obj)
-        if obj.mesh is not None:
-            inputs[f"{obj.name}.mesh"] = obj.mesh
-        _object_blocker(prep, model, scene.settings, inputs)
-        objects.append(prep)
-    _self_visibility(scene, objects, inputs, log)
-    env_sh = _environment(scene, inputs)
-    return PreparedScene(scene, objects, env_sh, _tables(scene, inputs), inputs,
+    # steps: every object, then the environment (an HDR is projected here), the tables
+    with (progress or silent)(total=len(scene.objects) + 2, desc="bake set-up",
+                              unit="steps") as bar:
+        for obj in scene.objects:
+            if log:
+                log(f"loading {obj.name}")
+            prep, model = _object_geometry(obj)
+            if obj.mesh is not None:
+                inputs[f"{obj.name}.mesh"] = obj.mesh
+            _object_blocker(prep, model, scene.settings, inputs, progress)
+            objects.append(prep)
+            bar.update(1)
+        _self_visibility(scene, objects, inputs, log)
+        env_sh = _environment(scene, inputs)
+        bar.update(1)
+        tables = _tables(scene, inputs)
+        bar.update(1)
+    return PreparedScene(scene, objects, env_sh, tables, inputs,
                          prepare_midrange(scene, env_sh, inputs))
 
 

@@ -126,7 +126,8 @@ def vector(n: int, *, positive=False, nonnegative=False, scalar_ok=False):
         if (not isinstance(value, list) or len(value) != n
                 or not all(isinstance(x, int | float) and not isinstance(x, bool)
                            for x in value)):
-            raise fail(f"must be a list of {n} numbers, got {value!r}")
+            what = f"a number or a list of {n} numbers" if scalar_ok else f"a list of {n} numbers"
+            raise fail(f"must be {what}, got {value!r}")
         if not all(math.isfinite(x) for x in value):
             raise fail(f"must be finite, got {value!r}")
         if positive and any(x <= 0 for x in value):

@@ -161,7 +161,7 @@ class RaytraceVisibility(VisibilityMethod):
 
 
 def receiver_clusters(prepared, vertices: np.ndarray):
-    """Receiver clusters from the first baked frame, reused for every frame.
+    """Receiver clusters of posed receivers (the baker uses frame 0), reused every frame.
 
     Clusters never mix objects, and the runtime recomputes each cluster's bound
     from the current positions, so rigidly moving and skinned receivers keep

@@ -89,7 +89,7 @@ def test_export_errors(bake_file, tmp_path, run_cli):
         (("--frame", 7, "-o", tmp_path / "x.png"), "frame 7 is not in this bake (it holds frames "
                                                    "3..4)"),
         (("-o", tmp_path / "x.obj"), "unsupported output format '.obj'"),
-        (("--frames", "3:5", "-o", tmp_path / "x.ply"), ".ply holds one frame"),
+        (("--frames", "3:9", "-o", tmp_path / "x.ply"), "frame 5 is not in this bake"),
     ):
         code, _, stderr = run_cli("export", bake_file, *args)
         assert code == 1 and message in stderr, stderr

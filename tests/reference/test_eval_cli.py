@@ -110,3 +110,27 @@ role = "blocker"
 translate = [0.0, 0.6, 0.0]
 blocker = { exact = true }
 """
+
+
+def test_eval_maps_have_a_colour_bar_per_row_with_units():
+    from types import SimpleNamespace
+
+    from shtools.reference.maps import ERROR_LABEL, RADIANCE_LABEL, comparison_figure
+
+    rng = np.random.default_rng(0)
+    verts = rng.uniform(-1, 1, (50, 3))
+    ref = rng.uniform(0, 2, (50, 3))
+    out = {"mesh_radiance": ref, "spheres_radiance": ref * 0.9,
+           "results": [SimpleNamespace(method="auto", radiance=ref * 1.1)]}
+    fig = comparison_figure(verts, out)
+    bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert [b.get_ylabel() for b in bars] == [RADIANCE_LABEL, ERROR_LABEL]
+    assert "units" in RADIANCE_LABEL and "units" in ERROR_LABEL
+    # the bars span the rows' shared scales: radiance from 0, error symmetric
+    lo, hi = bars[0].get_ylim()
+    assert lo == 0 and hi > 0
+    lo, hi = bars[1].get_ylim()
+    assert lo == -hi
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)

@@ -251,3 +251,22 @@ def test_batch_fit_refuses_clashing_names_and_missing_folder(tmp_path):
         batch_outputs([tmp_path / "x" / "a.obj", tmp_path / "y" / "a.obj"], tmp_path)
     with pytest.raises(InputError, match="is not a folder"):
         list(fit_many([tmp_path / "a.obj"], tmp_path / "missing", 4))
+
+
+def test_partial_bake_clusters_receivers_at_frame_0(tmp_path, monkeypatch):
+    """Clusters come from the scene's frame 0 whatever range is baked, so frames
+    2:4 of a partial bake are computed exactly as in a full bake."""
+    import shtools.scene.bake as bake_module
+
+    seen = []
+    original = bake_module.bake_clusters
+
+    def spy(prepared, method, t):
+        seen.append(t)
+        return original(prepared, method, t)
+
+    monkeypatch.setattr(bake_module, "bake_clusters", spy)
+    scene = tmp_path / "moving.toml"
+    scene.write_text(scene_text(order=3, frames=5, moving_ground=True))
+    bake_to_file(load_scene(scene), tmp_path / "part.h5", frames=range(2, 4), workers=1)
+    assert seen == [0.0]

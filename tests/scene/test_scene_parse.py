@@ -126,6 +126,8 @@ parent = "box"
         (('role = "receiver"', 'role = "blocker"'), "a blocker needs a representation"),
         (('role = "receiver"', 'role = "receiver"\nparent = "grund"'),
          "no object named 'grund'"),
+        (('role = "receiver"', 'role = "receiver"\nscale = "big"'),
+         "scale: must be a number or a list of 3 numbers, got 'big'"),
     ],
 )
 def test_invalid_scenes_give_one_line(tmp_path, edit, message):
