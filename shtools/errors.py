@@ -8,6 +8,7 @@ non-zero exit; any other exception is a bug and shows a traceback only with
 
 from __future__ import annotations
 
+import errno
 import os
 
 
@@ -39,3 +40,33 @@ class AssetError(ShtoolsError):
 
 class InputError(ShtoolsError):
     """An input file (mesh, image, scene) or parameter cannot be used."""
+
+
+#: errno values that mean "the disk cannot take the output" -> what to tell the user.
+DISK_ERRORS = {
+    errno.ENOSPC: "no space left on the device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EROFS: "the file system is read-only",
+    errno.EFBIG: "file too large for the file system (or the process's file-size limit)",
+}
+
+
+def disk_error_reason(exc: BaseException | None) -> str | None:
+    """The reason when ``exc`` (or an exception it wraps) is a disk-full-like OSError.
+
+    h5py reports the C library's errno only in its message text
+    (``"... errno = 28, error message = 'No space left on device'"``), so the
+    text is searched too.
+    """
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError):
+            if exc.errno in DISK_ERRORS:
+                return DISK_ERRORS[exc.errno]
+            text = str(exc)
+            for code, reason in DISK_ERRORS.items():
+                if f"errno = {code}," in text or os.strerror(code) in text:
+                    return reason
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -259,6 +259,7 @@ class TaskPool:
             "scheduler": self.scheduler,
             "address": self.address,
             "workers": self.workers,
+            "startup_seconds": round(self.startup_seconds, 4),
             "per_worker": {name: {"tasks": s.tasks, "seconds": round(s.seconds, 4)}
                            for name, s in sorted(self.stats.items())},
         }

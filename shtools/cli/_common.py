@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import sys
 
@@ -20,6 +21,25 @@ output_option = click.option(
 json_option = click.option(
     "--json", "as_json", is_flag=True, help="Print a machine-readable JSON summary on stdout."
 )
+
+
+
+
+def scheduler_options(unit: str):
+    """``--scheduler`` and ``--workers`` of a stage whose ``unit`` (frames, shells,
+    meshes) are independent tasks (:mod:`shtools.tasks`, docs/scale-out.md)."""
+    def decorate(f):
+        f = click.option(
+            "--workers", type=click.IntRange(min=1), default=None,
+            help=f"Local worker processes for {unit} (default: one per core; 1 = one after "
+                 "the other in this process); with --scheduler local, the cluster's size.")(f)
+        return click.option(
+            "--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
+            help=f"Run {unit} on Dask: 'local' starts a LocalCluster here, an address or a "
+                 "scheduler file joins an existing cluster (pip install "
+                 "'shtools[distributed]'; docs/scale-out.md).  Default: forked workers on "
+                 "this machine's cores.")(f)
+    return decorate
 
 
 def _default(o):
@@ -174,6 +194,70 @@ def setting_type(name: str, settings_cls=None) -> click.ParamType:
         hi = limits_of(cls, lim.hi_field).hi
     if lim.kind == "int":
         return click.IntRange(lo, hi, min_open=lim.lo_open, max_open=lim.hi_open)
-    if lim.kind == "float":
-        return click.FloatRange(lo, hi, min_open=lim.lo_open, max_open=lim.hi_open)
+    if lim.kind == "float":  # finite too (click's FloatRange lets nan through)
+        return FiniteRange(lo, hi, min_open=lim.lo_open, max_open=lim.hi_open)
     raise ValueError(f"setting {name!r} ({lim.kind}) has no command-line type")
+
+
+class FiniteRange(click.FloatRange):
+    """A float option in a range that also refuses ``nan`` and ``inf`` (click accepts them)."""
+
+    name = "finite number"
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return rv
+
+
+#: The range of every numeric option that is not a runtime setting (those come from
+#: the settings schema, :func:`setting_type`): one place, one finite check.
+OPTION_TYPES: dict[str, click.ParamType] = {
+    # exposure in stops: 2^60 ~ 1e18 keeps float32 radiance finite
+    "exposure": FiniteRange(-60, 60),
+    "elevation": FiniteRange(-90, 90),
+    "azimuth": FiniteRange(-360, 360),
+    "distance": FiniteRange(0, None, min_open=True),
+    "rotate_y": FiniteRange(-360, 360),
+    "zoom": FiniteRange(0, 1000, min_open=True),
+    "window_h": FiniteRange(0, 1000, min_open=True),
+    "thickness": FiniteRange(0, None, min_open=True),
+    # GIF frame delays are whole hundredths of a second: 100 fps at most
+    "fps": FiniteRange(0.1, 100),
+    "seed": click.IntRange(0, 2**32 - 1),
+    "columns": click.IntRange(1, 1000),
+    # one image side; the pixel count has its own limit (shtools.cli.export)
+    "size": click.IntRange(8, 16384),
+    # sphere count: the fit itself says when N exceeds what the mesh's samples allow
+    "count": click.IntRange(1, None),
+    "level": click.IntRange(0, 64),
+    # tables scaling: cone half-angle (its (0, 90) range is checked by the command,
+    # for the cone only), sampled k, samples and quadrature nodes
+    "alpha_deg": FiniteRange(None, None),
+    "k": FiniteRange(0, 1e6),
+    "scaling_order": click.IntRange(1, 16),
+    "scaling_samples": click.IntRange(3, 10_000),
+    "nodes": click.IntRange(8, 100_000),
+    # tables log: cap radii
+    "log_samples": click.IntRange(2, 100_000),
+    # diff
+    "tolerance": FiniteRange(0, None),
+    "show": click.IntRange(0, 1000),
+    # eval
+    "grid": click.IntRange(2, 1024),
+    "gap": FiniteRange(0, 100),
+    "frame": click.IntRange(0, None),
+    "n_dirs": click.IntRange(16, 100_000),
+    # spheres fit / tree / bind: round budget, starts, tree fan-out, skin weights
+    "iterations": click.IntRange(1, 100_000),
+    "restarts": click.IntRange(1, 1000),
+    "branching": click.IntRange(2, 1000),
+    "bones_per_sphere": click.IntRange(1, 64),
+    "check_frames": click.IntRange(0, 10_000),
+}
+
+
+def option_type(name: str) -> click.ParamType:
+    """The click type (range, finite) of the numeric option ``name`` (:data:`OPTION_TYPES`)."""
+    return OPTION_TYPES[name]

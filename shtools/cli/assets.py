@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, report
+from shtools.cli._common import json_option, option_type, report
 from shtools.data_formats import read_asset
 from shtools.data_formats.compare import compare_assets, frame_numbers, short, summarize_asset
 from shtools.errors import AssetError
@@ -88,18 +88,18 @@ def check(asset, as_json):
 @click.command()
 @_asset_arg("a")
 @_asset_arg("b")
-@click.option("--rtol", type=click.FloatRange(min=0), default=1e-5, show_default=True,
+@click.option("--rtol", type=option_type("tolerance"), default=1e-5, show_default=True,
               help="Relative tolerance, relative to B (the reference).")
-@click.option("--atol", type=click.FloatRange(min=0), default=1e-8, show_default=True,
+@click.option("--atol", type=option_type("tolerance"), default=1e-8, show_default=True,
               help="Absolute tolerance.")
 @click.option("--inputs", "compare_inputs", is_flag=True,
               help="Also require the recorded input hashes to match.")
 @click.option("--ignore", "ignore", multiple=True, metavar="NAME",
               help="Ignore a dataset, root attribute or parameter key (repeatable).")
-@click.option("--rel-rmse", "rel_rmse", type=click.FloatRange(min=0), default=None,
+@click.option("--rel-rmse", "rel_rmse", type=option_type("tolerance"), default=None,
               metavar="R", help="Also require every dataset's relative RMSE "
               "||a - b|| / ||b|| to be <= R (e.g. for baked radiance).")
-@click.option("--show", type=click.IntRange(0, 1000), default=10, show_default=True,
+@click.option("--show", type=option_type("show"), default=10, show_default=True,
               help="How many of the worst differing elements to print.")
 @click.option("--frames", "frames_text", metavar="A:B[:S]", default=None,
               help="Bake assets: compare only these scene frames (both must hold them).")

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report, setting_type
+from shtools.cli._common import (
+    json_option,
+    output_option,
+    progress,
+    report,
+    scheduler_options,
+    setting_type,
+)
 from shtools.scene.shadows import bake_method_names
 
 
@@ -24,17 +31,12 @@ from shtools.scene.shadows import bake_method_names
               help="Processes sharing ONE frame's shadow evaluation, when frames are "
                    "evaluated in this process (a single frame, or --workers 1); default one "
                    "per core.")
-@click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
-              help="Run frames on Dask: 'local' starts a LocalCluster here, an address or a "
-                   "scheduler file joins an existing cluster (pip install "
-                   "'shtools[distributed]'; docs/scale-out.md).  Default: forked workers on "
-                   "this machine's cores.")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Local workers for frames (default: one per core; 1 = frames one after "
-                   "the other in this process); with --scheduler local, the cluster's size.")
+@scheduler_options("frames")
+@click.option("--force", is_flag=True,
+              help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option
 def bake(scene, output, frames_text, method, store_visibility, processes, scheduler, workers,
-         as_json):
+         force, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.
 
     Frames are independent tasks spread over the local cores (or a Dask
@@ -42,14 +44,17 @@ def bake(scene, output, frames_text, method, store_visibility, processes, schedu
     file appears only when every frame is done (an error or Ctrl-C leaves
     nothing behind), and is the same bytes however the frames were spread.
     """
-    from shtools.scene.bake import bake_to_file, parse_frames
+    from shtools.cli._outputs import guard_outputs
+    from shtools.scene.bake import bake_to_file, parse_frames, scene_files
     from shtools.scene.scene import load_scene
 
+    guard_outputs({"-o": output}, [scene])
     parsed = load_scene(scene)
+    guard_outputs({"-o": output}, scene_files(parsed))
     frames = parse_frames(frames_text, parsed.settings.frames, scene)
     summary = bake_to_file(parsed, output, frames=frames, method=method,
                            store_visibility=store_visibility, processes=processes,
-                           scheduler=scheduler, workers=workers, progress=progress)
+                           scheduler=scheduler, workers=workers, progress=progress, force=force)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, report, setting_type
+from shtools.cli._common import json_option, option_type, report, setting_type
 from shtools.errors import InputError
 
 DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
@@ -38,11 +38,11 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
                    "the scene's).")
 @click.option("--light", "light_path", type=click.Path(dir_okay=False),
               help="Environment light asset (default: a procedural sky).")
-@click.option("--grid", default=64, show_default=True, type=click.IntRange(2, 1024),
+@click.option("--grid", default=64, show_default=True, type=option_type("grid"),
               help="Ground receivers per side (built-in form).")
-@click.option("--gap", default=0.0, show_default=True, type=click.FloatRange(0.0),
+@click.option("--gap", default=0.0, show_default=True, type=option_type("gap"),
               help="Gap between ground and mesh, as a fraction of the mesh height.")
-@click.option("--frame", default=0, show_default=True, type=click.IntRange(0),
+@click.option("--frame", default=0, show_default=True, type=option_type("frame"),
               help="Scene frame to evaluate (scene form).")
 @click.option("--methods", default=DEFAULT_METHODS, show_default=True,
               help="Comma-separated: auto, hyb, ps*, ps, ol, exact, volterra, product; "
@@ -53,7 +53,7 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
               help="Accumulation order of methods without @N (default: the runtime's).")
 @click.option("--no-hierarchy", is_flag=True, help="Accumulate all leaf spheres everywhere.")
 @click.option("--no-window", is_flag=True, help="Shade without windowing.")
-@click.option("--n-dirs", default=2000, show_default=True, type=click.IntRange(16),
+@click.option("--n-dirs", default=2000, show_default=True, type=option_type("n_dirs"),
               help="Ray-tracing directions per vertex.")
 @click.option("--png", "png_path", type=click.Path(dir_okay=False),
               help="Write a false-colour side-by-side comparison image.")
@@ -72,7 +72,11 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
 
     parse_methods(methods)  # fail early on a typo
     if png_path is not None:
+        from shtools.cli._outputs import guard_outputs
+
         _check_png_path(png_path)
+        guard_outputs({"--png": png_path},
+                      [scene, mesh, spheres_path, tree_path, light_path])
     if scene is not None:
         if mesh or spheres_path or field_path:
             raise InputError("give either a scene file or --mesh/--spheres/--field, not both",

@@ -6,14 +6,18 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
+from shtools.cli._common import json_option, option_type, output_option, progress, report
 from shtools.export.tonemap import CURVES
+
+#: Largest image (or contact-sheet tile) in pixels: 8192 x 8192, ~1 GiB of raster
+#: buffers (colour, depth, weights at ~16 bytes a pixel).
+MAX_PIXELS = 8192 * 8192
 
 
 @click.command("export")
 @click.argument("baked", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--frame", type=int, default=None,
+@click.option("--frame", type=option_type("frame"), default=None,
               help="Scene frame number to export (default the bake's first).")
 @click.option("--frames", "frames_text", metavar="A:B[:S]",
               help="Frame range, half-open with step S: a contact sheet (.png), the frames of "
@@ -27,24 +31,26 @@ from shtools.export.tonemap import CURVES
 @click.option("--rig", metavar="OBJECT=RIG.glb", default=None,
               help="With .glb and --frame: write skinned OBJECT as its source glTF with skin "
                    "and clips kept and this frame's baked colours.")
-@click.option("--distance", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--distance", type=option_type("distance"), default=None,
               help="Camera distance from the framed centre, scene units (default: fitted).")
-@click.option("--exposure", type=float, default=0.0, show_default=True,
+@click.option("--exposure", type=option_type("exposure"), default=0.0, show_default=True,
               help="Exposure in stops on top of the automatic exposure.")
 @click.option("--fixed-exposure", is_flag=True,
               help="No automatic exposure: radiance x 2^exposure goes straight to the tone curve.")
 @click.option("--tonemap", "curve", type=click.Choice(tuple(CURVES)),
               default="aces", show_default=True, help="Tone curve.")
-@click.option("--size", nargs=2, type=int, default=None, metavar="W H",
+@click.option("--size", nargs=2, type=option_type("size"), default=None, metavar="W H",
               help="Image size in pixels (default 800 600; 320 240 per sheet tile / GIF frame).")
-@click.option("--elevation", type=float, default=30.0, show_default=True,
+@click.option("--elevation", type=option_type("elevation"), default=30.0, show_default=True,
               help="Camera elevation above the horizon, degrees.")
-@click.option("--azimuth", type=float, default=35.0, show_default=True,
+@click.option("--azimuth", type=option_type("azimuth"), default=35.0, show_default=True,
               help="Camera azimuth about +Y, degrees.")
-@click.option("--zoom", type=float, default=1.0, show_default=True,
+@click.option("--zoom", type=option_type("zoom"), default=1.0, show_default=True,
               help="> 1 moves the camera closer than the fitted bounding sphere.")
-@click.option("--columns", type=int, default=None, help="Contact sheet columns.")
-@click.option("--fps", type=float, default=None, help="GIF frame rate (default the bake's).")
+@click.option("--columns", type=option_type("columns"), default=None,
+              help="Contact sheet columns.")
+@click.option("--fps", type=option_type("fps"), default=None,
+              help="GIF frame rate (default the bake's).")
 @json_option
 def export(baked, output, frame, frames_text, quantity, target, rig, distance, exposure,
            fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, as_json):
@@ -52,24 +58,26 @@ def export(baked, output, frame, frames_text, quantity, target, rig, distance, e
     stage, a vertex animation texture (.exr + .glb), PNG previews, a contact
     sheet or an animated GIF.
     """
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.bake import read_bake
     from shtools.errors import InputError
     from shtools.export.png import View
     from shtools.export.writer import FORMATS, export_bake
 
-    suffix = Path(output).suffix.lower()
-    if suffix not in FORMATS:
-        raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
-                         f"{', '.join(FORMATS)}", output)
-    if zoom <= 0:
-        raise InputError("--zoom must be > 0")
-    if size is not None and (size[0] < 8 or size[1] < 8):
-        raise InputError("--size must be at least 8 8 pixels")
     if rig is not None:
         name, sep, rig_path = rig.partition("=")
         if not sep or not name or not rig_path:
             raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
         rig = (name, rig_path)
+    guard_outputs({"-o": output}, [baked, rig[1] if rig else None])
+    suffix = Path(output).suffix.lower()
+    if suffix not in FORMATS:
+        raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
+                         f"{', '.join(FORMATS)}", output)
+    if size is not None and size[0] * size[1] > MAX_PIXELS:
+        raise InputError(f"--size {size[0]} {size[1]} is {size[0] * size[1]:,} pixels "
+                         f"({size[0] * size[1] * 16 / 2**30:.1f} GiB of raster buffers), above "
+                         f"the limit of {MAX_PIXELS:,}; use a smaller image", output)
     bake_asset = read_bake(baked)
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
                 auto_exposure=not fixed_exposure, curve=curve, distance=distance)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
+from shtools.cli._common import json_option, output_option, progress, report, scheduler_options
 
 
 @click.group("field")
@@ -39,9 +39,10 @@ def field():
               help="Do not store the per-vertex self-visibility O_v.")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Recorded for reproducibility (sampling is deterministic).")
+@scheduler_options("shells")
 @json_option
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
-           bits, cumulative, no_self_visibility, seed, as_json):
+           bits, cumulative, no_self_visibility, seed, scheduler, workers, as_json):
     """Sample the shadow field of MESH into a field asset.
 
     Per shell, the object's binary visibility over the direction map at R x R
@@ -71,7 +72,8 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
             sv = None
     with progress(total=shells * resolution * resolution, desc="field samples") as bar:
         try:
-            fld, rep = sample_field(mesh, params, self_visibility=sv, progress=bar.update)
+            fld, rep = sample_field(mesh, params, self_visibility=sv, progress=bar.update,
+                                    scheduler=scheduler, workers=workers)
         except InputError as exc:
             raise InputError(exc.message, exc.path or mesh_path) from None
     parameters = {k: getattr(params, k) for k in (

@@ -7,7 +7,7 @@ import time
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, output_option, report, setting_type
+from shtools.cli._common import json_option, option_type, output_option, report, setting_type
 
 
 @click.group()
@@ -25,12 +25,14 @@ def light():
               help="Per-band window against ringing (cosine: the paper's filter).")
 @click.option("--window-h", type=setting_type("window_h"), default=None,
               help="Window width in bands (default: 2n for cosine, n otherwise).")
-@click.option("--rotate-y", type=float, default=0.0, show_default=True, metavar="DEG",
+@click.option("--rotate-y", type=option_type("rotate_y"), default=0.0, show_default=True,
+              metavar="DEG",
               help="Rotate the environment about +y (right-hand rule; +90 turns the image "
               "centre from -z to -x).")
 @click.option("--mirror", is_flag=True,
               help="Mirror the image left-right first (for maps stored mirrored).")
-@click.option("--exposure", type=float, default=0.0, show_default=True, metavar="EV",
+@click.option("--exposure", type=option_type("exposure"), default=0.0, show_default=True,
+              metavar="EV",
               help="Scale radiance by 2**EV.")
 @json_option
 def project(image, order, output, window, window_h, rotate_y, mirror, exposure, as_json):
@@ -40,8 +42,10 @@ def project(image, order, output, window, window_h, rotate_y, mirror, exposure, 
     image centre towards -z in the Y-up world (docs/conventions.md).  Every
     basis function is integrated exactly over every pixel.
     """
+    from shtools.cli._outputs import guard_outputs
     from shtools.lighting.environment import project_environment_to_file
 
+    guard_outputs({"-o": output}, [image])
     start = time.perf_counter()
     coeffs, info = project_environment_to_file(image, order, output, window=window,
                                                window_h=window_h, rotate_y=rotate_y,

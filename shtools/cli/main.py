@@ -4,19 +4,30 @@ Every command is thin: parse options, call the library, report.  Errors a user
 can fix (:class:`shtools.errors.ShtoolsError`, click usage errors) become one
 line ``error: <file>: <what to do>`` on stderr with exit status 2 (usage) or 1;
 anything else is a bug and prints a traceback only with ``--debug``.
+
+Ctrl-C (SIGINT), SIGTERM and SIGHUP stop a command the same way: the signal
+becomes an exception, so atomic writers remove their temporary files and worker
+processes are stopped, and the command prints one line and exits 128 + signal
+(130, 143, 129).  A full disk, an exceeded quota or a read-only file system
+(``ENOSPC``, ``EDQUOT``, ``EROFS``, ``EFBIG``) is a one-line error, exit 1.
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
+import signal
 import sys
+import threading
+import time
+import warnings
 
 import click
 
 from shtools import __version__
 from shtools.cli._common import one_blas_thread
-from shtools.errors import ShtoolsError
+from shtools.errors import ShtoolsError, disk_error_reason
 
 #: command name -> "module:attribute" (module under shtools.cli).  Commands whose
 #: module is not present are not listed.
@@ -81,15 +92,86 @@ def cli(ctx, debug, quiet):
     ctx.obj["debug"] = debug
 
 
+class Terminated(BaseException):
+    """Raised in the main thread when SIGTERM or SIGHUP arrives (see :func:`main`)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+#: The stop signal being handled (None when none is): while it is set, the signal
+#: is sent again every RESEND_SECONDS, because Python runs a handler wherever the
+#: main thread is, and an exception raised inside a finaliser or a weakref
+#: callback is printed and dropped ("Exception ignored in ...") instead of
+#: stopping the command.
+_STOPPING: int | None = None
+RESEND_SECONDS = 2.0
+
+
+def _raise_terminated(signum, _frame):
+    global _STOPPING
+    if _STOPPING is None:
+        _STOPPING = signum
+
+        def resend():
+            while _STOPPING == signum:
+                time.sleep(RESEND_SECONDS)
+                if _STOPPING == signum:
+                    os.kill(os.getpid(), signum)
+
+        threading.Thread(target=resend, name="shtools-stop-resend", daemon=True).start()
+    raise Terminated(signum)
+
+
+def _default_termination_in_child() -> None:
+    """After fork: SIGTERM/SIGHUP kill a worker again (the handlers above are inherited).
+
+    A forked worker that kept them would turn SIGTERM into an exception, which a
+    process pool's worker loop catches and survives -- pools stop their workers
+    with SIGTERM.
+    """
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is _raise_terminated:
+            signal.signal(sig, signal.SIG_DFL)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_default_termination_in_child)
+
+
 def main(argv=None) -> int:
     """Entry point of the ``shtools`` console script."""
     argv = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in argv
+    handlers = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            handlers[sig] = signal.signal(sig, _raise_terminated)
+    try:
+        with warnings.catch_warnings():
+            if not debug:
+                # numeric warnings of NumPy/SciPy are not messages for a user: a
+                # real problem is checked and reported as one line where it matters
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return _run(argv, debug)
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+
+
+def _run(argv: list[str], debug: bool) -> int:
     try:
         # standalone_mode=False returns ctx.exit(n)'s code instead of raising it;
         # one BLAS thread unless the user set a count (see one_blas_thread)
         with one_blas_thread():
             rv = cli.main(args=argv, prog_name="shtools", standalone_mode=False)
+    except Terminated as exc:
+        global _STOPPING
+        _STOPPING = None
+        name = signal.Signals(exc.signum).name
+        click.echo(f"error: stopped by {name}; no output was written", err=True)
+        return 128 + exc.signum
     except _NO_ARGS_IS_HELP as exc:
         # a bare group (``shtools``, ``shtools spheres``) asks for its help
         click.echo(exc.ctx.get_help())
@@ -115,6 +197,12 @@ def main(argv=None) -> int:
     except Exception as exc:  # a bug: one line unless --debug
         if debug:
             raise
+        reason = disk_error_reason(exc)
+        if reason is not None:  # outside an atomic writer, which names its output itself
+            where = getattr(exc, "filename", None)
+            prefix = f"{where}: " if where else ""
+            click.echo(f"error: {prefix}{reason}; free space or write elsewhere", err=True)
+            return 1
         click.echo(
             f"error: internal error ({type(exc).__name__}: {exc}); rerun with --debug "
             "and report it",

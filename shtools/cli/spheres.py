@@ -7,9 +7,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
+from shtools.cli._common import (
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+    scheduler_options,
+)
 from shtools.geometry.fit_methods import FIT_METHODS
 
 
@@ -19,33 +28,59 @@ def spheres():
 
 
 @spheres.command("fit")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
-@click.option("-n", "--count", "count", type=int, required=True,
+@click.argument("mesh_paths", metavar="MESH...", nargs=-1, required=True,
+                type=click.Path(dir_okay=False))
+@click.option("-n", "--count", "count", type=option_type("count"), required=True,
               help="Number of spheres N (>= 1).")
-@output_option
+@click.option("-o", "--output", required=True, type=click.Path(writable=True),
+              help="Output file (written atomically); with several meshes, an existing "
+                   "folder that gets one MESH_STEM.spheres.h5 per mesh.")
 @click.option("--method", type=click.Choice(FIT_METHODS),
               default="variational", show_default=True,
               help="variational (Wang et al. 2006, minimal outside volume) or a baseline.")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=option_type("seed"), default=0, show_default=True,
               help="Seed of sampling and initialisation (same seed -> identical asset).")
-@click.option("--thickness", type=float, default=None,
+@click.option("--thickness", type=option_type("thickness"), default=None,
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
-@click.option("--iterations", type=click.IntRange(min=1), default=None,
+@click.option("--iterations", type=option_type("iterations"), default=None,
               help="Round budget of the variational fit, counted in rounds at N spheres "
                    "(from N = 64 the coarse stages spend part of it in cheaper rounds) "
                    "[default: scaled to the mesh and N, 40-150].")
-@click.option("--restarts", type=click.IntRange(min=1), default=1, show_default=True,
+@click.option("--restarts", type=option_type("restarts"), default=1, show_default=True,
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
                    "The fit is a non-convex search: a few starts buy a few percent of E.")
+@scheduler_options("meshes (several MESH)")
 @json_option
-def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts, as_json):
+def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts, scheduler,
+        workers, as_json):
     """Fit N spheres bounding the solid of MESH with minimal outside volume.
 
     Writes a 'spheres' asset with centers, radii and outside_volume_ratio
-    E = sum_i V(S_i - T) / V(T).
+    E = sum_i V(S_i - T) / V(T).  Several meshes (`meshes/*.obj -o out/`) are
+    fitted as independent tasks on the local cores or a Dask cluster, one
+    asset per mesh in the folder OUTPUT (docs/scale-out.md).
     """
-    from shtools.geometry.assets import fit_to_file
+    from shtools.cli._outputs import guard_outputs
+    from shtools.geometry.assets import batch_outputs, fit_many, fit_to_file
 
+    if len(mesh_paths) > 1 or Path(output).is_dir():
+        outputs = batch_outputs(mesh_paths, output)
+        guard_outputs({f"-o ({o.name})": o for o in outputs}, mesh_paths)
+        pool: dict = {}
+        rows = []
+        with progress(total=len(mesh_paths), desc="fit", unit="mesh") as bar:
+            for row in fit_many(mesh_paths, output, count, method=method, seed=seed,
+                                thickness=thickness, iterations=iterations,
+                                restarts=restarts, scheduler=scheduler, workers=workers,
+                                pool_summary=pool):
+                rows.append(row)
+                bar.update(1)
+        report({"fits": rows, "pool": pool}, as_json,
+               "\n".join(f"wrote {r['output']}: {r['spheres']} spheres ({method}), "
+                         f"E = {r['outside_volume_ratio']:.4f}" for r in rows))
+        return
+    mesh_path = mesh_paths[0]
+    guard_outputs({"-o": output}, [mesh_path])
     result = fit_to_file(mesh_path, count, output, method=method, seed=seed,
                          thickness=thickness, iterations=iterations, restarts=restarts,
                          progress=progress)
@@ -68,16 +103,18 @@ def fit(mesh_path, count, output, method, seed, thickness, iterations, restarts,
 @spheres.command("import")
 @click.argument("sph_path", metavar="FILE.sph", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--level", type=int, default=None,
+@click.option("--level", type=option_type("level"), default=None,
               help="Tree level to import (0 = root); default the deepest non-empty level.")
 @click.option("--mesh", "mesh_path", type=click.Path(dir_okay=False), default=None,
               help="Mesh the spheres bound: used to compute outside_volume_ratio.")
 @json_option
 def import_cmd(sph_path, output, level, mesh_path, as_json):
     """Convert a spheretree .sph file into a 'spheres' asset."""
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.spheres import write_spheres
     from shtools.geometry.sph_format import read_sph
 
+    guard_outputs({"-o": output}, [sph_path, mesh_path])
     result = read_sph(sph_path, level=level)
     inputs = {"sph": sph_path}
     if mesh_path is not None:
@@ -102,9 +139,11 @@ def import_cmd(sph_path, output, level, mesh_path, as_json):
 @json_option
 def export_cmd(spheres_path, output, as_json):
     """Write a 'spheres' asset as a two-level spheretree .sph file."""
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.spheres import read_spheres
     from shtools.geometry.sph_format import write_sph
 
+    guard_outputs({"-o": output}, [spheres_path])
     result = read_spheres(spheres_path)
     write_sph(output, result)
     report({"output": output, "spheres": len(result)}, as_json,

@@ -10,16 +10,17 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
+from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._outputs import guard_outputs
 from shtools.geometry.fit_methods import SPHERE_SPACES
 
 
 @click.command("tree")
 @click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--branching", default=4, show_default=True, type=click.IntRange(min=2),
+@click.option("--branching", default=4, show_default=True, type=option_type("branching"),
               help="Target average number of children per inner node.")
-@click.option("--seed", default=0, show_default=True, type=int,
+@click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Seed of the Lloyd clustering (same seed -> identical tree).")
 @json_option
 def tree(spheres_path, output, branching, seed, as_json):
@@ -30,6 +31,7 @@ def tree(spheres_path, output, branching, seed, as_json):
     from shtools.geometry.assets import tree_to_file
     from shtools.geometry.sphere_tree import tree_statistics
 
+    guard_outputs({"-o": output}, [spheres_path])
     result = tree_to_file(spheres_path, output, branching=branching, seed=seed,
                           progress=progress)
     stats = tree_statistics(result)
@@ -46,9 +48,11 @@ def tree(spheres_path, output, branching, seed, as_json):
 @click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
 @click.argument("rig_path", metavar="RIGGED", type=click.Path(dir_okay=False))
 @output_option
-@click.option("--bones-per-sphere", default=4, show_default=True, type=click.IntRange(min=1),
+@click.option("--bones-per-sphere", default=4, show_default=True,
+              type=option_type("bones_per_sphere"),
               help="Bones kept per sphere centre (the rest is folded into the kept ones).")
-@click.option("--check-frames", default=16, show_default=True, type=click.IntRange(min=0),
+@click.option("--check-frames", default=16, show_default=True,
+              type=option_type("check_frames"),
               help="Frames per animation at which the posed spheres' coverage of the "
                    "skinned vertices is measured for the summary (0: skip).")
 @click.option("--cover-animations", is_flag=True,
@@ -75,6 +79,7 @@ def bind(spheres_path, rig_path, output, bones_per_sphere, check_frames, cover_a
     from shtools.geometry.binding import bind_sphere_set
     from shtools.geometry.skin import load_skinned_gltf
 
+    guard_outputs({"-o": output}, [spheres_path, rig_path])
     centers, radii = read_sphere_set(spheres_path)
     model = load_skinned_gltf(rig_path)
     bound = bind_sphere_set(centers, radii, model, bones_per_sphere=bones_per_sphere,

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import click
 
-from shtools.cli._common import json_option, output_option, report, setting_type
+from shtools.cli._common import json_option, option_type, output_option, report, setting_type
 from shtools.errors import InputError
 
 
@@ -21,7 +22,7 @@ def tables():
 @output_option
 @click.option(
     "--samples",
-    type=click.IntRange(2, 100_000),
+    type=option_type("log_samples"),
     default=256,
     show_default=True,
     help="Number of cap radii theta in (0, pi/2].",
@@ -41,13 +42,24 @@ def log_cmd(order, output, samples, plot_path, as_json):
     The asset holds cap visibility (vis_zh) and its log by eigen-inversion
     (log_zh) over theta in (0, pi/2], and the OL tables ol_norm, ol_a, ol_b.
     """
-    from shtools.data_formats.tables import read_tables, write_log_tables
+    from shtools.cli._outputs import guard_outputs
+    from shtools.data_formats import atomic_path
+    from shtools.data_formats.tables import TABLE_KEYS, write_tables
+    from shtools.sh.tables import build_log_tables
 
+    guard_outputs({"-o": output, "--plot": plot_path})
     if plot_path and order < 2:
         raise InputError("order 1 has no band above DC, so there are no OL curves to plot; "
                          "use --order 2 or more with --plot", plot_path)
     start = time.perf_counter()
-    built = write_log_tables(output, order, samples=samples)
+    built = build_log_tables(order, samples=samples)
+    # both outputs or neither: the plot is drawn into its temporary file first and
+    # renamed into place only after the asset was written
+    with (atomic_path(plot_path) if plot_path else contextlib.nullcontext()) as plot_tmp:
+        if plot_path:
+            plot_ol_curves({**{k: built[k] for k in TABLE_KEYS}, "order": order}, plot_tmp,
+                           atomic=False)
+        write_tables(output, built, order, parameters={"samples": samples})
     seconds = time.perf_counter() - start
     summary = {
         "output": output,
@@ -59,7 +71,6 @@ def log_cmd(order, output, samples, plot_path, as_json):
         "seconds": round(seconds, 3),
     }
     if plot_path:
-        plot_ol_curves(read_tables(output), plot_path)
         summary["plot"] = plot_path
     human = (
         f"wrote {output}: order {order}, {summary['theta_count']} cap radii, "
@@ -72,23 +83,24 @@ def log_cmd(order, output, samples, plot_path, as_json):
 
 
 @tables.command("scaling")
-@click.option("--order", "-n", type=click.IntRange(1, 16), required=True, help="SH order n.")
+@click.option("--order", "-n", type=option_type("scaling_order"), required=True, help="SH order n.")
 @click.option("--function", "function", type=click.Choice(["cone", "midrange"]),
               required=True,
               help="Angular map: 'cone' (deformable shadow fields, k = d/r) or 'midrange' "
               "(environment on a sphere of radius R, k = d/R).")
-@click.option("--alpha", "alpha_deg", type=float, default=45.0, show_default=True,
+@click.option("--alpha", "alpha_deg", type=option_type("alpha_deg"), default=45.0,
+              show_default=True,
               help="Cone half-angle in degrees, in (0, 90) (cone only; the seed prints 45).")
 @click.option("--energy-preserving", is_flag=True,
               help="Energy-preserving scaling (Lambda = sin(phi) phi', keeps the integral).")
-@click.option("--samples", type=click.IntRange(3, 10_000), default=40, show_default=True,
+@click.option("--samples", type=option_type("scaling_samples"), default=40, show_default=True,
               help="Number K of sampled k.")
-@click.option("--k-range", nargs=2, type=float, default=None, metavar="LO HI",
+@click.option("--k-range", nargs=2, type=option_type("k"), default=None, metavar="LO HI",
               help="Sampled k range [default: 0.125 8 for cone, 0 0.95 for midrange].")
 @click.option("--interpolation", type=click.Choice(["linear", "linear-log-k"]),
               default="linear", show_default=True,
               help="Rule in k between samples, recorded for the reader (log-k: cone only).")
-@click.option("--nodes", type=click.IntRange(8, 100_000), default=None,
+@click.option("--nodes", type=option_type("nodes"), default=None,
               help="Gauss-Legendre nodes in theta per matrix entry [default: 400, doubled "
               "until the estimated error is below 1e-12].")
 @output_option
@@ -103,9 +115,11 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
     """
     import math
 
+    from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.scaling import write_scaling
     from shtools.sh.scaling import build_scaling_table
 
+    guard_outputs({"-o": output})
     if function == "cone" and not 0.0 < alpha_deg < 90.0:
         raise InputError(f"--alpha {alpha_deg:g} is outside (0, 90) degrees; give the cone "
                          "half-angle about the radial axis, e.g. 45", output)
@@ -174,12 +188,12 @@ def cap_ol_points(tab: dict):
     return norm, a, b
 
 
-def plot_ol_curves(tab: dict, path) -> None:
+def plot_ol_curves(tab: dict, path, *, atomic: bool = True) -> None:
     """Draw the OL coefficients a and b against ||f_hat|| (cf. Ren et al. 2006, Fig. 3).
 
     Lines are the tabulated ``ol_a``/``ol_b``; dots are eq. 24 evaluated on each
-    cap of the cap tables, with the cap radius on a secondary axis.  Written
-    atomically as a PNG.
+    cap of the cap tables, with the cap radius on a secondary axis.  Written as a
+    PNG, atomically unless ``atomic=False`` (``path`` is then already a temporary).
     """
     import matplotlib
 
@@ -221,6 +235,8 @@ def plot_ol_curves(tab: dict, path) -> None:
     )
     ax_theta.grid(alpha=0.3)
     ax_theta.set_xlim(0, xmax * 1.02)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
+    try:
+        with atomic_path(path) if atomic else contextlib.nullcontext(path) as tmp:
+            fig.savefig(tmp, dpi=130, format="png")
+    finally:
+        plt.close(fig)

@@ -15,7 +15,9 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import secrets
+import socket
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +26,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from shtools.errors import AssetError
+from shtools.errors import AssetError, disk_error_reason
 
 FORMAT_PREFIX = "shtools/"
 
@@ -172,8 +174,73 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+def _host() -> str:
+    """This machine's name as it appears in temporary names (no dots or slashes)."""
+    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname())[:32] or "host"
+
+
+def temporary_prefix(target: str | os.PathLike) -> str:
+    """Prefix of the temporaries :func:`atomic_path` makes for ``target``.
+
+    ``.NAME.PID@HOST.`` + 8 random characters + ``.tmp``: the owner's process id
+    and host name make a temporary left by a killed run recognisable.  A NAME
+    too long to leave room for the rest (file names stop at 255 bytes) is cut and
+    tagged with a hash of the whole name.
+    """
+    return f".{_temp_stem(Path(target).name)}.{os.getpid()}@{_host()}."
+
+
+def _temp_stem(name: str) -> str:
+    if len(name.encode()) <= 150:
+        return name
+    digest = hashlib.sha1(name.encode()).hexdigest()[:8]
+    return name.encode()[:120].decode(errors="ignore") + "~" + digest
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists but is someone else's (EPERM)
+        return True
+    return True
+
+
+def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
+    """Remove temporaries of ``target`` whose owner process is gone.
+
+    Only files named like :func:`temporary_prefix` by a process of *this* host
+    that no longer runs are removed (a temporary being written by a running
+    process, or by another machine sharing the folder, is left alone).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The removed files.
+    """
+    target = Path(target)
+    directory = target.parent if str(target.parent) else Path(".")
+    stem = re.escape(_temp_stem(target.name))
+    pattern = re.compile(rf"^\.{stem}\.(\d+)@([A-Za-z0-9_-]+)\.\w{{8}}\.tmp$")
+    removed = []
+    host = _host()
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return removed
+    for name in names:
+        m = pattern.match(name)
+        if m is None or m.group(2) != host or _pid_alive(int(m.group(1))):
+            continue
+        with contextlib.suppress(OSError):
+            (directory / name).unlink()
+            removed.append(directory / name)
+    return removed
 def _create_temporary(directory: Path, name: str) -> Path:
-    """Create an empty, new ``.<name>.<random>.tmp`` in ``directory`` and return its path.
+    """Create an empty, new ``.<name>.<pid>@<host>.<random>.tmp`` in ``directory``.
+
+    The name is :func:`temporary_prefix` plus 8 random hex digits; returns the path.
 
     The file is created with mode 0666, which the kernel masks by the process
     umask -- the mode any output gets -- without reading (or changing) the
@@ -181,7 +248,7 @@ def _create_temporary(directory: Path, name: str) -> Path:
     """
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
     for _ in range(100):
-        path = directory / f".{name}.{secrets.token_hex(4)}.tmp"
+        path = directory / f"{temporary_prefix(name)}{secrets.token_hex(4)}.tmp"
         try:
             os.close(os.open(path, flags, 0o666))
         except FileExistsError:
@@ -194,21 +261,46 @@ def _create_temporary(directory: Path, name: str) -> Path:
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``target``; rename it into place on success.
 
-    On any exception (including KeyboardInterrupt) the temporary file is removed
-    and ``target`` is left untouched, so ``make`` never sees a half-written file.
+    On any exception (including KeyboardInterrupt and SIGTERM, which the CLI turns
+    into an exception) the temporary file is removed and ``target`` is left
+    untouched, so ``make`` never sees a half-written file.  Temporaries of
+    ``target`` left by killed runs (``kill -9``, power loss) are removed first
+    (:func:`remove_stale_temporaries`).
     """
     target = Path(target)
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise AssetError("output folder does not exist; create it first", target)
-    tmp_path = _create_temporary(directory, target.name)
+    if target.exists() and not target.is_file():
+        # os.replace would put a file where a device (/dev/null), pipe or folder was
+        raise AssetError("is not a regular file (a folder, device, pipe or socket); give a "
+                         "file path", target)
+    remove_stale_temporaries(target)
+    try:
+        tmp_path = _create_temporary(directory, target.name)
+    except OSError as exc:
+        raise _output_error(exc, target) from exc
     try:
         yield tmp_path
         os.replace(tmp_path, target)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
+        if disk_error_reason(exc) is not None:
+            raise _output_error(exc, target) from exc
         raise
+
+
+def _output_error(exc: OSError, target: Path) -> Exception:
+    """A one-line AssetError for a full disk / read-only folder, else ``exc`` itself."""
+    reason = disk_error_reason(exc)
+    if reason is None:
+        if isinstance(exc, PermissionError):
+            return AssetError("cannot create a file in the output folder (no permission); "
+                              "choose a writable folder", target)
+        return exc
+    return AssetError(f"{reason}; free space or write elsewhere (nothing was written, an "
+                      "older file of that name is unchanged)", target)
 
 
 def write_asset(
@@ -271,19 +363,56 @@ def write_asset(
         root["sh_convention"] = SH_CONVENTION
     for k, v in (attrs or {}).items():
         root[k] = v
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w", track_order=True) as f:
-            for k in sorted(root):
-                f.attrs[k] = root[k]
-            for name in sorted(datasets):
-                arr = np.asarray(datasets[name])
-                kwargs = {"track_times": False}
-                if compression and arr.size > 1024:
-                    kwargs.update(compression=compression, shuffle=True)
-                ds = f.create_dataset(name, data=arr, **kwargs)
-                for k, v in sorted((dataset_attrs or {}).get(name, {}).items()):
-                    ds.attrs[k] = v
+    # The file is built in memory and written with plain Python I/O: HDF5 failing a
+    # write on a full disk leaves its file half-closed (tracebacks from h5py's
+    # __dealloc__, a crash at exit), Python raises one clean OSError instead.
+    with h5py.File(f"{os.fspath(path)}.{os.getpid()}.mem", "w", driver="core",
+                   backing_store=False, track_order=True) as f:
+        for k in sorted(root):
+            f.attrs[k] = root[k]
+        for name in sorted(datasets):
+            arr = np.asarray(datasets[name])
+            kwargs = {"track_times": False}
+            if compression and arr.size > 1024:
+                kwargs.update(compression=compression, shuffle=True)
+            ds = f.create_dataset(name, data=arr, **kwargs)
+            for k, v in sorted((dataset_attrs or {}).get(name, {}).items()):
+                ds.attrs[k] = v
+        f.flush()
+        image = f.id.get_file_image()
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(image)
+        fh.flush()
+        os.fsync(fh.fileno())
     return Path(path)
+
+
+def reserve_space(path: str | os.PathLike, nbytes: int, target: str | os.PathLike) -> None:
+    """Allocate ``nbytes`` of disk for the file ``path`` now, so a full disk fails here.
+
+    Used before HDF5 streams into a file (see :func:`write_asset` for why HDF5
+    must not meet a full disk).  HDF5 truncates the file to its real size when it
+    closes it.  File systems without ``fallocate`` are left alone.
+
+    Raises
+    ------
+    AssetError
+        The disk (or quota) cannot take ``nbytes``; the message names ``target``.
+    """
+    if not hasattr(os, "posix_fallocate") or nbytes <= 0:
+        return
+    fd = os.open(path, os.O_WRONLY)
+    try:
+        os.posix_fallocate(fd, 0, int(nbytes))
+    except OSError as exc:
+        if disk_error_reason(exc) is not None:
+            raise AssetError(f"needs up to {nbytes / 2**20:,.1f} MiB: "
+                             f"{disk_error_reason(exc)}; free space or write elsewhere "
+                             "(nothing was written, an older file of that name is unchanged)",
+                             target) from None
+        # EOPNOTSUPP/EINVAL: this file system cannot preallocate; write and see
+    finally:
+        os.close(fd)
 
 
 def _decode(v):
@@ -319,6 +448,9 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
     path = os.fspath(path)
     if not os.path.exists(path):
         raise AssetError("file not found; check the path or build it first", path)
+    if not os.path.isfile(path):
+        raise AssetError("is not a regular file (a folder, pipe or device); give an asset "
+                         "file", path)
     try:
         f = h5py.File(path, "r")
     except OSError:
@@ -337,6 +469,10 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
         if schema is None:
             raise AssetError(f"unknown asset kind '{file_kind}'; upgrade shtools", path)
         version = attrs.get("format_version")
+        if not isinstance(version, int) or isinstance(version, bool):
+            raise AssetError(f"attribute 'format_version' is {version!r} "
+                             f"({type(version).__name__}), expected an integer; rebuild the "
+                             "asset with shtools", path)
         if version not in schema.versions():
             raise AssetError(
                 f"'{file_kind}' format version {version} is not supported by this shtools "
@@ -352,6 +488,11 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
         for key in schema.required_attrs + (("sh_order",) if schema.has_sh else ()):
             if key not in attrs:
                 raise AssetError(f"missing root attribute '{key}'", path)
+        if schema.has_sh:
+            order = attrs["sh_order"]
+            if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= 64:
+                raise AssetError(f"attribute 'sh_order' is {order!r}, expected an integer SH "
+                                 "order in 1..64; rebuild the asset", path)
         dims: dict[str, int] = {}
         data: dict[str, np.ndarray] = {}
         for spec in schema.datasets:

@@ -21,7 +21,8 @@ dataset                shape / dtype      meaning
 =====================  =================  ==============================================
 
 Root attributes: the provenance set of every asset plus ``sh_order``,
-``object_names`` (JSON list) and ``fps``.
+``object_names`` (JSON list) and ``fps``.  The file is the same bytes whatever
+the process count (the count is in ``bake --json``'s summary, not in the file).
 
 :class:`BakeWriter` streams frames into the file as they are computed (memory
 stays bounded by one frame) and renames the temporary file into place only when
@@ -48,6 +49,7 @@ from shtools.data_formats._base import (
     generator_string,
     read_asset,
     register,
+    reserve_space,
     sha256_file,
 )
 from shtools.errors import AssetError, InputError
@@ -56,11 +58,35 @@ VERSION = 1
 
 
 def _check(f: h5py.File, ctx: dict) -> None:
-    dims, path = ctx["dims"], ctx["path"]
+    """Everything a reader (``export``, the runtime) relies on beyond shapes and dtypes."""
+    dims, path, attrs = ctx["dims"], ctx["path"], ctx["attrs"]
+    if dims["T"] == 0 or dims["V"] == 0:
+        raise AssetError(f"the bake holds {dims['T']} frame(s) of {dims['V']} vertices; "
+                         "an empty bake cannot be exported, rebake it", path)
+    n_objects = 1
     if "object_offsets" in f:
         offsets = f["object_offsets"][()]
-        if offsets[0] != 0 or offsets[-1] != dims["V"] or np.any(np.diff(offsets) < 0):
+        if (offsets.size < 2 or offsets[0] != 0 or offsets[-1] != dims["V"]
+                or np.any(np.diff(offsets) < 0)):
             raise AssetError("dataset 'object_offsets' does not partition the vertices", path)
+        n_objects = offsets.size - 1
+    if "object_names" in attrs:
+        try:
+            names = json.loads(attrs["object_names"])
+        except (TypeError, json.JSONDecodeError):
+            names = None
+        if (not isinstance(names, list) or not all(isinstance(n, str) for n in names)
+                or len(names) != n_objects):
+            raise AssetError(f"attribute 'object_names' must be a JSON list of {n_objects} "
+                             "name(s), one per receiver object; rebake it", path)
+    if "fps" in attrs:
+        fps = attrs["fps"]
+        if isinstance(fps, bool) or not isinstance(fps, int | float) or not 0 < fps < np.inf:
+            raise AssetError(f"attribute 'fps' is {fps!r}, expected a positive number", path)
+    if "visibility" in f and f["visibility"].shape[2] != int(attrs["sh_order"]) ** 2:
+        raise AssetError(f"dataset 'visibility' has {f['visibility'].shape[2]} coefficients "
+                         f"but sh_order {attrs['sh_order']} needs {int(attrs['sh_order']) ** 2}",
+                         path)
     faces = f["faces"][()]
     if faces.size and (faces.min() < 0 or faces.max() >= dims["V"]):
         raise AssetError("dataset 'faces' indexes vertices that do not exist; rebuild it", path)
@@ -203,6 +229,19 @@ def read_bake(path: str | os.PathLike) -> Bake:
     )
 
 
+def bake_size_bound(frames: int, vertices: int, *, static: bool = False,
+                    visibility_size: int | None = None, fixed: int | None = None) -> int:
+    """Upper bound of a bake asset's bytes: every dataset uncompressed, +1 % and 1 MiB.
+
+    ``fixed``: bytes of the frame-independent datasets (default: two triangles
+    per vertex, i.e. ``24 V``); ``static``: geometry stored once, not per frame.
+    """
+    T, V = int(frames), int(vertices)
+    per_frame = V * 12 * (1 if static else 3) + V * 4 * (visibility_size or 0)
+    fixed = V * 24 if fixed is None else fixed
+    return int(1.01 * (T * per_frame + fixed + V * 36 + T * 12)) + (1 << 20)
+
+
 class BakeWriter:
     """Stream a bake asset frame by frame into a temporary file, rename on success.
 
@@ -294,6 +333,12 @@ class BakeWriter:
         self._stack: contextlib.ExitStack | None = None
         self._file: h5py.File | None = None
 
+    def size_bound(self) -> int:
+        """Bytes the file can take at most (:func:`bake_size_bound`)."""
+        return bake_size_bound(self.n_frames, self.n_vertices, static=self.static,
+                               visibility_size=self.visibility_size,
+                               fixed=self.faces.nbytes + self.object_offsets.nbytes)
+
     # -- context management -------------------------------------------------
     def __enter__(self) -> BakeWriter:
         from shtools.sh.basis import SH_CONVENTION
@@ -303,9 +348,13 @@ class BakeWriter:
             tmp = stack.enter_context(atomic_path(self.path))
             f = h5py.File(tmp, "w", track_order=True)
             stack.callback(f.close)
-        except BaseException:
-            stack.close()
-            raise
+            # a full disk must fail here, before HDF5 streams frames (see reserve_space)
+            reserve_space(tmp, self.size_bound(), self.path)
+        except BaseException as exc:
+            # exit the contexts *with* the exception: a plain close() would commit
+            # the (empty) temporary file over an existing output
+            if not stack.__exit__(type(exc), exc, exc.__traceback__):
+                raise
         self._stack, self._file = stack, f
         root = {
             "format": FORMAT_PREFIX + "bake",

@@ -31,6 +31,9 @@ from shtools.export.quantity import QUANTITIES, check_quantity, display_linear, 
 #: Default image sizes (width, height): a single frame, and one tile of a sheet or GIF.
 FRAME_SIZE = (800, 600)
 TILE_SIZE = (320, 240)
+#: Most pixels a contact sheet or GIF may hold over all its frames (768 MiB of RGB
+#: images in memory until the file is written).
+MAX_SEQUENCE_PIXELS = 2**28
 
 FORMATS = (".ply", ".glb", ".png", ".gif", ".usda", ".usdc", ".usd", ".exr")
 #: formats holding every exported frame in one file (default: all the bake's frames)
@@ -217,6 +220,13 @@ def export_bake(
         summary["detail"] = f"frame {frames[0]}, {w}x{h}"
     else:
         w, h = size or TILE_SIZE
+        total = len(positions) * w * h
+        if total > MAX_SEQUENCE_PIXELS:  # every frame's image is kept until the file is written
+            raise InputError(
+                f"{len(positions)} frames of {w}x{h} are {total:,} pixels "
+                f"({3 * total / 2**30:.1f} GiB of images), above the limit of "
+                f"{MAX_SEQUENCE_PIXELS:,}; export fewer frames (--frames A:B) or a smaller "
+                "--size", output)
         # GIF frames are palette-quantised anyway: skip the supersampling (4x faster)
         ss = 1 if suffix == ".gif" else view.supersample
         images = render_frames(bake, positions, replace(view, width=w, height=h, supersample=ss),

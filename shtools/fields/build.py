@@ -144,9 +144,51 @@ def _check_solid(v: np.ndarray) -> None:
                          "solid -- thicken it first (e.g. `shtools spheres fit --thickness`)")
 
 
+@dataclass
+class _ShellJob:
+    """What every shell task shares (small arrays; the Embree scene is built per process)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    center: np.ndarray
+    radius: float
+    radii: np.ndarray
+    sample_dirs: np.ndarray
+    dirs: np.ndarray
+    weights: np.ndarray
+    order: int
+    token: str
+
+
+#: Per-process RayCaster of the current job (a worker keeps one across its shells).
+_WORKER_CASTER: dict = {}
+
+
+def _shell_task(job: _ShellJob, c: int) -> tuple[np.ndarray, int]:
+    """Task body: the OCVs of shell ``c``, shape (R0*R0, n*n), and the rays cast."""
+    from shtools.geometry.raycast import RayCaster
+
+    caster = _WORKER_CASTER.get(job.token)
+    if caster is None:
+        _WORKER_CASTER.clear()
+        caster = _WORKER_CASTER[job.token] = RayCaster(job.vertices, job.faces)
+    stats = {"rays": 0}
+    points = job.center + job.radii[c] * job.sample_dirs
+    ocv = sample_ocvs(caster, job.center, job.radius, points, job.dirs, job.weights,
+                      job.order, stats=stats)
+    return ocv, stats["rays"]
+
+
 def sample_shells(mesh, params: FieldParameters | None = None, *,
-                  progress: Callable[[int], None] | None = None) -> SampledShells:
+                  progress: Callable[[int], None] | None = None,
+                  scheduler: str | None = None, workers: int | None = None,
+                  pool_summary: dict | None = None) -> SampledShells:
     """Cast and project the OCVs of every shell at the initial resolution.
+
+    Shells are independent tasks (:mod:`shtools.tasks`): spread over the local
+    cores by default, or over a Dask cluster (``scheduler``).  Each shell is
+    cast identically wherever it runs, so the result does not depend on how
+    the shells were spread.
 
     Parameters
     ----------
@@ -155,40 +197,53 @@ def sample_shells(mesh, params: FieldParameters | None = None, *,
         ``shells``, ``resolution``, ``map_size`` and ``order`` are used.
     progress : callable, optional
         Called with the number of samples done after each shell.
+    scheduler, workers : optional
+        Where shells run, as :func:`shtools.tasks.task_pool` (default: local
+        worker processes, one per core; ``scheduler="inline"``: this process).
+    pool_summary : dict, optional
+        Filled with the scheduler's per-worker task counts and times.
 
     Returns
     -------
     SampledShells
     """
-    from shtools.geometry.raycast import RayCaster
+    import uuid
+
+    from shtools.tasks import task_pool
 
     params = params or FieldParameters()
     params.validate()
     v = np.asarray(mesh.vertices, dtype=np.float64)
     _check_solid(v)
     center, vr = bounding_sphere(v)
-    caster = RayCaster(v, mesh.faces)
     dirs, weights = direction_map(params.map_size)
     radii = shell_radii(vr, params.shells)
     R0 = params.resolution
-    sample_dirs = grid_directions(R0).reshape(-1, 3)
     n2 = params.order ** 2
-    stats = {"rays": 0}
+    job = _ShellJob(v, np.asarray(mesh.faces), center, vr, np.asarray(radii),
+                    grid_directions(R0).reshape(-1, 3), dirs, weights, params.order,
+                    uuid.uuid4().hex)
     grids = np.empty((params.shells, R0, R0, n2))
+    rays = 0
     t0 = time.perf_counter()
-    for c, r in enumerate(radii):
-        points = center + r * sample_dirs
-        grids[c] = sample_ocvs(caster, center, vr, points, dirs, weights, params.order,
-                               stats=stats).reshape(R0, R0, n2)
-        if progress is not None:
-            progress(R0 * R0)
-    return SampledShells(center, vr, radii, grids, stats["rays"],
+    with task_pool(scheduler, workers, n_tasks=params.shells) as pool:
+        for c, (ocv, cast) in enumerate(pool.map_ordered(_shell_task, range(params.shells),
+                                                         shared=job)):
+            grids[c] = ocv.reshape(R0, R0, n2)
+            rays += cast
+            if progress is not None:
+                progress(R0 * R0)
+        if pool_summary is not None:
+            pool_summary.update(pool.summary())
+    return SampledShells(center, vr, radii, grids, rays,
                          params.shells * R0 * R0 * dirs.shape[0], time.perf_counter() - t0)
 
 
 def sample_field(mesh, params: FieldParameters | None = None, *,
                  self_visibility: Callable | None = None,
-                 progress: Callable[[int], None] | None = None) -> tuple[ShadowField, FieldReport]:
+                 progress: Callable[[int], None] | None = None,
+                 scheduler: str | None = None,
+                 workers: int | None = None) -> tuple[ShadowField, FieldReport]:
     """Sample, reduce and quantize the shadow field of a mesh.
 
     Parameters
@@ -202,6 +257,8 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         :func:`shtools.fields.self_visibility.self_visibility`).
     progress : callable, optional
         Called with the number of samples done after each shell.
+    scheduler, workers : optional
+        Where the shells are sampled (:func:`sample_shells`).
 
     Returns
     -------
@@ -215,7 +272,8 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
     params = params or FieldParameters()
     params.validate()
     t0 = time.perf_counter()
-    sampled = sample_shells(mesh, params, progress=progress)
+    sampled = sample_shells(mesh, params, progress=progress, scheduler=scheduler,
+                            workers=workers)
     fld, rep = build_field(sampled, params, mesh=mesh, self_visibility=self_visibility)
     rep.seconds["total"] = time.perf_counter() - t0
     return fld, rep

@@ -52,10 +52,14 @@ def batch_outputs(mesh_paths, out_dir: str | os.PathLike) -> list:
     Raises
     ------
     InputError
-        Two meshes would write the same file (same stem in different folders).
+        ``out_dir`` is not an existing folder, or two meshes would write the
+        same file (same stem in different folders).
     """
     from pathlib import Path
 
+    if not Path(out_dir).is_dir():
+        raise InputError("is not a folder; create it first (a batch fit writes "
+                         "<mesh stem>.spheres.h5 files into it)", out_dir)
     outputs = [Path(out_dir) / f"{Path(m).stem}.spheres.h5" for m in mesh_paths]
     seen: dict = {}
     for mesh, out in zip(mesh_paths, outputs, strict=True):
@@ -110,13 +114,9 @@ def fit_many(mesh_paths, out_dir: str | os.PathLike, count: int, *,
         Per mesh, in the order given: ``mesh``, ``output``, ``spheres``,
         ``outside_volume_ratio``, ``coverage``, ``seconds``.
     """
-    from pathlib import Path
 
     from shtools.tasks import task_pool
 
-    if not Path(out_dir).is_dir():
-        raise InputError("is not a folder; create it first (a batch fit writes "
-                         "<mesh stem>.spheres.h5 files into it)", out_dir)
     outputs = batch_outputs(mesh_paths, out_dir)
     options = {"count": count, "method": method, "seed": seed, "thickness": thickness,
                "iterations": iterations, "restarts": restarts}

@@ -56,6 +56,8 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise InputError("mesh file not found; check the path", path)
     if path.is_dir():
         raise InputError("is a folder, expected a mesh file", path)
+    if not path.is_file():  # reading a pipe or device would block or never end
+        raise InputError("is not a regular file (a pipe or device?); give a mesh file", path)
     ext = path.suffix.lower()
     if ext not in SUPPORTED_EXTENSIONS:
         raise InputError(
@@ -63,8 +65,15 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
             f"{', '.join(SUPPORTED_EXTENSIONS)}",
             path,
         )
+    source = _checked_source(path, ext)
     try:
-        loaded = trimesh.load(str(path), force="mesh", process=False)
+        if source is None:
+            loaded = trimesh.load(str(path), force="mesh", process=False)
+        else:  # text we decoded ourselves (trimesh would guess the charset)
+            loaded = trimesh.load(source, file_type=ext[1:], force="mesh", process=False,
+                                  resolver=trimesh.resolvers.FilePathResolver(str(path)))
+    except InputError:
+        raise
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise InputError(
             f"cannot read the mesh ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); "
@@ -74,6 +83,83 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
     if not isinstance(loaded, trimesh.Trimesh):
         raise InputError("the file holds no triangle mesh (points or lines only?)", path)
     return validate_mesh(loaded, path)
+
+
+#: Bytes of a binary STL: an 80-byte header, a uint32 triangle count, 50 bytes each.
+STL_HEADER, STL_TRIANGLE = 84, 50
+
+
+def _checked_source(path: Path, ext: str):
+    """Format checks trimesh does not make, with the honest reason; the text to load.
+
+    * OBJ: binary data is refused; text that is not UTF-8 (a Latin-1 comment or
+      material name) is decoded as Latin-1, which maps every byte, instead of
+      letting trimesh guess the charset; a face index 0 (OBJ counts from 1) is
+      refused instead of silently wrapping to the last vertex.
+    * STL: a binary STL whose size disagrees with its triangle count is
+      truncated; an ASCII STL without ``endsolid`` too.
+    * glTF: the JSON must parse.
+
+    Returns
+    -------
+    io.BytesIO or None
+        UTF-8 text of an OBJ to load, or None to let trimesh read the file.
+    """
+    import io
+
+    if ext not in (".obj", ".stl", ".gltf"):
+        return None
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror})", path) from None
+    if ext == ".stl":
+        if len(data) >= STL_HEADER:
+            count = int.from_bytes(data[80:84], "little")
+            if len(data) == STL_HEADER + STL_TRIANGLE * count:
+                return None  # a complete binary STL
+        if data.lstrip()[:5].lower() == b"solid" and b"\0" not in data:
+            if b"endsolid" not in data[-4096:].lower():
+                raise InputError("truncated ASCII STL (no 'endsolid' at the end); re-export "
+                                 "the mesh", path)
+            return None
+        if len(data) < STL_HEADER:
+            raise InputError(f"not an STL file ({len(data)} bytes, shorter than a binary STL "
+                             "header)", path)
+        raise InputError(
+            f"truncated or damaged binary STL: the header announces {count} triangles "
+            f"({STL_HEADER + STL_TRIANGLE * count} bytes) but the file has {len(data)} bytes; "
+            "re-export the mesh", path)
+    if ext == ".gltf":
+        import json
+
+        try:
+            json.loads(data)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            where = (f" (line {exc.lineno}, column {exc.colno})"
+                     if isinstance(exc, json.JSONDecodeError) else "")
+            raise InputError(f"not valid glTF: the JSON does not parse{where}; re-export it "
+                             "or use .glb", path) from None
+        return None
+    # OBJ
+    if b"\0" in data:
+        raise InputError("not an OBJ file: it holds binary data (OBJ is text with 'v' and "
+                         "'f' lines)", path)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    faces = 0
+    for number, line in enumerate(text.splitlines(), 1):
+        fields = line.split()
+        faces += fields[:1] == ["f"]
+        if fields[:1] == ["f"] and any(
+                part in ("0", "-0") for item in fields[1:] for part in item.split("/")):
+            raise InputError(f"line {number}: face index 0 (OBJ indices start at 1); fix the "
+                             "exporter or the file", path)
+    if not faces:
+        raise InputError("the OBJ has no faces (no 'f' lines): empty, or not an OBJ mesh", path)
+    return io.BytesIO(text.encode("utf-8"))
 
 
 def validate_mesh(mesh: trimesh.Trimesh, path: str | os.PathLike | None = None) -> trimesh.Trimesh:

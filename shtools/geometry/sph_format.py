@@ -47,6 +47,8 @@ def read_sph(path: str | os.PathLike, *, level: int | None = None) -> SphereSet:
     path = os.fspath(path)
     if not os.path.exists(path):
         raise InputError("sphere file not found; check the path", path)
+    if not os.path.isfile(path):  # a pipe or device would block the read
+        raise InputError("is not a regular file (a folder, pipe or device)", path)
     try:
         with open(path, encoding="utf-8", errors="strict") as fh:
             lines = [ln.split() for ln in fh if ln.strip()]
@@ -60,14 +62,19 @@ def read_sph(path: str | os.PathLike, *, level: int | None = None) -> SphereSet:
         raise InputError("the header must be two integers 'LEVELS BRANCHING'", path) from None
     if levels < 1 or branching < 1:
         raise InputError(f"invalid header: {levels} levels, branching {branching}", path)
-    sizes = [branching**lev for lev in range(levels)]
-    total = sum(sizes)
+    # a header can promise astronomically many nodes (1e9 levels): stop counting as
+    # soon as the promise exceeds the lines the file holds
+    available = len(lines) - 1
+    sizes, total = [], 0
+    for lev in range(levels):
+        sizes.append(branching**lev)
+        total += sizes[-1]
+        if total > available:
+            raise InputError(
+                f"the header promises {levels} levels of branching {branching} (more than "
+                f"{available} nodes) but the file has {available} sphere lines; it is "
+                "truncated or the header is wrong", path)
     body = lines[1 : 1 + total]
-    if len(body) < total:
-        raise InputError(
-            f"the header promises {total} nodes but the file has {len(body)}; it is truncated",
-            path,
-        )
     try:
         nodes = np.array([[float(t) for t in row[:5]] for row in body], dtype=np.float64)
     except ValueError:

@@ -21,9 +21,46 @@ from shtools.errors import InputError
 HDR_SUFFIXES = (".hdr", ".pic", ".pfm", ".exr")
 
 
+#: Largest image accepted, in pixels (16384 x 8192, the largest lat-long probes in
+#: use; 1.5 GiB as float32 RGB).  Checked on the header, before decoding.
+MAX_PIXELS = 16384 * 8192
+
+
+def _header_size(path: Path, suffix: str) -> tuple[int, int] | None:
+    """(width, height) from a Radiance or PFM header, or None when it cannot be read."""
+    import re
+
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    if suffix == ".pfm":
+        m = re.match(rb"P[Ff]\s+(\d+)\s+(\d+)\s", head)
+    else:  # Radiance: header lines, a blank line, then "-Y H +X W"
+        m = re.search(rb"\n\n[-+]Y\s+(\d+)\s+[-+]X\s+(\d+)", head)
+        m = m and re.match(rb"(\d+) (\d+)", m.group(2) + b" " + m.group(1))
+    return None if m is None else (int(m.group(1)), int(m.group(2)))
+
+
+def check_image_size(width: int, height: int, path) -> None:
+    """Refuse images above :data:`MAX_PIXELS`, with the memory they would take."""
+    if width * height > MAX_PIXELS:
+        gib = width * height * 3 * 4 / 2**30
+        raise InputError(f"the header announces {width}x{height} pixels ({gib:.1f} GiB as "
+                         f"float RGB), above the limit of {MAX_PIXELS:,} pixels; downsample "
+                         "the map", path)
+
+
 def _read_opencv(path: Path, suffix: str) -> np.ndarray:
+    size = _header_size(path, suffix)
+    if size is not None:
+        check_image_size(*size, path)
+    # OpenCV logs decoder warnings (a truncated file) on stderr; we report our own line
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "OFF")
     import cv2
 
+    try:
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    except AttributeError:  # older bindings: the environment variable above
+        pass
     img = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR)
     if img is None:
         raise InputError(f"cannot decode the image as {suffix}; the file is damaged or not "
@@ -39,6 +76,13 @@ def _read_opencv(path: Path, suffix: str) -> np.ndarray:
 def _read_exr(path: Path) -> np.ndarray:
     import OpenEXR
 
+    try:
+        lo, hi = OpenEXR.File(str(path), header_only=True).header()["dataWindow"]
+        size = (int(hi[0]) - int(lo[0]) + 1, int(hi[1]) - int(lo[1]) + 1)
+    except Exception:  # the full read below reports what is wrong
+        size = None
+    if size is not None:
+        check_image_size(*size, path)
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             channels = {name: ch.pixels for name, ch in exr.channels().items()}

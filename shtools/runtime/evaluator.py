@@ -18,6 +18,7 @@ from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_pro
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.parallel import (
+    FRAME_PARTS,
     MIN_PARALLEL_PAIRS,
     VertexWorkers,
     resolve_processes,
@@ -162,10 +163,12 @@ class ShadowRuntime:
 
         Notes
         -----
-        With ``settings.processes > 1`` (the default on a multi-core machine),
-        frames of at least ``MIN_PARALLEL_PAIRS`` sphere-receiver pairs are
-        split by receiver cluster over this process and forked workers
-        (:mod:`shtools.runtime.parallel`); :meth:`close` stops them.
+        Frames of at least ``MIN_PARALLEL_PAIRS`` sphere-receiver pairs are
+        split by receiver cluster into ``FRAME_PARTS`` parts; with
+        ``settings.processes > 1`` (the default on a multi-core machine) forked
+        workers share them with this process (:mod:`shtools.runtime.parallel`;
+        :meth:`close` stops them).  The split does not depend on the process
+        count, so the result is the same bytes with any number of processes.
         """
         pts, nrm = _check_receivers(vertices, normals)
         spheres, others = self._blockers(blockers)
@@ -175,9 +178,9 @@ class ShadowRuntime:
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
         extra = _add(self._other_logs(pts, nrm, others), own)
-        if self.processes > 1 and stats["pairs"] >= MIN_PARALLEL_PAIRS:
+        if stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
-            g = self._parallel_visibility(work, pts, nrm, extra)
+            g = self._split_visibility(work, pts, nrm, extra)
             stats["seconds"]["accumulate_exp_wall"] = time.perf_counter() - w0
             return g
         t1 = time.process_time()
@@ -297,10 +300,14 @@ class ShadowRuntime:
         self.last_stats["seconds"]["other_blockers"] = time.process_time() - t0
         return total
 
-    def close(self) -> None:
-        """Stop the worker processes, if any were started (the runtime stays usable)."""
+    def close(self, *, kill: bool = False) -> None:
+        """Stop the worker processes, if any were started (the runtime stays usable).
+
+        ``kill=True`` kills them at once instead of letting running parts finish
+        (an interrupted frame).
+        """
         if self._workers is not None:
-            self._workers.close()
+            self._workers.close(kill=kill)
             self._workers = None
 
     def __enter__(self) -> ShadowRuntime:
@@ -429,26 +436,50 @@ class ShadowRuntime:
                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
                                    kernels=self._kernels, stats=stats)
 
-    def _parallel_visibility(self, work: FrameWork, pts, nrm, extra=None) -> np.ndarray:
-        """Visibility with the frame split over this process and the workers."""
-        if self._workers is None:
-            self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables)
-        parts = work.split(pts, nrm, self.processes)
-        if extra is not None:
+    def _split_visibility(self, work: FrameWork, pts, nrm, extra=None) -> np.ndarray:
+        """Visibility of a frame evaluated as ``FRAME_PARTS`` independent parts.
+
+        Each part's bytes depend only on the part (its receivers, cuts and
+        blocking), never on which process evaluates it or on the process count.
+        With workers, this process evaluates the first part and then takes the
+        parts no worker has started yet, from the end of the queue.
+        """
+        parts = work.split(pts, nrm, FRAME_PARTS)
+        if extra is not None:  # the other blockers' log sum, rows of each part
             parts = [(rows, ("with_log", task, extra[rows])) for rows, task in parts]
-        try:
-            futures = [self._workers.submit(task) for _, task in parts[1:]]
-            g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
-            rows, task = parts[0]
-            g[rows], evaluated = self.run_part(task)
-            for (rows, _), future in zip(parts[1:], futures, strict=True):
-                g[rows], count = self._workers.result(future)
+        g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
+        evaluated = 0
+        processes = 1
+        if self.processes == 1 or len(parts) == 1:
+            for rows, task in parts:
+                g[rows], count = self.run_part(task)
                 evaluated += count
-        except ShtoolsError:
-            self.close()  # a dead worker: the next frame starts fresh ones
-            raise
+        else:
+            if self._workers is None:
+                self._workers = VertexWorkers(min(self.processes, FRAME_PARTS) - 1,
+                                              self.settings, self.tables)
+            try:
+                queued = [(rows, task, self._workers.submit(task)) for rows, task in parts[1:]]
+                g[parts[0][0]], evaluated = self.run_part(parts[0][1])
+                # take back, one at a time from the end, parts no worker has started
+                for rows, task, future in reversed(queued):
+                    if not future.cancel():
+                        break  # this one and every earlier one are with a worker
+                    g[rows], count = self.run_part(task)
+                    evaluated += count
+                for rows, _, future in queued:
+                    if not future.cancelled():
+                        g[rows], count = self._workers.result(future)
+                        evaluated += count
+                processes = min(self.processes, FRAME_PARTS, len(parts))
+            except ShtoolsError:
+                self.close()  # a dead worker: the next frame starts fresh ones
+                raise
+            except BaseException:
+                self.close(kill=True)  # Ctrl-C / SIGTERM: do not wait for running parts
+                raise
         self.last_stats["pairs_evaluated"] = evaluated
-        self.last_stats["processes"] = len(parts)
+        self.last_stats["processes"] = processes
         return g
 
     def exponentiate(self, log_vis) -> np.ndarray:

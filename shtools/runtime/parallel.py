@@ -13,14 +13,24 @@ Workers are forked (``fork`` start method: no re-import of the caller's main
 module, the log table is inherited), started on the first frame large enough
 to gain from them (:data:`MIN_PARALLEL_PAIRS`), and stopped by
 :meth:`VertexWorkers.close`, when the runtime is garbage-collected, or at exit.
-A part's result does not depend on the other parts, so the visibility equals
-the single-process result up to float32 rounding of the block layout.
+They never outlive the caller: on Linux the kernel kills a worker when its
+parent dies (``prctl(PR_SET_PDEATHSIG)``, even after ``kill -9``); elsewhere a
+thread in the worker exits it when the parent is gone.  SIGTERM kills a worker
+(the default action, restored after fork), and an interrupted frame kills the
+workers instead of waiting for their parts (:meth:`VertexWorkers.close`).
+A part's result does not depend on the other parts, and the frame is always cut
+into the same :data:`FRAME_PARTS` parts (one process evaluates them one after
+the other), so the visibility is byte-identical for any process count.
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
+import signal
+import threading
+import time
 import weakref
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -34,6 +44,10 @@ from shtools.errors import ShtoolsError
 MIN_PARALLEL_PAIRS = 200_000
 #: ``processes=None`` uses the available cores, at most this many.
 MAX_AUTO_PROCESSES = 8
+#: Parts a large frame is split into, whatever the process count: fixing the split
+#: fixes every float32 reduction order, so a bake is the same bytes with 1, 2 or
+#: 8 processes (more processes than parts are not used).
+FRAME_PARTS = 8
 
 #: The evaluator of a worker process (set by :func:`_init_worker`).
 _WORKER_RUNTIME = None
@@ -104,7 +118,8 @@ class VertexWorkers:
     def __init__(self, count: int, settings, tables: dict):
         ctx = multiprocessing.get_context("fork")
         self._pool = ProcessPoolExecutor(max_workers=int(count), mp_context=ctx,
-                                         initializer=_init_worker, initargs=(settings, tables))
+                                         initializer=_init_worker,
+                                         initargs=(settings, tables, os.getpid()))
         self._close = weakref.finalize(self, _shutdown, self._pool)
 
     def submit(self, task):
@@ -122,8 +137,14 @@ class VertexWorkers:
         except BrokenProcessPool as exc:
             raise _worker_died() from exc
 
-    def close(self) -> None:
-        """Stop the workers (idempotent)."""
+    def close(self, *, kill: bool = False) -> None:
+        """Stop the workers (idempotent); ``kill=True`` does not wait for running parts."""
+        if kill:
+            # ProcessPoolExecutor has no public way to stop busy workers (3.14 adds
+            # terminate_workers); its process table is stable across 3.11-3.13
+            for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+                with contextlib.suppress(Exception):
+                    proc.kill()
         self._close()
 
 
@@ -136,13 +157,46 @@ def _shutdown(pool: ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _init_worker(settings, tables) -> None:
-    import signal
+#: Linux ``prctl`` option: signal sent to this process when its parent dies.
+PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Make this (forked) process exit when ``parent_pid`` dies.
+
+    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, then a check that the parent did
+    not die before the call.  Elsewhere: a daemon thread polling ``getppid``.
+    """
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        armed = libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):  # no libc prctl: not Linux
+        armed = False
+    if os.getppid() != parent_pid:
+        os._exit(1)
+    if armed:
+        return
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="shtools-parent-watch", daemon=True).start()
+
+
+def _init_worker(settings, tables, parent_pid) -> None:
     from dataclasses import replace
 
+    die_with_parent(parent_pid)
     # Ctrl-C reaches the whole process group: the caller handles it and stops
-    # the workers, which must not print tracebacks of their own
+    # the workers, which must not print tracebacks of their own.  SIGTERM/SIGHUP
+    # get their default action back (the CLI's handlers are inherited by fork).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
     from shtools.runtime.evaluator import ShadowRuntime
 

@@ -32,7 +32,7 @@ import numpy as np
 from shtools.data_formats.bake import parse_frames
 from shtools.errors import AssetError, InputError
 from shtools.scene.pose import FrameState, pose_frame
-from shtools.scene.prepare import PreparedObject, PreparedScene, prepare_scene
+from shtools.scene.prepare import PreparedObject, PreparedScene, prepare_scene, scene_files
 from shtools.scene.scene import Scene
 from shtools.scene.shadows import (
     LIGHT_SHADOWS,
@@ -44,7 +44,8 @@ from shtools.scene.shadows import (
 
 #: the three jobs' public names, importable from here as before the split
 __all__ = ["FrameResult", "FrameState", "PreparedObject", "PreparedScene", "bake_scene",
-           "bake_to_file", "parse_frames", "pose_frame", "prepare_scene", "runtime_settings"]
+           "bake_to_file", "check_bake_size", "parse_frames", "pose_frame", "prepare_scene",
+           "runtime_settings", "scene_files"]
 
 
 @dataclass
@@ -352,6 +353,7 @@ def bake_to_file(
     store_visibility: bool = False,
     on_frame: Callable[[FrameResult], None] | None = None,
     processes: int | None = None,
+    force: bool = False,
     scheduler: str | None = None,
     workers: int | None = None,
     progress=None,
@@ -365,7 +367,8 @@ def bake_to_file(
     ``output``, ``pool`` (scheduler, workers, per-worker task counts and
     seconds).  ``processes``, ``scheduler`` and ``workers`` as in
     :func:`bake_scene`; ``progress`` a progress factory
-    (:mod:`shtools.progress`) for the set-up and the frames.
+    (:mod:`shtools.progress`) for the set-up and the frames; ``force`` bakes past
+    :func:`check_bake_size`'s limits.
     """
     from shtools.progress import silent
 
@@ -374,6 +377,10 @@ def bake_to_file(
         raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
     prepared = prepare_scene(scene, progress=progress)
+    frames = range(scene.settings.frames) if frames is None else frames
+    if not force:
+        check_bake_size(len(frames), prepared.n_vertices, store_visibility,
+                        scene.settings.order, scene.path)
     n = 0
     frame_seconds = 0.0
     pool: dict = {}
@@ -400,4 +407,36 @@ def bake_to_file(
         "method": method or scene.settings.method,
         "output": os.fspath(output),
         "pool": pool,
+        # not stored in the asset: its bytes must not depend on how it was computed
+        "processes": processes,
     }
+
+
+#: Most vertex-frames a bake runs without --force: about half an hour at the
+#: 0.5 M vertex-frames/s of a battle-scale frame on 2 cores (README).
+MAX_VERTEX_FRAMES = 1_000_000_000
+#: Largest bake asset written without --force (uncompressed bound).
+MAX_BAKE_BYTES = 16 * 2**30
+
+
+def check_bake_size(frames: int, vertices: int, store_visibility: bool, order: int,
+                    path=None) -> None:
+    """Refuse a bake past :data:`MAX_VERTEX_FRAMES` or :data:`MAX_BAKE_BYTES`, with the estimate.
+
+    Raises
+    ------
+    InputError
+        Naming the scene; ``bake --frames A:B`` or ``--force`` are the ways out.
+    """
+    from shtools.data_formats.bake import bake_size_bound
+
+    work = frames * vertices
+    size = bake_size_bound(frames, vertices, visibility_size=order ** 2 if store_visibility
+                           else None)
+    if work > MAX_VERTEX_FRAMES or size > MAX_BAKE_BYTES:
+        raise InputError(
+            f"the bake would evaluate {work:,} vertex-frames ({frames:,} frames x {vertices:,} "
+            f"vertices, about {work / 5e5 / 3600:,.1f} h at 0.5 M/s) and write up to "
+            f"{size / 2**30:,.1f} GiB, above the limits ({MAX_VERTEX_FRAMES:,} vertex-frames, "
+            f"{MAX_BAKE_BYTES / 2**30:.0f} GiB); bake a range with --frames A:B or pass --force",
+            path)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from shtools.errors import InputError
 from shtools.scene.animation import (
     light_at,
     transform_normals,
@@ -31,6 +32,11 @@ class FrameState:
     self_visibility: list = field(default_factory=list)  # list[shtools.runtime.SelfVisibility]
 
 
+#: Largest world coordinate a posed vertex may have: the runtime works in float32,
+#: whose squares overflow above ~1.8e19.
+MAX_COORDINATE = 1e18
+
+
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
     """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
 
@@ -53,6 +59,11 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             joints = None
             local_v, local_n = o.vertices, o.normals
         world_v = transform_points(m, local_v)
+        if not np.all(np.abs(world_v) <= MAX_COORDINATE):
+            raise InputError(f"objects '{o.spec.name}': posed vertices at t = {t:g} s are not "
+                             f"finite or beyond +-{MAX_COORDINATE:g} (the runtime computes in "
+                             "float32); check its translate/scale and its parents'",
+                             prepared.scene.path)
         rotation = rotation_of(m) if o.self_log is not None else None
         if rotation is not None:
             # exact self-shadowing: its own spheres (appended next) are skipped on its rows

@@ -205,6 +205,19 @@ def _tables(scene: Scene, inputs: dict) -> dict | None:
     return tables
 
 
+def scene_files(scene: Scene) -> list[Path]:
+    """Every file a bake of ``scene`` reads: the scene itself and each file it names.
+
+    Used to refuse an output path that would overwrite one of them.
+    """
+    files = [scene.path, scene.settings.tables, scene.environment.path]
+    for obj in scene.objects:
+        files.append(obj.mesh)
+        if obj.blocker is not None:
+            files.append(obj.blocker.path)
+    return [Path(f) for f in files if f is not None]
+
+
 def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
                   progress=None) -> PreparedScene:
     """Load meshes, blockers, skins, environment and tables of a parsed scene.

@@ -37,6 +37,72 @@ PRIMITIVES: dict[str, dict] = {
 }
 
 
+#: Smallest integer of each integer parameter (default 1).
+INT_MINIMUM = {("sphere", "subdivisions"): 0, ("capsule", "count"): 4,
+               ("cylinder", "sections"): 3}
+#: Most vertices a primitive may have: a 2000 x 2000 plane.  Per baked frame every
+#: receiver vertex costs ~100 bytes of working memory and 12-24 bytes of output.
+MAX_PRIMITIVE_VERTICES = 4_000_000
+
+
+def vertex_count(kind: str, p: dict) -> int:
+    """Vertices the primitive ``kind`` with full parameters ``p`` will have (table above)."""
+    if kind == "plane":
+        return (p["subdivisions"] + 1) ** 2
+    if kind == "sphere":
+        return 10 * 4 ** min(p["subdivisions"], 64) + 2
+    if kind == "box":
+        return 6 * (p["subdivisions"] + 1) ** 2
+    if kind == "capsule":
+        return p["count"] ** 2
+    return 4 * p["sections"] * (p["subdivisions"] + 1)
+
+
+def check_parameters(kind: str, params: dict) -> dict:
+    """Check the parameters of a primitive and its size; the full parameter set.
+
+    Each parameter takes the type of its default: a list of that many finite
+    numbers (positive, except ``center``), an integer at least its minimum
+    (:data:`INT_MINIMUM`, else 1), or a positive finite number.  The vertex count
+    (:func:`vertex_count`) must stay within :data:`MAX_PRIMITIVE_VERTICES`.
+
+    Raises
+    ------
+    InputError
+        The message starts with the parameter name (the scene parser adds the
+        file and the TOML path).
+    """
+    import math
+
+    p = dict(PRIMITIVES[kind])
+    for key, value in params.items():
+        default = p[key]
+        if isinstance(default, list):
+            n = len(default)
+            if (not isinstance(value, list) or len(value) != n
+                    or not all(isinstance(x, int | float) and not isinstance(x, bool)
+                               for x in value)):
+                raise InputError(f"'{key}' must be a list of {n} numbers, got {value!r}")
+            if not all(math.isfinite(x) for x in value):
+                raise InputError(f"'{key}' must be finite, got {value!r}")
+            if key != "center" and any(x <= 0 for x in value):
+                raise InputError(f"'{key}' must be positive, got {value!r}")
+        elif isinstance(default, int):
+            lo = INT_MINIMUM.get((kind, key), 1)
+            if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+                raise InputError(f"'{key}' must be an integer >= {lo}, got {value!r}")
+        elif (isinstance(value, bool) or not isinstance(value, int | float)
+              or not math.isfinite(value) or value <= 0):
+            raise InputError(f"'{key}' must be a positive number, got {value!r}")
+        p[key] = value
+    count = vertex_count(kind, p)
+    if count > MAX_PRIMITIVE_VERTICES:
+        raise InputError(f"'{kind}' with these parameters would have {count:,} vertices, above "
+                         f"the limit of {MAX_PRIMITIVE_VERTICES:,}; lower the subdivisions "
+                         "(or use a mesh file)")
+    return p
+
+
 @dataclass
 class Primitive:
     """A generated mesh with its vertex normals and, if exact, its sphere set.
@@ -100,13 +166,13 @@ def make_primitive(kind: str, params: dict) -> Primitive:
         close = difflib.get_close_matches(kind, PRIMITIVES, n=1)
         hint = f"did you mean '{close[0]}'? " if close else ""
         raise InputError(f"unknown primitive type '{kind}'; {hint}known: {', '.join(PRIMITIVES)}")
-    p = dict(PRIMITIVES[kind])
-    for key, value in params.items():
-        if key not in p:
-            close = difflib.get_close_matches(key, p, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else f"; known: {', '.join(p)}"
+    for key in params:
+        if key not in PRIMITIVES[kind]:
+            close = difflib.get_close_matches(key, PRIMITIVES[kind], n=1)
+            hint = (f"; did you mean '{close[0]}'?" if close
+                    else f"; known: {', '.join(PRIMITIVES[kind])}")
             raise InputError(f"unknown parameter '{key}' for primitive '{kind}'{hint}")
-        p[key] = value
+    p = check_parameters(kind, params)
     center = np.asarray(p["center"], dtype=float).reshape(3)
     spheres = None
     if kind == "plane":

@@ -56,7 +56,8 @@ class Settings(ShadowSettings):
     ``window = "none"`` is stored as None.
     """
 
-    frames: int = setting(1, "int", lo=1, doc="frames to bake")
+    frames: int = setting(1, "int", lo=1, hi=1_000_000,
+                          doc="frames to bake (at most 1,000,000: 11.6 hours at 24 fps)")
     fps: float = setting(24.0, "float", lo=0, lo_open=True, doc="frames per second")
     tables: Path | None = setting(None, "path", none_means="built at the accumulation order",
                                   doc="log tables asset (.h5) of the accumulation order")
@@ -216,6 +217,8 @@ def _file(value: str, base: Path, ctx: _Ctx, suffixes=None) -> Path:
     path = (base / value) if not os.path.isabs(value) else Path(value)
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise ctx.error(f"'{value}' has an unsupported extension; use one of {', '.join(suffixes)}")
+    if path.is_dir():
+        raise ctx.error(f"'{value}' is a folder; name a file")
     if not path.is_file():
         raise ctx.error(f"file '{value}' not found (paths are relative to the scene file)")
     return path

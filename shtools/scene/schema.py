@@ -264,6 +264,12 @@ class Primitive(Table):
                 hint = (f"did you mean '{close[0]}'?" if close
                         else f"allowed: {', '.join(allowed)}")
                 raise fail(f"unknown key '{key}'; {hint}")
+        from shtools.scene.primitives import check_parameters
+
+        try:  # types, lengths, ranges and the vertex count, at parse time
+            check_parameters(data["type"], {k: v for k, v in data.items() if k != "type"})
+        except InputError as exc:
+            raise fail(exc.message) from None
         return data
 
     @property

@@ -100,3 +100,17 @@ def test_field_reader_refuses_a_broken_asset(run_cli, tmp_path, box_obj):
     code, _, err = run_cli("check", out)
     assert code == 1 and "power" in err
     np.testing.assert_equal(True, True)
+
+
+def test_shells_as_tasks_give_the_same_bytes(run_cli, tmp_path, box_obj):
+    # Shells are independent tasks: one process or two workers, the same file.
+    import filecmp
+
+    outs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}.field.h5"
+        code, _, err = run_cli("field", "sample", box_obj, "-o", out, *SMALL,
+                              "--workers", workers, "--no-self-visibility")
+        assert code == 0, err
+        outs.append(out)
+    assert filecmp.cmp(*outs, shallow=False)

@@ -66,7 +66,7 @@ def test_export_import_round_trip(run_cli, write_mesh, small_torus, tmp_path):
         ("empty", "empty"),
         ("nan", "NaN"),
         ("flat", "--thickness"),
-        ("zero", "-n must be >= 1"),
+        ("zero", "0 is not in the range x>=1"),
         ("too_many", "sample points"),
     ],
 )

@@ -270,3 +270,29 @@ def test_partial_bake_clusters_receivers_at_frame_0(tmp_path, monkeypatch):
     scene.write_text(scene_text(order=3, frames=5, moving_ground=True))
     bake_to_file(load_scene(scene), tmp_path / "part.h5", frames=range(2, 4), workers=1)
     assert seen == [0.0]
+
+
+def test_batch_fit_cli_one_asset_per_mesh(run_cli, tmp_path):
+    import json
+
+    import trimesh
+
+    meshes = []
+    for name, mesh in [("box", trimesh.creation.box(extents=[2, 1, 1])),
+                       ("capsule", trimesh.creation.capsule(height=1.0, radius=0.4))]:
+        path = tmp_path / f"{name}.obj"
+        mesh.export(path)
+        meshes.append(path)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    code, stdout, err = run_cli("spheres", "fit", *meshes, "-n", 5, "--method", "kmeans",
+                                "-o", out_dir, "--workers", 2, "--json")
+    assert code == 0, err
+    summary = json.loads(stdout)
+    assert [Path(f["output"]).name for f in summary["fits"]] == ["box.spheres.h5",
+                                                                  "capsule.spheres.h5"]
+    assert sorted(p.name for p in out_dir.iterdir()) == ["box.spheres.h5",
+                                                         "capsule.spheres.h5"]
+    # A file as the batch's output folder: one line, nothing written.
+    code, _, err = run_cli("spheres", "fit", *meshes, "-n", 5, "-o", meshes[0])
+    assert code != 0 and "not a folder" in err
