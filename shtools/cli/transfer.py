@@ -39,11 +39,10 @@ def transfer(mesh_path, output, order, n_dirs, floor, as_json):
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
     start = time.perf_counter()
-    bar = progress(total=len(mesh.vertices), desc="rays")
+    bar = progress(total=len(mesh.vertices), desc="transfer", unit="vertices")
 
-    def tick(done, total):
-        bar.n = done
-        bar.refresh()
+    def tick(done, total):  # self_visibility reports (done, total) after each chunk
+        bar.update(done - bar.n)
 
     try:
         g, f, params = mesh_transfer(mesh, order, n_dirs=n_dirs, floor=floor, progress=tick)

@@ -150,3 +150,27 @@ def test_convexity_test_traces_an_arch_of_overlapping_boxes():
         assert is_convex(prim.vertices, prim.faces), kind
     torus = trimesh.creation.torus(major_radius=0.6, minor_radius=0.25)
     assert not is_convex(torus.vertices, torus.faces)
+
+
+def test_posed_local_log_is_the_sh_rotation_of_each_vertex():
+    """Per-vertex rotation by quadrature equals shtools.sh.rotate with that vertex's
+    rotation (the polar part of world @ blend), to float32 round-off."""
+    from scipy.spatial.transform import Rotation
+
+    from shtools.scene.transfer import posed_local_log
+    from shtools.sh import rotate
+
+    rng = np.random.default_rng(5)
+    log = rng.normal(size=(6, 36))
+    rots = Rotation.random(6, random_state=7).as_matrix()
+    scales = rng.uniform(0.5, 2.0, size=(6, 1, 1))  # uniform scale per vertex: same rotation
+    blend = np.zeros((6, 4, 4))
+    blend[:, :3, :3] = rots * scales
+    blend[:, 3, 3] = 1.0
+    world = np.eye(4)
+    world[:3, :3] = Rotation.from_euler("y", 30, degrees=True).as_matrix()
+    got = posed_local_log(log, blend, world)
+    for v in range(6):
+        want = rotate(log[v, :16], world[:3, :3] @ rots[v])  # LOCAL_ORDER = 4 bands
+        np.testing.assert_allclose(got[v, :16], want, atol=2e-5)  # float32 output
+        np.testing.assert_array_equal(got[v, 16:], 0.0)
