@@ -176,7 +176,8 @@ def test_unreachable_scheduler_is_one_line_and_no_output(scene_file, tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_workers_and_leaves_no_file(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_stops_workers_and_leaves_no_file(tmp_path, sig):
     scene = tmp_path / "long.toml"
     # ~40k ground vertices: each frame takes long enough that the bake is mid-way.
     scene.write_text(scene_text(order=4, frames=400).replace("subdivisions = 24",
@@ -195,7 +196,7 @@ def test_ctrl_c_stops_workers_and_leaves_no_file(tmp_path):
             time.sleep(0.5)
             children = _children(proc.pid)
         time.sleep(1.0)
-        os.kill(proc.pid, signal.SIGINT)
+        os.kill(proc.pid, sig)
         _, err = proc.communicate(timeout=120)
     assert proc.returncode != 0
     assert len(err.strip().splitlines()) == 1, err
