@@ -104,9 +104,10 @@ class Terminated(BaseException):
 #: is sent again every RESEND_SECONDS, because Python runs a handler wherever the
 #: main thread is, and an exception raised inside a finaliser or a weakref
 #: callback is printed and dropped ("Exception ignored in ...") instead of
-#: stopping the command.
+#: stopping the command.  Short, so a command cannot finish (and write its
+#: output) between a dropped stop and the next one.
 _STOPPING: int | None = None
-RESEND_SECONDS = 2.0
+RESEND_SECONDS = 0.2
 
 
 def _raise_terminated(signum, _frame):
@@ -121,7 +122,18 @@ def _raise_terminated(signum, _frame):
                     os.kill(os.getpid(), signum)
 
         threading.Thread(target=resend, name="shtools-stop-resend", daemon=True).start()
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     raise Terminated(signum)
+
+
+def _quiet_dropped_stops(unraisable, _previous=sys.unraisablehook) -> None:
+    """``sys.unraisablehook`` while a command runs: a stop dropped in a finaliser
+    or weakref callback prints nothing (it is re-sent, see ``_STOPPING``), so the
+    user still sees one line; anything else goes to the previous hook."""
+    if isinstance(unraisable.exc_value, Terminated | KeyboardInterrupt):
+        return
+    _previous(unraisable)
 
 
 def _default_termination_in_child() -> None:
@@ -134,6 +146,8 @@ def _default_termination_in_child() -> None:
     for sig in (signal.SIGTERM, signal.SIGHUP):
         if signal.getsignal(sig) is _raise_terminated:
             signal.signal(sig, signal.SIG_DFL)
+    if signal.getsignal(signal.SIGINT) is _raise_terminated:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 if hasattr(os, "register_at_fork"):
@@ -148,6 +162,10 @@ def main(argv=None) -> int:
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGHUP):
             handlers[sig] = signal.signal(sig, _raise_terminated)
+        # Ctrl-C the same way (re-sent while stopping), unless the caller ignores it
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            handlers[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_terminated)
+    previous_hook, sys.unraisablehook = sys.unraisablehook, _quiet_dropped_stops
     try:
         with warnings.catch_warnings():
             if not debug:
@@ -156,6 +174,7 @@ def main(argv=None) -> int:
                 warnings.simplefilter("ignore", RuntimeWarning)
             return _run(argv, debug)
     finally:
+        sys.unraisablehook = previous_hook
         for sig, handler in handlers.items():
             signal.signal(sig, handler)
 
@@ -192,6 +211,7 @@ def _run(argv: list[str], debug: bool) -> int:
     except click.exceptions.Exit as exc:
         return exc.exit_code
     except KeyboardInterrupt:
+        _STOPPING = None
         click.echo("error: interrupted; no output was written", err=True)
         return 130
     except Exception as exc:  # a bug: one line unless --debug
