@@ -20,13 +20,16 @@ Figures are the best of a few repetitions (wall clock).  ``--quick`` uses
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # runnable as a script too
+import unrolled_kernel  # noqa: F401  (registers the "unrolled" product kernel)
+
 import shtools.sh as sh
-from benchmarks import unrolled_kernel  # noqa: F401  (registers the "unrolled" product kernel)
 from shtools.sh._kernels import run_product
 from shtools.sh.tables import build_log_tables
 
