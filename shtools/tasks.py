@@ -295,9 +295,45 @@ def _run_local(fn, item):
     return result, f"pid {os.getpid()}", time.perf_counter() - start
 
 
+#: glibc malloc settings a Dask worker gets back (see :func:`_undo_dask_malloc_trim`):
+#: the values glibc's own dynamic thresholds grow to on 64-bit Linux.
+MMAP_THRESHOLD = 32 << 20
+TRIM_THRESHOLD = 64 << 20
+_MALLOC_TUNED = False
+
+
+def _undo_dask_malloc_trim() -> None:
+    """Give a Dask worker process glibc's usual large-allocation behaviour back.
+
+    Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``; setting
+    any malloc threshold turns glibc's dynamic mmap threshold off, so every
+    NumPy temporary over 128 KiB is a fresh ``mmap`` whose pages fault in again
+    on every use: a bake frame ran 1.6-1.8x slower in such a worker than in
+    any other process (measured, docs/scale-out.md).  Here the thresholds are
+    set to where glibc's dynamic ones settle (32 MiB mmap, 64 MiB trim), once
+    per process.  Linux/glibc only; elsewhere nothing is done.
+    """
+    global _MALLOC_TUNED
+    if _MALLOC_TUNED:
+        return
+    _MALLOC_TUNED = True
+    if "MALLOC_TRIM_THRESHOLD_" not in os.environ:
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None)
+        M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's <malloc.h>
+        libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+        libc.mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 def _run_dask(fn, shared, item):
     from distributed import get_worker
 
+    _undo_dask_malloc_trim()
     start = time.perf_counter()
     result = fn(shared, item)
     return result, get_worker().address, time.perf_counter() - start
