@@ -169,7 +169,7 @@ class TaskPool:
 
         def new_pool():
             return ProcessPoolExecutor(self.workers, mp_context=context,
-                                       initializer=_worker_init)
+                                       initializer=_worker_init, initargs=(os.getpid(),))
 
         def submit(index):
             try:
@@ -269,24 +269,43 @@ class TaskPool:
 _SHARED: Any = None
 
 
-def _worker_init() -> None:
+def _worker_init(parent_pid: int) -> None:
     """Local workers die with their parent and leave Ctrl-C to it."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent cancels and terminates us
-    _die_with_parent()
+    die_with_parent(parent_pid)
 
 
-def _die_with_parent() -> None:
-    """Ask Linux to SIGKILL this process when its parent dies (no orphaned workers)."""
+def die_with_parent(parent_pid: int) -> None:
+    """Make this (forked) process exit when ``parent_pid`` dies (no orphaned workers).
+
+    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, then a check that the parent did
+    not die before the call.  Elsewhere: a daemon thread polling ``getppid``.
+    Used by the frame pool here and by the runtime's in-frame workers.
+    """
+    import signal
+    import threading
+
     try:
         import ctypes
 
         libc = ctypes.CDLL(None, use_errno=True)
-        PR_SET_PDEATHSIG = 1
-        libc.prctl(PR_SET_PDEATHSIG, 9)
-    except (OSError, AttributeError):  # not Linux: the pool's own pipe watch remains
-        pass
+        PR_SET_PDEATHSIG = 1  # <sys/prctl.h>
+        armed = libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):  # no libc prctl: not Linux
+        armed = False
+    if os.getppid() != parent_pid:
+        os._exit(1)
+    if armed:
+        return
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="shtools-parent-watch", daemon=True).start()
 
 
 def _run_local(fn, item):

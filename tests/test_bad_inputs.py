@@ -568,7 +568,8 @@ FORCE_WORKERS = textwrap.dedent("""
 
 def _long_bake(kit, tmp_path, args=("--processes", "2", "--workers", "1")):
     scene = tmp_path / "long.toml"
-    text = SCENE.format(frames=400, subdivisions=24)
+    # ~9.4k vertices: frames last long enough, even on an idle machine, to catch the workers
+    text = SCENE.format(frames=400, subdivisions=96)
     for name in ("mesh.obj", "spheres.h5", "light.h5"):
         text = text.replace(f'"{name}"', f'"{kit.root / name}"')
     scene.write_text(text)

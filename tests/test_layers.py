@@ -21,7 +21,7 @@ ALLOWED = {
     "tasks": {"errors"},
     "sh": {"errors"},
     "data_formats": {"errors", "sh"},
-    "runtime": {"errors", "sh", "data_formats"},
+    "runtime": {"errors", "tasks", "sh", "data_formats"},
     "geometry": {"errors", "progress", "tasks", "sh", "data_formats", "runtime"},
     "fields": {"errors", "progress", "tasks", "sh", "data_formats", "runtime", "geometry"},
     "lighting": {"errors", "progress", "sh", "data_formats", "runtime"},

@@ -29,8 +29,6 @@ import contextlib
 import multiprocessing
 import os
 import signal
-import threading
-import time
 import weakref
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -38,6 +36,7 @@ from concurrent.futures.process import BrokenProcessPool
 import numpy as np
 
 from shtools.errors import ShtoolsError
+from shtools.tasks import die_with_parent
 
 #: Frames with fewer sphere-receiver pairs run in one process: a worker round
 #: trip (pickling receivers, cuts and the result) costs about a millisecond.
@@ -159,32 +158,6 @@ def _shutdown(pool: ProcessPoolExecutor) -> None:
 
 #: Linux ``prctl`` option: signal sent to this process when its parent dies.
 PR_SET_PDEATHSIG = 1
-
-
-def die_with_parent(parent_pid: int) -> None:
-    """Make this (forked) process exit when ``parent_pid`` dies.
-
-    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, then a check that the parent did
-    not die before the call.  Elsewhere: a daemon thread polling ``getppid``.
-    """
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        armed = libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
-    except (OSError, AttributeError):  # no libc prctl: not Linux
-        armed = False
-    if os.getppid() != parent_pid:
-        os._exit(1)
-    if armed:
-        return
-
-    def watch():
-        while os.getppid() == parent_pid:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="shtools-parent-watch", daemon=True).start()
 
 
 def _init_worker(settings, tables, parent_pid) -> None:

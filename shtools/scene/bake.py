@@ -361,9 +361,11 @@ def bake_to_file(
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
     Summary keys: ``frames``, ``vertices``, ``seconds`` (wall, everything),
-    ``frame_seconds`` (posing + visibility + shading summed over frames),
-    ``setup_seconds`` (loading, fits, tables, clustering, file writes),
-    ``vertex_frames_per_second`` (frames x vertices / frame_seconds), ``method``,
+    ``frame_seconds`` (posing + visibility + shading summed over frames, in
+    whichever process ran them), ``setup_seconds`` (wall time of loading, fits,
+    tables, clustering and pool start-up before the first frame: the rest of the
+    wall time is the frames and their writes), ``vertex_frames_per_second``
+    (frames x vertices per wall second after the set-up), ``method``,
     ``output``, ``pool`` (scheduler, workers, per-worker task counts and
     seconds).  ``processes``, ``scheduler`` and ``workers`` as in
     :func:`bake_scene`; ``progress`` a progress factory
@@ -383,6 +385,7 @@ def bake_to_file(
                         scene.settings.order, scene.path)
     n = 0
     frame_seconds = 0.0
+    first = None  # wall time when the first frame arrived (frames may run in parallel)
     pool: dict = {}
     total = len(frames) if frames is not None else scene.settings.frames
     with (progress or silent)(total=total, desc="bake", unit="frames") as bar:
@@ -392,6 +395,8 @@ def bake_to_file(
                                  workers=workers, pool_summary=pool):
             n += 1
             frame_seconds += result.seconds
+            if first is None:
+                first = time.perf_counter() - result.seconds
             bar.update(1)
             if on_frame is not None:
                 on_frame(result)
@@ -402,8 +407,8 @@ def bake_to_file(
         "vertices": V,
         "seconds": round(end - start, 4),
         "frame_seconds": round(frame_seconds, 4),
-        "setup_seconds": round(end - start - frame_seconds, 4),
-        "vertex_frames_per_second": round(n * V / max(frame_seconds, 1e-9), 1),
+        "setup_seconds": round((first or end) - start, 4),
+        "vertex_frames_per_second": round(n * V / max(end - (first or end), 1e-9), 1),
         "method": method or scene.settings.method,
         "output": os.fspath(output),
         "pool": pool,

@@ -25,6 +25,7 @@ imported from :mod:`shtools.scene.kinds` (see ``docs/architecture.md``).
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -90,7 +91,7 @@ class PrepareContext:
     progress: Any = None
 
 
-class BlockerKind:
+class BlockerKind(ABC):
     """A kind of blocker (see the module docstring).  Subclass and register."""
 
     name: ClassVar[str]
@@ -107,10 +108,11 @@ class BlockerKind:
         """
         return None
 
+    @abstractmethod
     def prepare(self, spec: BlockerSpec, prep, ctx: PrepareContext) -> None:
         """Load or build what :meth:`pose` needs into ``prep`` (a ``PreparedObject``)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def pose(self, prep, world: np.ndarray, joints: np.ndarray | None):
         """The runtime blocker at one frame.
 
@@ -122,7 +124,6 @@ class BlockerKind:
         joints : ndarray, shape (J, 4, 4) or None
             Skinning matrices this frame (skinned objects).
         """
-        raise NotImplementedError
 
 
 class SphereSetKind(BlockerKind):
@@ -137,8 +138,9 @@ class SphereSetKind(BlockerKind):
     def branching(self, spec: BlockerSpec) -> int:
         return 4
 
+    @abstractmethod
     def load(self, spec: BlockerSpec, prep, ctx: PrepareContext) -> None:
-        raise NotImplementedError
+        """Set ``prep.centers``/``prep.radii`` (and a tree) from the blocker's value."""
 
     def prepare(self, spec, prep, ctx):
         self.load(spec, prep, ctx)

@@ -22,6 +22,7 @@ from :mod:`shtools.scene.kinds` (see ``docs/architecture.md``).
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -59,7 +60,7 @@ class BakeRun:
 
 
 # --------------------------------------------------------------------------- visibility
-class VisibilityMethod:
+class VisibilityMethod(ABC):
     """A way to compute a frame's SH visibility (see the module docstring)."""
 
     name: ClassVar[str]
@@ -80,9 +81,9 @@ class VisibilityMethod:
         """
         return None
 
+    @abstractmethod
     def visibility(self, run: BakeRun, state) -> np.ndarray:
         """SH visibility of the posed frame ``state`` (FrameState), shape ``(V, n*n)``."""
-        raise NotImplementedError
 
 
 class RuntimeVisibility(VisibilityMethod):
@@ -218,7 +219,7 @@ def bake_method_names() -> tuple[str, ...]:
 
 
 # --------------------------------------------------------------------------- lights
-class LightShadow:
+class LightShadow(ABC):
     """A way to shadow spherical lights (see the module docstring)."""
 
     name: ClassVar[str]
@@ -227,13 +228,13 @@ class LightShadow:
     #: posed blocker meshes are needed in the FrameState
     needs_meshes: ClassVar[bool] = False
 
+    @abstractmethod
     def radiance(self, run: BakeRun, state, visibility: np.ndarray,
                  lights: list) -> np.ndarray:
         """Outgoing radiance ``(V, 3)`` from ``lights`` (SphereLight) at the receivers.
 
         ``state`` is the posed FrameState, ``visibility`` the frame's SH visibility.
         """
-        raise NotImplementedError
 
 
 class ShexpLight(LightShadow):
