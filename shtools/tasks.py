@@ -59,6 +59,9 @@ MAX_RESUBMITS = 3
 WINDOW_PER_WORKER = 2
 #: Seconds to wait for a Dask scheduler before giving up with an error.
 CONNECT_TIMEOUT = 10.0
+#: Local worker processes at most (a typo such as ``--workers 100000`` must not
+#: fork a machine to death; a bigger machine than this wants a Dask cluster).
+MAX_LOCAL_WORKERS = 256
 #: Scheduler names that are not addresses or files.
 LOCAL_NAMES = ("inline", "processes", "local")
 
@@ -407,8 +410,8 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
         The scheduler cannot be reached, or ``dask``/``distributed`` are missing.
     """
     check_scheduler(scheduler)
-    if workers is not None and workers < 1:
-        raise InputError(f"--workers must be >= 1, got {workers}")
+    if workers is not None and not 1 <= workers <= MAX_LOCAL_WORKERS:
+        raise InputError(f"--workers must be in 1..{MAX_LOCAL_WORKERS}, got {workers}")
     if not _is_dask(scheduler):
         n = workers or default_workers()
         if n_tasks is not None:

@@ -28,9 +28,11 @@ json_option = click.option(
 def scheduler_options(unit: str):
     """``--scheduler`` and ``--workers`` of a stage whose ``unit`` (frames, shells,
     meshes) are independent tasks (:mod:`shtools.tasks`, docs/scale-out.md)."""
+    from shtools.tasks import MAX_LOCAL_WORKERS
+
     def decorate(f):
         f = click.option(
-            "--workers", type=click.IntRange(min=1), default=None,
+            "--workers", type=click.IntRange(min=1, max=MAX_LOCAL_WORKERS), default=None,
             help=f"Local worker processes for {unit} (default: one per core; 1 = one after "
                  "the other in this process); with --scheduler local, the cluster's size.")(f)
         return click.option(

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shtools.geometry.bounding import minimal_enclosing_sphere
+from shtools.fields.sampling import bounding_sphere as sampling_bounding_sphere
 from shtools.geometry.raycast import RayCaster
 from shtools.runtime.deformable import DeformableField, layout_directions
 from shtools.sh import basis, check_order, rotation_matrix
@@ -78,15 +78,8 @@ def bounding_sphere(vertices) -> tuple[np.ndarray, float]:
     center : ndarray, shape (3,)
     radius : float
     """
-    v = np.asarray(vertices, dtype=np.float64)
-    try:  # the hull's vertices bound the same sphere, far fewer points
-        from scipy.spatial import ConvexHull
-
-        v = v[ConvexHull(v).vertices]
-    except Exception:
-        pass
-    center, radius = minimal_enclosing_sphere(v, np.zeros(len(v)))
-    return np.asarray(center, dtype=np.float64), float(radius) * (1.0 + RADIUS_MARGIN)
+    center, radius = sampling_bounding_sphere(vertices)  # the shadow fields' own
+    return center, radius * (1.0 + RADIUS_MARGIN)
 
 
 def _frames(axes: np.ndarray) -> np.ndarray:

@@ -81,6 +81,8 @@ def test_bad_scheduler_values():
         pass
     with pytest.raises(InputError, match="--workers"), task_pool(None, 0):
         pass
+    with pytest.raises(InputError, match="--workers"), task_pool(None, 100_000):
+        pass
 
 
 @pytest.fixture(scope="module")
@@ -221,17 +223,23 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def test_batch_fit_writes_one_asset_per_mesh_identically(tmp_path):
+def _two_meshes(folder: Path) -> list[Path]:
+    """A box and a capsule as OBJ files: two small meshes for batch fits."""
     import trimesh
-
-    from shtools.geometry.assets import fit_many, fit_to_file
 
     meshes = []
     for name, mesh in [("box", trimesh.creation.box(extents=[2, 1, 1])),
                        ("capsule", trimesh.creation.capsule(height=1.0, radius=0.4))]:
-        path = tmp_path / f"{name}.obj"
+        path = folder / f"{name}.obj"
         mesh.export(path)
         meshes.append(path)
+    return meshes
+
+
+def test_batch_fit_writes_one_asset_per_mesh_identically(tmp_path):
+    from shtools.geometry.assets import fit_many, fit_to_file
+
+    meshes = _two_meshes(tmp_path)
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     pool: dict = {}
@@ -276,14 +284,7 @@ def test_partial_bake_clusters_receivers_at_frame_0(tmp_path, monkeypatch):
 def test_batch_fit_cli_one_asset_per_mesh(run_cli, tmp_path):
     import json
 
-    import trimesh
-
-    meshes = []
-    for name, mesh in [("box", trimesh.creation.box(extents=[2, 1, 1])),
-                       ("capsule", trimesh.creation.capsule(height=1.0, radius=0.4))]:
-        path = tmp_path / f"{name}.obj"
-        mesh.export(path)
-        meshes.append(path)
+    meshes = _two_meshes(tmp_path)
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     code, stdout, err = run_cli("spheres", "fit", *meshes, "-n", 5, "--method", "kmeans",
