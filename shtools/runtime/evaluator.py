@@ -20,6 +20,7 @@ from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.parallel import (
     FRAME_PARTS,
     MIN_PARALLEL_PAIRS,
+    PoolParts,
     VertexWorkers,
     resolve_processes,
     split_clusters,
@@ -50,6 +51,10 @@ class ShadowRuntime:
         or :func:`shtools.data_formats.tables.read_tables`; built when omitted.
         The cap log depends on the order it was computed at, so the tables must
         have exactly the accumulation order.
+    part_pool : shtools.tasks.TaskPool, optional
+        Run the parts of a large frame as tasks of this pool (e.g. a Dask
+        cluster; :class:`~shtools.runtime.parallel.PoolParts`) instead of on
+        forked worker processes; the bytes are the same.
 
     Attributes
     ----------
@@ -62,7 +67,8 @@ class ShadowRuntime:
         other jobs on the machine).
     """
 
-    def __init__(self, settings: ShadowSettings | None = None, tables: dict | None = None):
+    def __init__(self, settings: ShadowSettings | None = None, tables: dict | None = None,
+                 part_pool=None):
         self.settings = settings if settings is not None else ShadowSettings()
         self.settings.validate()
         self.order = self.settings.order
@@ -92,6 +98,8 @@ class ShadowRuntime:
         #: first frame of at least MIN_PARALLEL_PAIRS pairs)
         self.processes = resolve_processes(self.settings.processes)
         self._workers: VertexWorkers | None = None
+        self._part_pool = part_pool
+        self._pool_parts: PoolParts | None = None  # started on the first split frame
         self.last_stats: dict = {}
 
     # -- clusters --------------------------------------------------------------
@@ -309,6 +317,9 @@ class ShadowRuntime:
         if self._workers is not None:
             self._workers.close(kill=kill)
             self._workers = None
+        if self._pool_parts is not None:
+            self._pool_parts.close()
+            self._pool_parts = None
 
     def __enter__(self) -> ShadowRuntime:
         return self
@@ -450,7 +461,15 @@ class ShadowRuntime:
         g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
         evaluated = 0
         processes = 1
-        if self.processes == 1 or len(parts) == 1:
+        if self._part_pool is not None and len(parts) > 1:
+            if self._pool_parts is None:
+                self._pool_parts = PoolParts(self._part_pool, self.settings, self.tables)
+            results = self._pool_parts.map([task for _, task in parts])
+            for (rows, _), (g_part, count) in zip(parts, results, strict=True):
+                g[rows] = g_part
+                evaluated += count
+            processes = min(self._part_pool.workers, len(parts))
+        elif self.processes == 1 or len(parts) == 1:
             for rows, task in parts:
                 g[rows], count = self.run_part(task)
                 evaluated += count
