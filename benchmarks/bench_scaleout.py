@@ -130,7 +130,8 @@ def many_frames(tmp: Path, frames: int, quick: bool, cores: int, have_dask: bool
                          dict(scheduler="local", workers=8), 8))
     print(f"{'configuration':41s} {'wall s':>7s} {'ms/frame':>8s} {'speed-up':>8s} "
           f"{'of ideal':>8s} {'overhead':>8s} {'start s':>7s} {'set-up s':>8s} "
-          f"{'cpu ms/f':>8s} {'caller':>6s} {'cpu ovh':>7s} {'task cpu%':>9s} {'same':>5s} {'load':>5s}")
+          f"{'cpu ms/f':>8s} {'caller':>6s} {'cpu ovh':>7s} {'task cpu%':>9s} {'same':>5s} "
+          f"{'load':>5s}")
     base_out = tmp / "row0.h5"
     base_frame = base_cpu = None
     for k, (name, kwargs, n_workers) in enumerate(rows):
@@ -152,7 +153,7 @@ def many_frames(tmp: Path, frames: int, quick: bool, cores: int, have_dask: bool
               f"{worker_setup:8.2f} {1e3 * r['cpu_per_frame']:8.1f} "
               f"{1e3 * r['client_cpu_per_frame']:6.1f} "
               f"{100 * (r['cpu_per_frame'] / base_cpu - 1):6.1f}% "
-              f"{_percent(_task_cpu_share(pool)):>9s} {str(same):>5s} "
+              f"{_percent(_task_cpu_share(pool)):>9s} {same!s:>5s} "
               f"{os.getloadavg()[0]:5.2f}")
 
 
@@ -188,7 +189,7 @@ def single_frame(tmp: Path, cores: int, have_dask: bool, frames: int = 6) -> Non
         print(f"{name:41s} {1e3 * per_frame:8.1f} {base / per_frame:7.2f}x "
               f"{pool.get('startup_seconds', 0.0):7.2f} {pool.get('setup_seconds', 0.0):8.2f} "
               f"{1e3 * r['cpu_per_frame']:8.1f} {parts:6d} "
-              f"{str(filecmp.cmp(out, tmp / 'row0.h5', shallow=False)):>5s} "
+              f"{filecmp.cmp(out, tmp / 'row0.h5', shallow=False)!s:>5s} "
               f"{os.getloadavg()[0]:5.2f}")
 
 

@@ -407,6 +407,7 @@ def bake_to_file(
     scheduler: str | None = None,
     workers: int | None = None,
     progress=None,
+    split_frames: bool | None = None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -417,7 +418,7 @@ def bake_to_file(
     wall time is the frames and their writes), ``vertex_frames_per_second``
     (frames x vertices per wall second after the set-up), ``method``,
     ``output``, ``pool`` (scheduler, workers, per-worker task counts and
-    seconds).  ``processes``, ``scheduler`` and ``workers`` as in
+    seconds).  ``processes``, ``scheduler``, ``workers`` and ``split_frames`` as in
     :func:`bake_scene`; ``progress`` a progress factory
     (:mod:`shtools.progress`) for the set-up and the frames; ``force`` bakes past
     :func:`check_bake_size`'s limits.
@@ -442,7 +443,8 @@ def bake_to_file(
         for result in bake_scene(scene, frames=frames, method=method,
                                  store_visibility=store_visibility, output=output,
                                  prepared=prepared, processes=processes, scheduler=scheduler,
-                                 workers=workers, pool_summary=pool):
+                                 workers=workers, pool_summary=pool,
+                                 split_frames=split_frames):
             n += 1
             frame_seconds += result.seconds
             if first is None:
