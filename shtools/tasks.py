@@ -64,9 +64,8 @@ CONNECT_TIMEOUT = 10.0
 MAX_LOCAL_WORKERS = 256
 #: Scheduler names that are not addresses or files.
 LOCAL_NAMES = ("inline", "processes", "local")
-#: Dask settings of the ``LocalCluster`` that ``"local"`` starts.  It has no
-#: dashboard (nobody looks at an embedded cluster's), so nothing needs the
-#: statistical profiler (which takes the GIL from the task every 10 ms) nor
+#: Dask settings of the ``LocalCluster`` that ``"local"`` starts.  Nobody looks
+#: at an embedded cluster's dashboard, so nothing needs the statistical profiler (which takes the GIL from the task every 10 ms) nor
 #: half-second system metrics; the event-loop health check (every 20 ms) and
 #: the memory monitor (every 100 ms) are slowed to once a second.  Together
 #: these periodic callbacks cost the scheduler/nanny loop and each worker's
@@ -171,7 +170,7 @@ class TaskPool:
         from distributed import wait
 
         client = self.client
-        ref = client.scatter(shared, broadcast=True, hash=False)
+        ref = None if shared is None else client.scatter(shared, broadcast=True, hash=False)
         try:
             if setup is not None:
                 # One set-up task per worker; loose restrictions so a worker
@@ -182,7 +181,8 @@ class TaskPool:
             self.setup_seconds += time.perf_counter() - start
             yield Shared(shared, ref, setup)
         finally:
-            ref.release()
+            if ref is not None:
+                ref.release()
 
     def map_ordered(self, fn: Callable[[Any, Any], Any], items: Iterable, *,
                     shared: Any = None, window: int | None = None,
@@ -542,7 +542,7 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
             with dask.config.set(EMBEDDED_CLUSTER_CONFIG):
                 cluster = distributed.LocalCluster(
                     n_workers=workers or default_workers(), threads_per_worker=1,
-                    processes=True, dashboard_address=None, silence_logs=50)
+                    processes=True, dashboard_address=":0", silence_logs=50)
                 client = distributed.Client(cluster, timeout=CONNECT_TIMEOUT)
         elif "://" in scheduler:
             client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
