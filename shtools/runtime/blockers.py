@@ -160,7 +160,8 @@ class SelfVisibility:
         The object's rotation this frame (own frame -> world); None: identity.
     blocker : int, optional
         Index, in the ``blockers`` list of the same call, of the object's own
-        sphere blocker, skipped on ``rows``.
+        blocker, skipped on ``rows``: a sphere set, or a log blocker (a
+        deformable field), which is then not evaluated on those rows.
     """
 
     log: Any
