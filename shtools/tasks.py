@@ -65,12 +65,12 @@ MAX_LOCAL_WORKERS = 256
 #: Scheduler names that are not addresses or files.
 LOCAL_NAMES = ("inline", "processes", "local")
 #: Dask settings of the ``LocalCluster`` that ``"local"`` starts.  Nobody looks
-#: at an embedded cluster's dashboard, so nothing needs the statistical profiler (which takes the GIL from the task every 10 ms) nor
-#: half-second system metrics; the event-loop health check (every 20 ms) and
-#: the memory monitor (every 100 ms) are slowed to once a second.  Together
-#: these periodic callbacks cost the scheduler/nanny loop and each worker's
-#: loop about 3x more CPU per frame than with these values (measured by
-#: thread, docs/scale-out.md), on cores the frames need.
+#: at an embedded cluster's dashboard, so nothing needs the statistical profiler
+#: (which takes the GIL from the task every 10 ms) nor half-second system
+#: metrics; the event-loop health check (every 20 ms) and the memory monitor
+#: (every 100 ms) are slowed to once a second.  These periodic callbacks had
+#: cost the scheduler/nanny loop and each worker's loop about 3x more CPU per
+#: frame, on cores the frames need (measured per thread, docs/scale-out.md).
 EMBEDDED_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",
