@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import time
 from dataclasses import dataclass
 
@@ -13,7 +14,7 @@ from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
-from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
+from shtools.runtime.fast_exp import FAST_METHODS, QuadratureProducts, fast_exp
 from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
@@ -86,6 +87,7 @@ class ShadowRuntime:
         self._auto_groups: np.ndarray | None = None
         self._rotated_logs: dict = {}  # id(log) -> (rotation, rotated log), last frame
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._products: QuadratureProducts | None = None  # self-visibility products
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         #: processes sharing the per-vertex stages (worker processes start on the
@@ -121,11 +123,11 @@ class ShadowRuntime:
         """
         pts, nrm = _check_receivers(vertices, normals)
         spheres, others = self._blockers(blockers)
-        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        own, exclude, skips = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
-        extra = _add(self._other_logs(pts, nrm, others), own)
+        extra = _add(self._other_logs(pts, nrm, others, skips), own)
         if extra is not None:
             f += extra
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
@@ -151,10 +153,11 @@ class ShadowRuntime:
             are computed on the first call and reused while the vertex count
             stays the same (built per object when ``self_visibility`` is given).
         self_visibility : sequence of SelfVisibility
-            Precomputed log visibility of objects' real meshes on their own
-            receiver rows, added in log space; each skips its object's own
-            sphere blocker (an index into ``blockers``) on those rows.  Clusters
-            must not mix rows of different objects (build them with ``groups``).
+            Self-visibility of objects' real meshes on their own receiver rows:
+            logs are added in log space, visibilities multiply the result after
+            the exp; each skips its object's own blocker (an index into
+            ``blockers``) on those rows.  Clusters must not mix rows of
+            different objects (build them with ``groups``).
 
         Returns
         -------
@@ -171,13 +174,18 @@ class ShadowRuntime:
         count, so the result is the same bytes with any number of processes.
         """
         pts, nrm = _check_receivers(vertices, normals)
+        g = self._visibility(pts, nrm, blockers, clusters, self_visibility)
+        return self._multiply_self(g, self_visibility)
+
+    def _visibility(self, pts, nrm, blockers, clusters, self_visibility) -> np.ndarray:
+        """:meth:`visibility` before the self-visibilities given as visibility."""
         spheres, others = self._blockers(blockers)
         if any(isinstance(b, FieldBlocker) for b in others):
             return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
-        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        own, exclude, skips = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = _add(self._other_logs(pts, nrm, others), own)
+        extra = _add(self._other_logs(pts, nrm, others, skips), own)
         if stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
             g = self._split_visibility(work, pts, nrm, extra)
@@ -284,19 +292,27 @@ class ShadowRuntime:
         g = field_product_visibility(pts, nrm, fields, self.order, self.acc_order, base=base)
         return g.astype(np.float32)
 
-    def _other_logs(self, pts, nrm, others: list) -> np.ndarray | None:
-        """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None."""
+    def _other_logs(self, pts, nrm, others: list, skips: dict | None = None
+                    ) -> np.ndarray | None:
+        """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None.
+
+        ``skips``: ``id(blocker) -> (V,) bool`` rows a blocker leaves alone (its own
+        object's, when that object has its own self-visibility); not evaluated there.
+        """
         if not others:
             return None
         t0 = time.process_time()
         total = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
         for b in others:
-            f = np.asarray(b.log_visibility(pts, nrm, self.acc_order))
-            if f.shape != total.shape or not np.isfinite(f).all():
+            skip = (skips or {}).get(id(b))
+            keep = slice(None) if skip is None else np.flatnonzero(~skip)
+            f = np.asarray(b.log_visibility(pts[keep], nrm[keep], self.acc_order))
+            want = total[keep].shape
+            if f.shape != want or not np.isfinite(f).all():
                 raise InputError(
                     f"{type(b).__name__}.log_visibility returned shape {f.shape} (or "
-                    f"non-finite values); expected finite values of shape {total.shape}")
-            total += f
+                    f"non-finite values); expected finite values of shape {want}")
+            total[keep] += f
         self.last_stats["seconds"]["other_blockers"] = time.process_time() - t0
         return total
 
@@ -317,15 +333,17 @@ class ShadowRuntime:
         self.close()
 
     def _self_terms(self, self_visibility, n_vertices: int, blockers: list):
-        """Rotated self-visibility logs ``(V, n_acc^2)`` and the sphere blocker each row skips.
+        """Rotated self-visibility logs ``(V, n_acc^2)`` and the own blocker each row skips.
 
-        Returns ``(None, None)`` without self-visibility; ``exclude (V,)`` indexes
-        the *sphere* blockers (-1: none).  A rotated log is kept while its
-        object's rotation does not change (static objects).
+        Returns ``(None, None, None)`` without self-visibility; ``exclude (V,)``
+        indexes the *sphere* blockers (-1: none); ``skips`` maps ``id`` of a log
+        blocker named by a self-visibility to its ``(V,)`` bool rows to skip.  A
+        rotated log is kept while its object's rotation does not change (static
+        objects).
         """
         if not self_visibility:
             self._rotated_logs = {}
-            return None, None
+            return None, None, None
         size = self.acc_order * self.acc_order
         sphere_index = {}  # position in `blockers` -> position among the sphere blockers
         for k, b in enumerate(blockers):
@@ -333,22 +351,25 @@ class ShadowRuntime:
                 sphere_index[k] = len(sphere_index)
         extra = np.zeros((n_vertices, size), dtype=np.float32)
         exclude = np.full(n_vertices, -1, dtype=np.int64)
+        skips: dict[int, np.ndarray] = {}
         kept = {}
         for sv in self_visibility:
             if not isinstance(sv, SelfVisibility):
                 raise InputError(f"self_visibility must hold SelfVisibility objects, got "
                                  f"{type(sv).__name__}")
-            if sv.log.shape[1] != size:
+            if sv.log is not None and sv.log.shape[1] != size:
                 raise InputError(
                     f"self-visibility log has {sv.log.shape[1]} coefficients but the runtime "
                     f"accumulates at order {self.acc_order} ({size}); rebuild the transfer "
                     f"with --order {self.acc_order}")
             rows = np.arange(n_vertices)[sv.rows]
-            if rows.shape[0] != sv.log.shape[0]:
-                raise InputError(f"self-visibility covers {sv.log.shape[0]} vertices but its "
-                                 f"rows select {rows.shape[0]}")
             log = sv.log
-            if sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
+            if log is None:  # a visibility: multiplied in after the exp (_multiply_self)
+                pass
+            elif rows.shape[0] != log.shape[0]:
+                raise InputError(f"self-visibility covers {log.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            elif sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
                 cached = self._rotated_logs.get(id(sv.log))
                 if cached is not None and np.array_equal(cached[0], sv.rotation):
                     log = cached[1]
@@ -356,14 +377,51 @@ class ShadowRuntime:
                     d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
                     log = sv.log @ d.T
                 kept[id(sv.log)] = (sv.rotation.copy(), log)
-            extra[rows] += log
+            if log is not None:
+                extra[rows] += log
             if sv.blocker is not None:
-                if int(sv.blocker) not in sphere_index:
+                k = int(sv.blocker)
+                if k in sphere_index:
+                    exclude[rows] = sphere_index[k]
+                elif 0 <= k < len(blockers) and not isinstance(blockers[k], FieldBlocker):
+                    # a log blocker (a deformable field): left out on the object's rows
+                    skips.setdefault(id(blockers[k]), np.zeros(n_vertices, dtype=bool))[rows] \
+                        = True
+                else:
                     raise InputError(f"self-visibility names blocker {sv.blocker}, which is not "
-                                     f"a SphereBlocker of the {len(blockers)} given")
-                exclude[rows] = sphere_index[int(sv.blocker)]
+                                     f"a SphereBlocker or log blocker of the {len(blockers)} "
+                                     "given (shadow fields skip their rows themselves)")
         self._rotated_logs = kept
-        return extra, (exclude if (exclude >= 0).any() else None)
+        if all(sv.log is None for sv in self_visibility):
+            extra = None  # visibilities only: nothing to add before the exp
+        return extra, (exclude if (exclude >= 0).any() else None), skips
+
+    def _multiply_self(self, g: np.ndarray, self_visibility) -> np.ndarray:
+        """``g`` with the self-visibilities given as visibility multiplied into their rows.
+
+        The exact truncated SH product at the shading order (quadrature); on rows
+        no other blocker reaches, ``g`` is the constant 1 and the product returns
+        the given visibility.
+        """
+        given = [sv for sv in self_visibility or () if sv.visibility is not None]
+        if not given:
+            return g
+        size = self.order * self.order
+        if self._products is None:
+            self._products = QuadratureProducts(self.order, np.float32)
+        for sv in given:
+            rows = np.arange(g.shape[0])[sv.rows]
+            values = sv.visibility
+            k = values.shape[1]
+            if math.isqrt(k) ** 2 != k:
+                raise InputError(f"self-visibility has {k} coefficients, not an SH order's n*n")
+            if values.shape[0] != rows.shape[0]:
+                raise InputError(f"self-visibility covers {values.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            vis = np.zeros((rows.shape[0], size), dtype=np.float32)
+            vis[:, :min(k, size)] = values[:, :size]
+            g[rows] = self._products.product(g[rows], vis)
+        return g
 
     def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:
         """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
