@@ -252,6 +252,79 @@ def _markdown(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+# -- the characters as deformable shadow fields (issue 12; the scaling engineer's) ---------
+
+
+def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
+                        methods=("default", "product")) -> list[dict]:
+    """The skinned scene with its bound spheres vs a deformable shadow field, per method.
+
+    Same scene, settings (the new default) and frames; only the character's
+    blocker changes (``bound`` -> ``deformable = true``).  Each bake runs in
+    this process with one runtime process (frame seconds comparable as CPU
+    work), both variants alternated :data:`REPEATS` times (fastest kept).  The
+    reference is the ray tracer of the posed real meshes on random vertex
+    subsets, as :func:`evaluate`.
+    """
+    import re
+
+    import trimesh
+
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import bake_scene, pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+
+    texts = {"bound spheres": spec["text"],
+             "deformable field": re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
+                                        "blocker = { deformable = true }", spec["text"])}
+    preps = {}
+    for label, text in texts.items():
+        for method in methods:
+            variant = f"{label}, {method}"
+            scene = load_scene(_scene_file(f"{name}.{label.split()[0]}.{method}",
+                                           {**spec, "text": text}, "new",
+                                           f'method = "{method}"\nprocesses = 1\n'))
+            preps[variant] = (scene, prepare_scene(scene))
+    baked, times = {}, {}
+    for _ in range(REPEATS):
+        for variant, (scene, prepared) in preps.items():
+            c0 = time.process_time()
+            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline"))
+            cpu = 1e3 * (time.process_time() - c0) / len(frames)
+            baked[variant] = [f.radiance.astype(np.float64) for f in frames]
+            ms = 1e3 * float(np.mean([f.seconds for f in frames][1:] or frames[0].seconds))
+            old = times.get(variant, (math.inf, math.inf))
+            times[variant] = (min(old[0], ms), min(old[1], cpu))
+    scene, prepared = next(iter(preps.values()))
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+    rng = np.random.default_rng(0)
+    offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
+    acc = {}
+    for k, t in enumerate(scene.frame_times()):
+        state = pose_frame(prepared, float(t), with_meshes=True)
+        meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
+        for o, obj in enumerate(prepared.receivers):
+            a, b = offsets[o], offsets[o + 1]
+            sel = np.sort(rng.choice(np.arange(a, b), min(subset, b - a), replace=False))
+            v, n = state.vertices[sel], state.normals[sel]
+            ref = shader.shade(raytrace_visibility(v, n, meshes, 4, n_dirs), v, n,
+                               prepared.env_sh, state.lights)
+            e = acc.setdefault(obj.spec.name, {"ref": [], **{var: [] for var in preps}})
+            e["ref"].append(ref)
+            for variant in preps:
+                e[variant].append(baked[variant][k][sel])
+    rows = []
+    for variant in preps:
+        row = {"scene": name, "blocker, method": variant}
+        for obj_name, e in acc.items():
+            row[f"{obj_name} vs mesh"] = relative_rmse(np.concatenate(e[variant]),
+                                                       np.concatenate(e["ref"]))
+        row["ms/frame wall"], row["ms/frame CPU"] = times[variant]
+        rows.append(row)
+    return rows
+
+
 # --------------------------------------------------------------------------- skinned
 #: Variants of the skinned comparison (``--skinned``): [settings] lines of each.
 SKINNED_VARIANTS = {
@@ -445,6 +518,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="spot only, coarse")
     parser.add_argument("--scene", action="append", help="only these scenes")
+    parser.add_argument("--deformable", action="store_true",
+                        help="the skinned scenes with a deformable shadow field instead of "
+                             "their bound spheres (issue 12)")
     parser.add_argument("--skinned", action="store_true",
                         help="skinned objects' per-frame tracing: quadrature and variants")
     args = parser.parse_args(argv)
@@ -454,6 +530,16 @@ def main(argv=None) -> int:
     if args.skinned:
         return skinned_main(args.scene)
     n_dirs, subset = (1600, 600) if args.quick else (3200, 2500)
+    if args.deformable:
+        rows = []
+        for name, spec in scenes(False, args.scene or ["cesiumman", "fox"]).items():
+            rows += deformable_variants(name, spec, n_dirs=n_dirs, subset=subset)
+        load = os.getloadavg()
+        print(f"\n### Skinned characters: bound spheres vs deformable shadow field (order 4, "
+              f"{n_dirs} directions, {subset} vertices per receiver and frame; one runtime "
+              f"process; load {load[0]:.2f} on {os.cpu_count()} cores)\n")
+        print(_markdown(rows))
+        return 0
     all_rows, sums, pre = [], [], {}
     for name, spec in scenes(args.quick, args.scene).items():
         out = evaluate(name, spec, n_dirs=n_dirs, subset=subset)

@@ -163,8 +163,8 @@ class SelfVisibility:
         The object's rotation this frame (own frame -> world); None: identity.
     blocker : int, optional
         Index, in the ``blockers`` list of the same call, of the object's own
-        blocker (a sphere set, or a log blocker such as a deformable field),
-        skipped on ``rows``.
+        blocker, skipped on ``rows``: a sphere set, or a log blocker (a
+        deformable field), which is then not evaluated on those rows.
     visibility : array_like, shape (R, m*m), optional
         Instead of ``log``: world-space visibility vectors (any order ``m``;
         truncated or zero-padded to the shading order), multiplied in by the

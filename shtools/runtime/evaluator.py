@@ -122,12 +122,12 @@ class ShadowRuntime:
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        spheres, others = self._blockers(blockers)
-        own, exclude, skips = self._self_terms(self_visibility, pts.shape[0], blockers)
+        spheres, _ = self._blockers(blockers)
+        own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
-        extra = _add(self._other_logs(pts, nrm, others, skips), own)
+        extra = _add(self._other_logs(pts, nrm, blockers, skip), own)
         if extra is not None:
             f += extra
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
@@ -156,8 +156,9 @@ class ShadowRuntime:
             Self-visibility of objects' real meshes on their own receiver rows:
             logs are added in log space, visibilities multiply the result after
             the exp; each skips its object's own blocker (an index into
-            ``blockers``) on those rows.  Clusters must not mix rows of
-            different objects (build them with ``groups``).
+            ``blockers``: a sphere set or a log blocker such as a deformable
+            field) on those rows.  Clusters must not mix rows of different
+            objects (build them with ``groups``).
 
         Returns
         -------
@@ -182,10 +183,10 @@ class ShadowRuntime:
         spheres, others = self._blockers(blockers)
         if any(isinstance(b, FieldBlocker) for b in others):
             return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
-        own, exclude, skips = self._self_terms(self_visibility, pts.shape[0], blockers)
+        own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = _add(self._other_logs(pts, nrm, others, skips), own)
+        extra = _add(self._other_logs(pts, nrm, blockers, skip), own)
         if stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
             g = self._split_visibility(work, pts, nrm, extra)
@@ -292,27 +293,34 @@ class ShadowRuntime:
         g = field_product_visibility(pts, nrm, fields, self.order, self.acc_order, base=base)
         return g.astype(np.float32)
 
-    def _other_logs(self, pts, nrm, others: list, skips: dict | None = None
+    def _other_logs(self, pts, nrm, blockers: list, skip: dict | None = None
                     ) -> np.ndarray | None:
         """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None.
 
-        ``skips``: ``id(blocker) -> (V,) bool`` rows a blocker leaves alone (its own
-        object's, when that object has its own self-visibility); not evaluated there.
+        ``skip``: position in ``blockers`` -> bool mask ``(V,)`` of the rows that
+        blocker is not evaluated on (its object's own rows, which its
+        self-visibility covers).
         """
+        others = [(k, b) for k, b in enumerate(blockers) if not isinstance(b, SphereBlocker)]
         if not others:
             return None
         t0 = time.process_time()
         total = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
-        for b in others:
-            skip = (skips or {}).get(id(b))
-            keep = slice(None) if skip is None else np.flatnonzero(~skip)
-            f = np.asarray(b.log_visibility(pts[keep], nrm[keep], self.acc_order))
-            want = total[keep].shape
+        for k, b in others:
+            rows = None if not skip or k not in skip else np.flatnonzero(~skip[k])
+            if rows is not None and rows.size == 0:
+                continue
+            p, n = (pts, nrm) if rows is None else (pts[rows], nrm[rows])
+            f = np.asarray(b.log_visibility(p, n, self.acc_order))
+            want = (p.shape[0], total.shape[1])
             if f.shape != want or not np.isfinite(f).all():
                 raise InputError(
                     f"{type(b).__name__}.log_visibility returned shape {f.shape} (or "
                     f"non-finite values); expected finite values of shape {want}")
-            total[keep] += f
+            if rows is None:
+                total += f
+            else:
+                total[rows] += f
         self.last_stats["seconds"]["other_blockers"] = time.process_time() - t0
         return total
 
@@ -336,10 +344,10 @@ class ShadowRuntime:
         """Rotated self-visibility logs ``(V, n_acc^2)`` and the own blocker each row skips.
 
         Returns ``(None, None, None)`` without self-visibility; ``exclude (V,)``
-        indexes the *sphere* blockers (-1: none); ``skips`` maps ``id`` of a log
-        blocker named by a self-visibility to its ``(V,)`` bool rows to skip.  A
-        rotated log is kept while its object's rotation does not change (static
-        objects).
+        indexes the *sphere* blockers (-1: none); ``skip`` maps the position of a
+        log blocker (e.g. a deformable field) named by a self-visibility to the
+        bool mask ``(V,)`` of the rows it skips.  A rotated log is kept while its
+        object's rotation does not change (static objects).
         """
         if not self_visibility:
             self._rotated_logs = {}
@@ -351,7 +359,7 @@ class ShadowRuntime:
                 sphere_index[k] = len(sphere_index)
         extra = np.zeros((n_vertices, size), dtype=np.float32)
         exclude = np.full(n_vertices, -1, dtype=np.int64)
-        skips: dict[int, np.ndarray] = {}
+        skip = {}
         kept = {}
         for sv in self_visibility:
             if not isinstance(sv, SelfVisibility):
@@ -383,18 +391,15 @@ class ShadowRuntime:
                 k = int(sv.blocker)
                 if k in sphere_index:
                     exclude[rows] = sphere_index[k]
-                elif 0 <= k < len(blockers) and not isinstance(blockers[k], FieldBlocker):
-                    # a log blocker (a deformable field): left out on the object's rows
-                    skips.setdefault(id(blockers[k]), np.zeros(n_vertices, dtype=bool))[rows] \
-                        = True
+                elif 0 <= k < len(blockers) and isinstance(blockers[k], LogBlocker):
+                    skip.setdefault(k, np.zeros(n_vertices, dtype=bool))[rows] = True
                 else:
                     raise InputError(f"self-visibility names blocker {sv.blocker}, which is not "
-                                     f"a SphereBlocker or log blocker of the {len(blockers)} "
-                                     "given (shadow fields skip their rows themselves)")
+                                     f"one of the {len(blockers)} blockers given")
         self._rotated_logs = kept
         if all(sv.log is None for sv in self_visibility):
             extra = None  # visibilities only: nothing to add before the exp
-        return extra, (exclude if (exclude >= 0).any() else None), skips
+        return extra, (exclude if (exclude >= 0).any() else None), (skip or None)
 
     def _multiply_self(self, g: np.ndarray, self_visibility) -> np.ndarray:
         """``g`` with the self-visibilities given as visibility multiplied into their rows.
