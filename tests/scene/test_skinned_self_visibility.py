@@ -103,6 +103,27 @@ def test_own_deformable_field_is_skipped_like_own_spheres(rig):
     assert relative_rmse(np.concatenate(field_off), np.concatenate(with_field)) > 0.05
 
 
+def test_each_frame_traced_once_and_only_when_shading(rig, monkeypatch):
+    """A bake traces the posed mesh once per frame: the clustering (frame 0) and other
+    callers that need only the geometry pose with ``trace=False``."""
+    import shtools.scene.transfer as transfer
+    from shtools.scene.pose import pose_frame
+
+    calls = []
+    traced = transfer.traced_self_visibility
+    monkeypatch.setattr(transfer, "traced_self_visibility",
+                        lambda *a, **k: calls.append(1) or traced(*a, **k))
+    scene = _scene(rig, '{ spheres = "tube.h5" }')
+    prepared = prepare_scene(scene)
+    frames = list(bake_scene(scene, prepared=prepared, processes=1, scheduler="inline"))
+    assert len(calls) == len(frames) == 2
+    full, bare = pose_frame(prepared, 1.0), pose_frame(prepared, 1.0, trace=False)
+    assert len(calls) == 3
+    assert [sv.visibility is not None for sv in full.self_visibility] == [True]
+    assert bare.self_visibility == []
+    np.testing.assert_array_equal(bare.vertices, full.vertices)
+
+
 def test_switches(rig):
     off = prepare_scene(_scene(rig, '{ spheres = "tube.h5" }', "", "self_visibility = false"))
     assert not off.objects[1].traced and off.objects[1].local_log is None
