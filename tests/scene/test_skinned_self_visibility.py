@@ -149,12 +149,16 @@ def test_runtime_multiplies_a_given_visibility_and_skips_the_own_blocker():
     g_own += 0.3 * rng.normal(size=(20, 16)) * np.exp(-np.arange(16) / 4)
     rt = ShadowRuntime(ShadowSettings(order=4, processes=1, hierarchy=False))
     base = rt.visibility(pts, nrm, [other])  # what the other blocker alone gives
+    assert base[10:30, 1:].any(axis=1).all()  # it reaches every own row: full products
     sv = SelfVisibility(None, slice(10, 30), blocker=0, visibility=g_own)
     got = rt.visibility(pts, nrm, [own, other], self_visibility=[sv])
     # rows 10..29: the other blocker's visibility times the given one (the exact SH
     # product, independent implementation: shtools.sh.product's triple tensor)
     np.testing.assert_allclose(got[10:30], product(base[10:30].astype(float), g_own, 4),
                                atol=2e-5)  # float32 quadrature products
+    # nothing else reaches them: 1 times the given visibility is the given visibility
+    alone = rt.visibility(pts, nrm, [own], self_visibility=[sv])
+    np.testing.assert_allclose(alone[10:30], g_own, rtol=0, atol=1e-6)  # float32
     both = rt.visibility(pts, nrm, [own, other])
     # the other rows keep both blockers (grouped differently: float32 sums reordered)
     np.testing.assert_allclose(got[:10], both[:10], rtol=0, atol=1e-6)
