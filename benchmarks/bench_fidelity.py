@@ -342,8 +342,10 @@ SKINNED_VARIANTS[PREVIOUS] = SKINNED_VARIANTS["traced 32"]
 
 @contextlib.contextmanager
 def _previous_tracing(active: bool):
-    """While active, trace as the first shift did: Embree's robust traversal on, and
-    the receivers' clustering posing frame 0 with its trace (one more trace a bake)."""
+    """While active, trace as the first shift did: Embree's robust traversal on, the
+    receivers' clustering posing frame 0 with its trace (one more trace a bake), and
+    the traced visibility multiplied by quadrature on every row (also where the
+    other blockers give the constant 1)."""
     if not active:
         yield
         return
@@ -351,6 +353,8 @@ def _previous_tracing(active: bool):
     import shtools.scene.transfer as transfer
     from shtools.fields.self_visibility import hemisphere_visibility
     from shtools.geometry.raycast import RayCaster
+    from shtools.runtime.evaluator import ShadowRuntime
+    from shtools.runtime.fast_exp import QuadratureProducts
     from shtools.scene.pose import pose_frame
     from shtools.scene.shadows import receiver_clusters
 
@@ -361,12 +365,22 @@ def _previous_tracing(active: bool):
         return hemisphere_visibility(vertices, normals, RayCaster(vertices, faces), order,
                                      n_dirs=n_dirs).astype(np.float32)
 
-    saved = bake.bake_clusters, transfer.traced_self_visibility
+    def multiply(runtime, g, self_visibility):
+        if runtime._products is None:
+            runtime._products = QuadratureProducts(runtime.order, np.float32)
+        for sv in self_visibility or ():
+            if sv.visibility is not None:
+                rows = np.arange(g.shape[0])[sv.rows]
+                g[rows] = runtime._products.product(g[rows], sv.visibility[:, :g.shape[1]])
+        return g
+
+    saved = bake.bake_clusters, transfer.traced_self_visibility, ShadowRuntime._multiply_self
     bake.bake_clusters, transfer.traced_self_visibility = clusters, traced
+    ShadowRuntime._multiply_self = multiply
     try:
         yield
     finally:
-        bake.bake_clusters, transfer.traced_self_visibility = saved
+        bake.bake_clusters, transfer.traced_self_visibility, ShadowRuntime._multiply_self = saved
 
 
 def skinned_quadrature(name: str, spec: dict, *, n_ref: int = 3200) -> list[dict]:
