@@ -9,12 +9,18 @@ Four tables, side by side in one run:
    receivers like the seed's Table 1 planes): relative RMSE of
    per-vertex radiance against ray tracing of the posed mesh, on the ground and
    on the character itself, for (a) the deformable shadow field (re-sampled on
-   the bounding sphere every frame, scaled per receiver; log space with one exp,
-   and product space) and (b) today's bound sphere set (``spheres bind``: a
-   variational fit on the rest mesh, bound to the skin, radii grown to cover the
-   animation), with the visibility time per frame of each.  The cone model's
-   half-angle alpha is swept, and the log/product commutation difference of the
-   field is reported.
+   the bounding sphere every frame, scaled per receiver; log space with one exp
+   at several samplings and both logs, and product space) and (b) today's bound
+   sphere set (the 48-sphere ``spheres fit`` + ``spheres bind`` sets of
+   ``bench_fidelity``, cached in ``build/bench_fidelity``), through the runtime
+   at its defaults in one process.  The character's own vertices are also given
+   other self paths (nothing, the local visibility ``g_p``, the sphere set, a
+   per-frame ray-traced self-visibility), combined with the field on the
+   ground in log space.  Frame time = the sum of the per-frame components
+   (sampling, lookups, self path, one exp), wall and CPU (this process), with
+   the components listed; ratios are of CPU time.  The cone model's
+   half-angle alpha is swept, and the log/product commutation difference of
+   the field is reported.
 3. **Mid-range lighting** -- a teapot on a plane inside an environment sphere
    (the seed's Fig. 11 set-up, probe ``uffizi.hdr``): radiance error against
    per-vertex ray-traced environment lighting (rays hit the sphere, the probe --
