@@ -204,11 +204,15 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     difference (mean, max) of the field.
     """
     from shtools.fields.deformable import sample_deformable_field
-    from shtools.fields.self_visibility import self_visibility, self_visibility_log
-    from shtools.runtime import SphereBlocker
-    from shtools.runtime.deformable import deformable_visibility
+    from shtools.fields.self_visibility import (
+        HEMISPHERE_DIRECTIONS,
+        self_visibility,
+        self_visibility_log,
+    )
+    from shtools.runtime import SelfVisibility, SphereBlocker
+    from shtools.runtime.deformable import DeformableBlocker, deformable_visibility
     from shtools.runtime.spheres import pose_bound_spheres
-    from shtools.scene.transfer import posed_local_log
+    from shtools.scene.transfer import posed_local_log, traced_self_visibility
     from shtools.sh import exp as sh_exp
     from shtools.sh import log as sh_log
 
@@ -228,6 +232,24 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     g = put("spheres", _timed2(lambda: rt.visibility(pts, fr.nrm, [spheres_blocker()],
                                                      clusters=clusters["all"])))
     err.setdefault("spheres", []).append(fr.errors(g))
+    # the scenes' defaults (issue 16): the character's posed mesh traced on its own
+    # vertices every frame, multiplied in after the exp, its own blocker skipped there
+    own = slice(n_g, None)
+
+    def with_traced(blocker):
+        traced = traced_self_visibility(fr.verts, fr.nrm[n_g:], model.faces, ORDER,
+                                        HEMISPHERE_DIRECTIONS)
+        return rt.visibility(pts, fr.nrm, [blocker()], clusters=clusters["all"],
+                             self_visibility=[SelfVisibility(None, own, blocker=0,
+                                                             visibility=traced)])
+
+    g = put("default spheres", _timed2(lambda: with_traced(spheres_blocker)))
+    err.setdefault("default spheres", []).append(fr.errors(g))
+    label0, layout0, rays0, method0 = SAMPLINGS[0]
+    g = put("default field", _timed2(lambda: with_traced(lambda: DeformableBlocker(
+        sample_deformable_field(fr.verts, model.faces, acc, layout=layout0, rays=rays0,
+                                log_method=method0), tables[45.0]))))
+    err.setdefault("default field", []).append(fr.errors(g))
     # components of the combined paths
     logs = {}
     for label, layout, rays, method in SAMPLINGS:
@@ -310,6 +332,8 @@ def _frame_time(secs, parts):
 
 def _character_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
     """Table rows of one character: every (ground, self) combination with its frame time."""
+    from shtools.fields.self_visibility import HEMISPHERE_DIRECTIONS
+
     rows = []
     sph = _frame_time(secs, ["spheres"])
 
@@ -320,6 +344,10 @@ def _character_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
                     f"{wall:.3f} | {cpu:.3f} | {cpu / sph[1]:.2f}x |")
 
     row(f"bound sphere set ({SPHERES}) / the same", "spheres", ["spheres"])
+    row(f"**scene default**: bound sphere set ({SPHERES}) / traced posed mesh "
+        f"({HEMISPHERE_DIRECTIONS} rays, after the exp)", "default spheres", ["default spheres"])
+    row(f"**scene default**: field, log, {SAMPLINGS[0][0]} / traced posed mesh "
+        f"({HEMISPHERE_DIRECTIONS} rays)", "default field", ["default field"])
     first = SAMPLINGS[0][0]
     for label, *_ in SAMPLINGS:
         base = [f"sample {label}", f"ground {label}", "exp"]
