@@ -337,17 +337,18 @@ def _character_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
     rows = []
     sph = _frame_time(secs, ["spheres"])
 
-    def row(label, key, parts):
+    def row(label, key, parts, base=sph):
         e = np.mean(err[key], axis=0)
         wall, cpu = _frame_time(secs, parts)
         rows.append(f"| {name} | {n_v} | {label} | {100 * e[0]:.1f} % | {100 * e[1]:.1f} % | "
-                    f"{wall:.3f} | {cpu:.3f} | {cpu / sph[1]:.2f}x |")
+                    f"{wall:.3f} | {cpu:.3f} | {cpu / base[1]:.2f}x |")
 
     row(f"bound sphere set ({SPHERES}) / the same", "spheres", ["spheres"])
     row(f"**scene default**: bound sphere set ({SPHERES}) / traced posed mesh "
         f"({HEMISPHERE_DIRECTIONS} rays, after the exp)", "default spheres", ["default spheres"])
     row(f"**scene default**: field, log, {SAMPLINGS[0][0]} / traced posed mesh "
-        f"({HEMISPHERE_DIRECTIONS} rays)", "default field", ["default field"])
+        f"({HEMISPHERE_DIRECTIONS} rays) (ratio to the sphere set's scene default)",
+        "default field", ["default field"], base=_frame_time(secs, ["default spheres"]))
     first = SAMPLINGS[0][0]
     for label, *_ in SAMPLINGS:
         base = [f"sample {label}", f"ground {label}", "exp"]
