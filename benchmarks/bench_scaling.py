@@ -245,7 +245,7 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
 
     g = put("default spheres", _timed2(lambda: with_traced(spheres_blocker)))
     err.setdefault("default spheres", []).append(fr.errors(g))
-    label0, layout0, rays0, method0 = SAMPLINGS[0]
+    _, layout0, rays0, method0 = SAMPLINGS[0]
     g = put("default field", _timed2(lambda: with_traced(lambda: DeformableBlocker(
         sample_deformable_field(fr.verts, model.faces, acc, layout=layout0, rays=rays0,
                                 log_method=method0), tables[45.0]))))
