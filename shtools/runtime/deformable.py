@@ -143,7 +143,11 @@ def interpolate_samples(samples, layout, directions) -> np.ndarray:
 
 
 def _local_samples(field: DeformableField, table: ScalingTable, log: bool) -> np.ndarray:
-    """The field's samples in their axis frames ``(S, n*n)`` float32 (made once per field)."""
+    """The field's samples in their axis frames ``(S, n*n)`` float32 (made once per field).
+
+    Only the table's SH rotations are used, which depend on its order alone, so
+    the cache holds for every table of the field's order (any alpha).
+    """
     key = "log" if log else "vis"
     if key not in field._local:
         samples = field.log_visibility if log else field.visibility
@@ -159,6 +163,16 @@ def interpolate_local(field: DeformableField, table: ScalingTable, directions, *
     Bilinear in the samples' axis frames; the pole rows are the mean of the
     nearest ring's world samples, expressed in the receiver's own frame (so the
     world-frame result is continuous across the poles).
+
+    Parameters
+    ----------
+    field : DeformableField
+    table : ScalingTable
+        Of the field's order (its SH rotations give the axis frames).
+    directions : array_like, shape (V, 3)
+        Unit directions from the field's centre to the receivers.
+    log : bool
+        The log samples, or the visibility samples.
 
     Returns
     -------
