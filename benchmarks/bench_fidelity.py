@@ -256,8 +256,11 @@ def _markdown(rows: list[dict]) -> str:
 
 
 def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
-                        methods=("default", "product")) -> list[dict]:
+                        methods=("default", "product"), fields=None) -> list[dict]:
     """The skinned scene with its bound spheres vs a deformable shadow field, per method.
+
+    ``fields``: label -> blocker table of each field variant (default one,
+    ``{ deformable = true }``).
 
     Same scene, settings (the new default) and frames; only the character's
     blocker changes (``bound`` -> ``deformable = true``).  Each bake runs in
@@ -275,14 +278,17 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     from shtools.scene.bake import bake_scene, pose_frame, prepare_scene
     from shtools.scene.scene import load_scene
 
-    texts = {"bound spheres": spec["text"],
-             "deformable field": re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
-                                        "blocker = { deformable = true }", spec["text"])}
+    fields = fields or {"deformable field": "{ deformable = true }"}
+    texts = {"bound spheres": spec["text"]}
+    for label, table in fields.items():  # label -> blocker table of the field variant
+        texts[label] = re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
+                              f"blocker = {table}", spec["text"])
     preps = {}
     for label, text in texts.items():
         for method in methods:
             variant = f"{label}, {method}"
-            scene = load_scene(_scene_file(f"{name}.{label.split()[0]}.{method}",
+            tag = re.sub(r"\W+", "_", label)
+            scene = load_scene(_scene_file(f"{name}.{tag}.{method}",
                                            {**spec, "text": text}, "new",
                                            f'method = "{method}"\n'))
             preps[variant] = (scene, prepare_scene(scene))
