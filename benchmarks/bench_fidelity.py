@@ -27,7 +27,10 @@ Assets (sphere fits, trees, bound sets, transfers) are cached in
 ``build/bench_fidelity``.
 
 ``python benchmarks/bench_fidelity.py [--quick]`` (quick: the small ``spot``
-mesh on a coarse ground only, fewer directions).
+mesh on a coarse ground only, fewer directions).  ``--skinned [--scene fox]``:
+the skinned objects' per-frame tracing of their posed mesh — quadrature error of
+direction sets and counts, then old default / rest-pose ``g_p`` / traced at
+several direction counts, accuracy and frame time (wall and CPU) side by side.
 """
 
 from __future__ import annotations
@@ -322,6 +325,245 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     return rows
 
 
+# --------------------------------------------------------------------------- skinned
+#: Variants of the skinned comparison (``--skinned``): [settings] lines of each.
+SKINNED_VARIANTS = {
+    "old": 'self_visibility = false\nlocal_visibility = false\nderinging = "none"\n',
+    "g_p": 'self_visibility = false\nlocal_visibility = true\nderinging = "desaturate"\n',
+    **{f"traced {q}": (f'self_visibility = true\nself_visibility_directions = {q}\n'
+                       'deringing = "desaturate"\n') for q in (16, 24, 32, 48)},
+}
+
+
+def skinned_quadrature(name: str, spec: dict, *, n_ref: int = 3200) -> list[dict]:
+    """Quadrature error of the per-frame traced self-visibility on the posed character.
+
+    Direction sets, each against the project's ray tracer at ``n_ref`` directions of
+    the same posed mesh (own vertices, every frame of the scene): the default
+    hemisphere Fibonacci set in each vertex's tangent frame, the same turned by a
+    random azimuth per vertex, and one spherical Fibonacci set shared by all
+    vertices (one matrix product; half its rays fall below the tangent plane).
+    Relative error of ``g`` at orders 4 and 6, and of the order-4 radiance.
+    """
+    import trimesh
+
+    from shtools.fields.self_visibility import (
+        hemisphere_directions,
+        hemisphere_visibility,
+        tangent_frames,
+    )
+    from shtools.geometry.raycast import RayCaster
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+    from shtools.sh import basis
+
+    scene = load_scene(_skinned_scene_file(name, spec, "old", SKINNED_VARIANTS["old"]))
+    prepared = prepare_scene(scene)
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+    rng = np.random.default_rng(0)
+    acc: dict = {}
+    own = slice(len(prepared.receivers[0].vertices), None)  # the ground comes first
+
+    def frames_visibility(v, n, rc, q, kind):
+        if kind == "hemisphere":
+            return hemisphere_visibility(v, n, rc, 6, n_dirs=q)
+        if kind == "hemisphere, random azimuth":
+            t1, t2 = tangent_frames(n)
+            a = rng.uniform(0.0, 2 * math.pi, len(v))[:, None]
+            frames = np.stack([np.cos(a) * t1 + np.sin(a) * t2,
+                               -np.sin(a) * t1 + np.cos(a) * t2, n], axis=1)
+            dirs = hemisphere_directions(q) @ frames  # (V, Q, 3)
+            o = np.repeat(rc.embree_points(v + 1e-5 * rc.diagonal * n), q, axis=0)
+            blocked = rc.occluded_embree(o, dirs.reshape(-1, 3).astype(np.float32))
+            g = np.zeros((len(v), 36))
+            g[:, 0] = math.sqrt(4 * math.pi)
+            y = basis(dirs, 6) * blocked.reshape(len(v), q, 1)
+            return g - (2 * math.pi / q) * y.sum(axis=1)
+        i = np.arange(2 * q) + 0.5  # full sphere: 2q directions, about q above the plane
+        z = 1.0 - i / q
+        phi = i * math.pi * (3.0 - math.sqrt(5.0))
+        r = np.sqrt(1.0 - z * z)
+        d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+        vis = rc.visibility(v, d, normals=n, offset=1e-5 * rc.diagonal)
+        g = -(~vis).astype(np.float64) @ (basis(d, 6) * (2 * math.pi / q))
+        g[:, 0] += math.sqrt(4 * math.pi)
+        return g
+
+    for t in scene.frame_times():
+        state = pose_frame(prepared, float(t), with_meshes=True)
+        v, n = state.vertices[own], state.normals[own]
+        mv, mf = state.blocker_meshes[0]
+        ref = raytrace_visibility(v, n, [trimesh.Trimesh(mv, mf, process=False)], 6, n_ref)
+        r_ref = shader.shade(ref[:, :16], v, n, prepared.env_sh, state.lights)
+        rc = RayCaster(mv, mf)
+        for kind in ("hemisphere", "hemisphere, random azimuth", "sphere (2x rays cast)"):
+            for q in (16, 24, 32, 48, 64, 128):
+                g = frames_visibility(v, n, rc, q, kind)
+                r = shader.shade(g[:, :16], v, n, prepared.env_sh, state.lights)
+                e = acc.setdefault((kind, q), {"g4": [], "ref4": [], "g6": [], "ref6": [],
+                                               "r": [], "rref": []})
+                e["g4"].append(g[:, :16])
+                e["ref4"].append(ref[:, :16])
+                e["g6"].append(g)
+                e["ref6"].append(ref)
+                e["r"].append(r)
+                e["rref"].append(r_ref)
+    rows = []
+    for (kind, q), e in acc.items():
+        cat = {k: np.concatenate(x) for k, x in e.items()}
+        rows.append({"scene": name, "set": kind, "rays per vertex": q,
+                     "g order 4 vs 3,200": relative_rmse(cat["g4"], cat["ref4"]),
+                     "g order 6 vs 3,200": relative_rmse(cat["g6"], cat["ref6"]),
+                     "radiance vs 3,200": relative_rmse(cat["r"], cat["rref"])})
+    return rows
+
+
+def skinned_interpolation(name: str, spec: dict, *, n_ref: int = 3200,
+                          times=(0.2, 0.45, 0.7), fps: float = 24.0) -> list[dict]:
+    """Would tracing every k-th frame do?  The worst case of linear interpolation.
+
+    At each time, the traced visibility (the default 32 rays) against the mean of
+    the traces ``k/2`` frames before and after (at ``fps``): the midpoint between
+    two traced frames, where interpolation is furthest from a trace.  Order-4
+    radiance of the character's own vertices vs the ray tracer at ``n_ref``.
+    """
+    import trimesh
+
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+    from shtools.scene.transfer import traced_self_visibility
+
+    scene = load_scene(_skinned_scene_file(name, spec, "old", SKINNED_VARIANTS["old"]))
+    prepared = prepare_scene(scene)
+    own = slice(len(prepared.receivers[0].vertices), None)
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+
+    def traced(t):
+        state = pose_frame(prepared, t, with_meshes=True)
+        return traced_self_visibility(state.vertices[own], state.normals[own],
+                                      state.blocker_meshes[0][1], 4, 32)
+
+    got: dict = {}
+    for t in times:
+        state = pose_frame(prepared, t, with_meshes=True)
+        v, n = state.vertices[own], state.normals[own]
+        mv, mf = state.blocker_meshes[0]
+        ref = raytrace_visibility(v, n, [trimesh.Trimesh(mv, mf, process=False)], 4, n_ref)
+        r_ref = shader.shade(ref, v, n, prepared.env_sh, state.lights)
+        got.setdefault(1, []).append((traced(t), r_ref, v, n, state.lights))
+        for k in (2, 4, 8):
+            dt = 0.5 * k / fps
+            got.setdefault(k, []).append((0.5 * (traced(t - dt) + traced(t + dt)), r_ref, v, n,
+                                          state.lights))
+    rows = []
+    for k, items in got.items():
+        r = np.concatenate([shader.shade(g, v, n, prepared.env_sh, lights)
+                            for g, _, v, n, lights in items])
+        ref = np.concatenate([r_ref for _, r_ref, *_ in items])
+        rows.append({"scene": name, "traced every k-th frame (24 fps), midpoint": k,
+                     "radiance vs 3,200": relative_rmse(r, ref)})
+    return rows
+
+
+def _skinned_scene_file(name: str, spec: dict, variant: str, settings: str) -> Path:
+    path = CACHE / f"{name}.skinned.{variant.replace(' ', '')}.toml"
+    path.write_text(f'[settings]\norder = 4\nframes = {spec["frames"]}\n'
+                    f'fps = {spec.get("fps", 24)}\n{settings}\n'
+                    f'[environment]\nimage = "{spec["env"]}"\n\n{spec["text"]}')
+    return path
+
+
+def evaluate_skinned(name: str, spec: dict, *, n_dirs: int = 3200, subset: int = 2500,
+                     repeats: int = 3) -> tuple[list[dict], list[dict]]:
+    """Every :data:`SKINNED_VARIANTS` bake of a skinned scene against the real posed mesh.
+
+    Accuracy as in :func:`evaluate` (reference: the ray tracer of the posed meshes on
+    a vertex subset, shaded raw).  Frame time, the variants alternated ``repeats``
+    times and the fastest kept: **wall** ms per frame with the runtime's default
+    processes (frames in this process, as :func:`evaluate`), and **CPU** ms per
+    frame with one process (``time.process_time``: robust to the other jobs).
+    """
+    import trimesh
+
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import bake_scene, pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+
+    preps, baked, wall, cpu = {}, {}, {}, {}
+    for variant, settings in SKINNED_VARIANTS.items():
+        scene = load_scene(_skinned_scene_file(name, spec, variant, settings))
+        t0 = time.process_time()
+        preps[variant] = (scene, prepare_scene(scene))
+        cpu[variant + " set-up"] = time.process_time() - t0
+    for _ in range(repeats):
+        for variant, (scene, prepared) in preps.items():
+            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline"))
+            baked[variant] = [f.radiance.astype(np.float64) for f in frames]
+            ms = 1e3 * float(np.mean([f.seconds for f in frames][1:]))
+            wall[variant] = min(wall.get(variant, ms), ms)
+            t0 = time.process_time()
+            list(bake_scene(scene, prepared=prepared, scheduler="inline", processes=1))
+            ms = 1e3 * (time.process_time() - t0) / len(frames)
+            cpu[variant] = min(cpu.get(variant, ms), ms)
+    scene, prepared = preps["old"]
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+    rng = np.random.default_rng(0)
+    offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
+    ref, got = {}, {}
+    for k, t in enumerate(scene.frame_times()):
+        state = pose_frame(prepared, float(t), with_meshes=True)
+        meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
+        for o, obj in enumerate(prepared.receivers):
+            a, b = offsets[o], offsets[o + 1]
+            sel = np.sort(rng.choice(np.arange(a, b), min(subset, b - a), replace=False))
+            v, n = state.vertices[sel], state.normals[sel]
+            g = raytrace_visibility(v, n, meshes, 4, n_dirs)
+            ref.setdefault(obj.spec.name, []).append(
+                shader.shade(g, v, n, prepared.env_sh, state.lights))
+            for variant in preps:
+                got.setdefault((obj.spec.name, variant), []).append(baked[variant][k][sel])
+    load = os.getloadavg()[0]
+    accuracy = []
+    for receiver, r in ref.items():
+        row = {"scene": name, "receiver": receiver}
+        for variant in preps:
+            row[variant] = relative_rmse(np.concatenate(got[(receiver, variant)]),
+                                         np.concatenate(r))
+        accuracy.append(row)
+    timing = []
+    for variant in preps:
+        timing.append({"scene": name, "variant": variant,
+                       "wall ms/frame": round(wall[variant], 1),
+                       "wall ratio": round(wall[variant] / wall["old"], 2),
+                       "CPU ms/frame (1 process)": round(cpu[variant], 1),
+                       "CPU ratio": round(cpu[variant] / cpu["old"], 2),
+                       "set-up CPU s": round(cpu[variant + " set-up"], 2),
+                       "load": round(load, 1)})
+    return accuracy, timing
+
+
+def skinned_main(names) -> int:
+    """``--skinned``: quadrature of the per-frame tracing, then the variants' table."""
+    specs = scenes(False, names or ["cesiumman", "fox"])
+    quad, acc, tim = [], [], []
+    for name, spec in specs.items():
+        quad += skinned_quadrature(name, spec)
+        print(f"\n### Per-frame tracing quadrature, {name} (load {os.getloadavg()[0]:.2f} on "
+              f"{os.cpu_count()} cores)\n\n" + _markdown(quad[-18:]), flush=True)
+        print("\n" + _markdown(skinned_interpolation(name, spec)), flush=True)
+        a, t = evaluate_skinned(name, spec)
+        acc += a
+        tim += t
+        print(f"\n### {name}: radiance vs the real posed mesh (order 4, 3,200 directions)\n\n"
+              + _markdown(a) + "\n\n" + _markdown(t), flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="spot only, coarse")
@@ -329,10 +571,14 @@ def main(argv=None) -> int:
     parser.add_argument("--deformable", action="store_true",
                         help="the skinned scenes with a deformable shadow field instead of "
                              "their bound spheres (issue 12)")
+    parser.add_argument("--skinned", action="store_true",
+                        help="skinned objects' per-frame tracing: quadrature and variants")
     args = parser.parse_args(argv)
     if not (DATA / "meshes").is_dir():
         print(f"bench_fidelity: {DATA} not present; nothing to measure")
         return 0
+    if args.skinned:
+        return skinned_main(args.scene)
     n_dirs, subset = (1600, 600) if args.quick else (3200, 2500)
     if args.deformable:
         rows = []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import time
 from dataclasses import dataclass
 
@@ -13,7 +14,7 @@ from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
-from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
+from shtools.runtime.fast_exp import FAST_METHODS, QuadratureProducts, fast_exp
 from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
@@ -92,6 +93,7 @@ class ShadowRuntime:
         self._auto_groups: np.ndarray | None = None
         self._rotated_logs: dict = {}  # id(log) -> (rotation, rotated log), last frame
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._products: QuadratureProducts | None = None  # self-visibility products
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         #: processes sharing the per-vertex stages (worker processes start on the
@@ -159,11 +161,12 @@ class ShadowRuntime:
             are computed on the first call and reused while the vertex count
             stays the same (built per object when ``self_visibility`` is given).
         self_visibility : sequence of SelfVisibility
-            Precomputed log visibility of objects' real meshes on their own
-            receiver rows, added in log space; each skips its object's own
-            blocker (an index into ``blockers``: a sphere set or a log blocker
-            such as a deformable field) on those rows.  Clusters
-            must not mix rows of different objects (build them with ``groups``).
+            Self-visibility of objects' real meshes on their own receiver rows:
+            logs are added in log space, visibilities multiply the result after
+            the exp; each skips its object's own blocker (an index into
+            ``blockers``: a sphere set or a log blocker such as a deformable
+            field) on those rows.  Clusters must not mix rows of different
+            objects (build them with ``groups``).
 
         Returns
         -------
@@ -180,6 +183,11 @@ class ShadowRuntime:
         count, so the result is the same bytes with any number of processes.
         """
         pts, nrm = _check_receivers(vertices, normals)
+        g = self._visibility(pts, nrm, blockers, clusters, self_visibility)
+        return self._multiply_self(g, self_visibility)
+
+    def _visibility(self, pts, nrm, blockers, clusters, self_visibility) -> np.ndarray:
+        """:meth:`visibility` before the self-visibilities given as visibility."""
         spheres, others = self._blockers(blockers)
         if any(isinstance(b, FieldBlocker) for b in others):
             return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
@@ -368,17 +376,19 @@ class ShadowRuntime:
             if not isinstance(sv, SelfVisibility):
                 raise InputError(f"self_visibility must hold SelfVisibility objects, got "
                                  f"{type(sv).__name__}")
-            if sv.log.shape[1] != size:
+            if sv.log is not None and sv.log.shape[1] != size:
                 raise InputError(
                     f"self-visibility log has {sv.log.shape[1]} coefficients but the runtime "
                     f"accumulates at order {self.acc_order} ({size}); rebuild the transfer "
                     f"with --order {self.acc_order}")
             rows = np.arange(n_vertices)[sv.rows]
-            if rows.shape[0] != sv.log.shape[0]:
-                raise InputError(f"self-visibility covers {sv.log.shape[0]} vertices but its "
-                                 f"rows select {rows.shape[0]}")
             log = sv.log
-            if sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
+            if log is None:  # a visibility: multiplied in after the exp (_multiply_self)
+                pass
+            elif rows.shape[0] != log.shape[0]:
+                raise InputError(f"self-visibility covers {log.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            elif sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
                 cached = self._rotated_logs.get(id(sv.log))
                 if cached is not None and np.array_equal(cached[0], sv.rotation):
                     log = cached[1]
@@ -386,7 +396,8 @@ class ShadowRuntime:
                     d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
                     log = sv.log @ d.T
                 kept[id(sv.log)] = (sv.rotation.copy(), log)
-            extra[rows] += log
+            if log is not None:
+                extra[rows] += log
             if sv.blocker is not None:
                 k = int(sv.blocker)
                 if k in sphere_index:
@@ -397,7 +408,36 @@ class ShadowRuntime:
                     raise InputError(f"self-visibility names blocker {sv.blocker}, which is not "
                                      f"one of the {len(blockers)} blockers given")
         self._rotated_logs = kept
+        if all(sv.log is None for sv in self_visibility):
+            extra = None  # visibilities only: nothing to add before the exp
         return extra, (exclude if (exclude >= 0).any() else None), (skip or None)
+
+    def _multiply_self(self, g: np.ndarray, self_visibility) -> np.ndarray:
+        """``g`` with the self-visibilities given as visibility multiplied into their rows.
+
+        The exact truncated SH product at the shading order (quadrature); on rows
+        no other blocker reaches, ``g`` is the constant 1 and the product returns
+        the given visibility.
+        """
+        given = [sv for sv in self_visibility or () if sv.visibility is not None]
+        if not given:
+            return g
+        size = self.order * self.order
+        if self._products is None:
+            self._products = QuadratureProducts(self.order, np.float32)
+        for sv in given:
+            rows = np.arange(g.shape[0])[sv.rows]
+            values = sv.visibility
+            k = values.shape[1]
+            if math.isqrt(k) ** 2 != k:
+                raise InputError(f"self-visibility has {k} coefficients, not an SH order's n*n")
+            if values.shape[0] != rows.shape[0]:
+                raise InputError(f"self-visibility covers {values.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            vis = np.zeros((rows.shape[0], size), dtype=np.float32)
+            vis[:, :min(k, size)] = values[:, :size]
+            g[rows] = self._products.product(g[rows], vis)
+        return g
 
     def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:
         """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
