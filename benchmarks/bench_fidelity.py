@@ -284,13 +284,14 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
             variant = f"{label}, {method}"
             scene = load_scene(_scene_file(f"{name}.{label.split()[0]}.{method}",
                                            {**spec, "text": text}, "new",
-                                           f'method = "{method}"\nprocesses = 1\n'))
+                                           f'method = "{method}"\n'))
             preps[variant] = (scene, prepare_scene(scene))
     baked, times = {}, {}
     for _ in range(REPEATS):
         for variant, (scene, prepared) in preps.items():
             c0 = time.process_time()
-            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline"))
+            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline",
+                                     processes=1))
             cpu = 1e3 * (time.process_time() - c0) / len(frames)
             baked[variant] = [f.radiance.astype(np.float64) for f in frames]
             ms = 1e3 * float(np.mean([f.seconds for f in frames][1:] or frames[0].seconds))
@@ -318,8 +319,9 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     for variant in preps:
         row = {"scene": name, "blocker, method": variant}
         for obj_name, e in acc.items():
-            row[f"{obj_name} vs mesh"] = relative_rmse(np.concatenate(e[variant]),
-                                                       np.concatenate(e["ref"]))
+            role = "ground" if obj_name == "ground" else "character"
+            row[f"{role} vs mesh"] = relative_rmse(np.concatenate(e[variant]),
+                                                   np.concatenate(e["ref"]))
         row["ms/frame wall"], row["ms/frame CPU"] = times[variant]
         rows.append(row)
     return rows
@@ -584,6 +586,7 @@ def main(argv=None) -> int:
         rows = []
         for name, spec in scenes(False, args.scene or ["cesiumman", "fox"]).items():
             rows += deformable_variants(name, spec, n_dirs=n_dirs, subset=subset)
+            print(_markdown(rows), flush=True)
         load = os.getloadavg()
         print(f"\n### Skinned characters: bound spheres vs deformable shadow field (order 4, "
               f"{n_dirs} directions, {subset} vertices per receiver and frame; one runtime "
