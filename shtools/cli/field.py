@@ -36,13 +36,17 @@ def field():
               help="Check every halving against the initial samples (beyond the paper, "
                    "which compares with the previous level only).")
 @click.option("--no-self-visibility", is_flag=True,
-              help="Do not store the per-vertex self-visibility O_v.")
+              help="Do not store the per-vertex self-visibility O_v (the object's own "
+                   "vertices then need a transfer asset or are not self-shadowed).")
+@click.option("--self-order", default=None, type=int,
+              help="SH order of the stored O_v [default: the bake's accumulation order at "
+                   "--order, 6 at order 4].")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Recorded for reproducibility (sampling is deterministic).")
 @scheduler_options("shells")
 @json_option
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
-           bits, cumulative, no_self_visibility, seed, scheduler, workers, as_json):
+           bits, cumulative, no_self_visibility, self_order, seed, scheduler, workers, as_json):
     """Sample the shadow field of MESH into a field asset.
 
     Per shell, the object's binary visibility over the direction map at R x R
@@ -58,7 +62,8 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
 
     params = FieldParameters(shells=shells, resolution=resolution, map_size=map_size,
                              order=order, threshold=threshold, min_resolution=min_resolution,
-                             bits=bits, cumulative=cumulative, seed=seed)
+                             bits=bits, cumulative=cumulative, seed=seed,
+                             self_order=self_order)
     try:
         params.validate()
     except InputError as exc:
@@ -82,6 +87,8 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     parameters = {k: getattr(params, k) for k in (
         "shells", "resolution", "map_size", "order", "threshold", "min_resolution", "bits",
         "cumulative", "log_floor", "log_eps", "seed")}
+    if not no_self_visibility:
+        parameters["self_order"] = params.resolved_self_order()
     write_field(output, fld, inputs={"mesh": mesh_path}, parameters=parameters)
     fixed = shells * resolution * resolution * order * order
     summary = {
@@ -100,6 +107,7 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         "closed": fld.attrs["closed"],
         "boundary_edges": fld.attrs["boundary_edges"],
         "self_visibility": fld.self_visibility is not None,
+        "self_order": fld.self_order,
     }
     human = (f"wrote {output}: {shells} shells, R_c {summary['resolution']}, "
              f"{summary['bytes']} B ({summary['reduction_percent']:.1f} % below fixed), "
