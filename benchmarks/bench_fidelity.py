@@ -34,7 +34,10 @@ Assets (sphere fits, trees, bound sets, transfers, fields) are cached in
 ``build/bench_fidelity``.
 
 ``python benchmarks/bench_fidelity.py [--quick]`` (quick: the small ``spot``
-mesh on a coarse ground only, fewer directions).
+mesh on a coarse ground only, fewer directions).  ``--skinned [--scene fox]``:
+the skinned objects' per-frame tracing of their posed mesh — quadrature error of
+direction sets and counts, then old default / rest-pose ``g_p`` / traced at
+several direction counts, accuracy and frame time (wall and CPU) side by side.
 """
 
 from __future__ import annotations
@@ -192,8 +195,7 @@ VARIANTS = {
     "wave2": {"blocker": "tree", "settings": 'self_visibility = true\n'
                                                'local_visibility = true\n'
                                                'deringing = "desaturate"\n'},
-    "new": {"blocker": "field", "settings": 'self_visibility = true\nlocal_visibility = true\n'
-                                            'deringing = "desaturate"\n'},
+    "new": {"blocker": "field", "settings": ""},  # the current defaults
 }
 
 
@@ -344,6 +346,270 @@ def _markdown(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+# -- the characters as deformable shadow fields (issue 12; the scaling engineer's) ---------
+
+
+def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
+                        methods=("default", "product")) -> list[dict]:
+    """The skinned scene with its bound spheres vs a deformable shadow field, per method.
+
+    Same scene, settings (the new default) and frames; only the character's
+    blocker changes (``bound`` -> ``deformable = true``).  Each bake runs in
+    this process with one runtime process (frame seconds comparable as CPU
+    work), both variants alternated :data:`REPEATS` times (fastest kept).  The
+    reference is the ray tracer of the posed real meshes on random vertex
+    subsets, as :func:`evaluate`.
+    """
+    import re
+
+    import trimesh
+
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import bake_scene, pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+
+    texts = {"bound spheres": spec["text"],
+             "deformable field": re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
+                                        "blocker = { deformable = true }", spec["text"])}
+    preps = {}
+    for label, text in texts.items():
+        for method in methods:
+            variant = f"{label}, {method}"
+            # the settings this comparison was measured with (wave 2's defaults)
+            v = dict(VARIANTS["wave2"])
+            v["settings"] += f'method = "{method}"\nprocesses = 1\n'
+            scene = load_scene(_scene_file(f"{name}.{label.split()[0]}.{method}",
+                                           {**spec, "text": text}, "new", v))
+            preps[variant] = (scene, prepare_scene(scene))
+    baked, times = {}, {}
+    for _ in range(REPEATS):
+        for variant, (scene, prepared) in preps.items():
+            c0 = time.process_time()
+            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline"))
+            cpu = 1e3 * (time.process_time() - c0) / len(frames)
+            baked[variant] = [f.radiance.astype(np.float64) for f in frames]
+            ms = 1e3 * float(np.mean([f.seconds for f in frames][1:] or frames[0].seconds))
+            old = times.get(variant, (math.inf, math.inf))
+            times[variant] = (min(old[0], ms), min(old[1], cpu))
+    scene, prepared = next(iter(preps.values()))
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+    rng = np.random.default_rng(0)
+    offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
+    acc = {}
+    for k, t in enumerate(scene.frame_times()):
+        state = pose_frame(prepared, float(t), with_meshes=True)
+        meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
+        for o, obj in enumerate(prepared.receivers):
+            a, b = offsets[o], offsets[o + 1]
+            sel = np.sort(rng.choice(np.arange(a, b), min(subset, b - a), replace=False))
+            v, n = state.vertices[sel], state.normals[sel]
+            ref = shader.shade(raytrace_visibility(v, n, meshes, 4, n_dirs), v, n,
+                               prepared.env_sh, state.lights)
+            e = acc.setdefault(obj.spec.name, {"ref": [], **{var: [] for var in preps}})
+            e["ref"].append(ref)
+            for variant in preps:
+                e[variant].append(baked[variant][k][sel])
+    rows = []
+    for variant in preps:
+        row = {"scene": name, "blocker, method": variant}
+        for obj_name, e in acc.items():
+            row[f"{obj_name} vs mesh"] = relative_rmse(np.concatenate(e[variant]),
+                                                       np.concatenate(e["ref"]))
+        row["ms/frame wall"], row["ms/frame CPU"] = times[variant]
+        rows.append(row)
+    return rows
+
+
+# --------------------------------------------------------------------------- skinned
+#: Variants of the skinned comparison (``--skinned``): [settings] lines of each.
+SKINNED_VARIANTS = {
+    "old": 'self_visibility = false\nlocal_visibility = false\nderinging = "none"\n',
+    "g_p": 'self_visibility = false\nlocal_visibility = true\nderinging = "desaturate"\n',
+    **{f"traced {q}": (f'self_visibility = true\nself_visibility_directions = {q}\n'
+                       'deringing = "desaturate"\n') for q in (16, 24, 32, 48)},
+}
+
+
+def skinned_quadrature(name: str, spec: dict, *, n_ref: int = 3200) -> list[dict]:
+    """Quadrature error of the per-frame traced self-visibility on the posed character.
+
+    Direction sets, each against the project's ray tracer at ``n_ref`` directions of
+    the same posed mesh (own vertices, every frame of the scene): the default
+    hemisphere Fibonacci set in each vertex's tangent frame, the same turned by a
+    random azimuth per vertex, and one spherical Fibonacci set shared by all
+    vertices (one matrix product; half its rays fall below the tangent plane).
+    Relative error of ``g`` at orders 4 and 6, and of the order-4 radiance.
+    """
+    import trimesh
+
+    from shtools.fields.self_visibility import (
+        hemisphere_directions,
+        hemisphere_visibility,
+        tangent_frames,
+    )
+    from shtools.geometry.raycast import RayCaster
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+    from shtools.sh import basis
+
+    scene = load_scene(_skinned_scene_file(name, spec, "old", SKINNED_VARIANTS["old"]))
+    prepared = prepare_scene(scene)
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+    rng = np.random.default_rng(0)
+    acc: dict = {}
+    own = slice(len(prepared.receivers[0].vertices), None)  # the ground comes first
+
+    def frames_visibility(v, n, rc, q, kind):
+        if kind == "hemisphere":
+            return hemisphere_visibility(v, n, rc, 6, n_dirs=q)
+        if kind == "hemisphere, random azimuth":
+            t1, t2 = tangent_frames(n)
+            a = rng.uniform(0.0, 2 * math.pi, len(v))[:, None]
+            frames = np.stack([np.cos(a) * t1 + np.sin(a) * t2,
+                               -np.sin(a) * t1 + np.cos(a) * t2, n], axis=1)
+            dirs = hemisphere_directions(q) @ frames  # (V, Q, 3)
+            o = np.repeat(rc.embree_points(v + 1e-5 * rc.diagonal * n), q, axis=0)
+            blocked = rc.occluded_embree(o, dirs.reshape(-1, 3).astype(np.float32))
+            g = np.zeros((len(v), 36))
+            g[:, 0] = math.sqrt(4 * math.pi)
+            y = basis(dirs, 6) * blocked.reshape(len(v), q, 1)
+            return g - (2 * math.pi / q) * y.sum(axis=1)
+        i = np.arange(2 * q) + 0.5  # full sphere: 2q directions, about q above the plane
+        z = 1.0 - i / q
+        phi = i * math.pi * (3.0 - math.sqrt(5.0))
+        r = np.sqrt(1.0 - z * z)
+        d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+        vis = rc.visibility(v, d, normals=n, offset=1e-5 * rc.diagonal)
+        g = -(~vis).astype(np.float64) @ (basis(d, 6) * (2 * math.pi / q))
+        g[:, 0] += math.sqrt(4 * math.pi)
+        return g
+
+    for t in scene.frame_times():
+        state = pose_frame(prepared, float(t), with_meshes=True)
+        v, n = state.vertices[own], state.normals[own]
+        mv, mf = state.blocker_meshes[0]
+        ref = raytrace_visibility(v, n, [trimesh.Trimesh(mv, mf, process=False)], 6, n_ref)
+        r_ref = shader.shade(ref[:, :16], v, n, prepared.env_sh, state.lights)
+        rc = RayCaster(mv, mf)
+        for kind in ("hemisphere", "hemisphere, random azimuth", "sphere (2x rays cast)"):
+            for q in (16, 24, 32, 48, 64, 128):
+                g = frames_visibility(v, n, rc, q, kind)
+                r = shader.shade(g[:, :16], v, n, prepared.env_sh, state.lights)
+                e = acc.setdefault((kind, q), {"g4": [], "ref4": [], "g6": [], "ref6": [],
+                                               "r": [], "rref": []})
+                e["g4"].append(g[:, :16])
+                e["ref4"].append(ref[:, :16])
+                e["g6"].append(g)
+                e["ref6"].append(ref)
+                e["r"].append(r)
+                e["rref"].append(r_ref)
+    rows = []
+    for (kind, q), e in acc.items():
+        cat = {k: np.concatenate(x) for k, x in e.items()}
+        rows.append({"scene": name, "set": kind, "rays per vertex": q,
+                     "g order 4 vs 3,200": relative_rmse(cat["g4"], cat["ref4"]),
+                     "g order 6 vs 3,200": relative_rmse(cat["g6"], cat["ref6"]),
+                     "radiance vs 3,200": relative_rmse(cat["r"], cat["rref"])})
+    return rows
+
+
+def _skinned_scene_file(name: str, spec: dict, variant: str, settings: str) -> Path:
+    path = CACHE / f"{name}.skinned.{variant.replace(' ', '')}.toml"
+    path.write_text(f'[settings]\norder = 4\nframes = {spec["frames"]}\n'
+                    f'fps = {spec.get("fps", 24)}\n{settings}\n'
+                    f'[environment]\nimage = "{spec["env"]}"\n\n{spec["text"]}')
+    return path
+
+
+def evaluate_skinned(name: str, spec: dict, *, n_dirs: int = 3200, subset: int = 2500,
+                     repeats: int = 3) -> tuple[list[dict], list[dict]]:
+    """Every :data:`SKINNED_VARIANTS` bake of a skinned scene against the real posed mesh.
+
+    Accuracy as in :func:`evaluate` (reference: the ray tracer of the posed meshes on
+    a vertex subset, shaded raw).  Frame time, the variants alternated ``repeats``
+    times and the fastest kept: **wall** ms per frame with the runtime's default
+    processes (frames in this process, as :func:`evaluate`), and **CPU** ms per
+    frame with one process (``time.process_time``: robust to the other jobs).
+    """
+    import trimesh
+
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import bake_scene, pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+
+    preps, baked, wall, cpu = {}, {}, {}, {}
+    for variant, settings in SKINNED_VARIANTS.items():
+        scene = load_scene(_skinned_scene_file(name, spec, variant, settings))
+        t0 = time.process_time()
+        preps[variant] = (scene, prepare_scene(scene))
+        cpu[variant + " set-up"] = time.process_time() - t0
+    for _ in range(repeats):
+        for variant, (scene, prepared) in preps.items():
+            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline"))
+            baked[variant] = [f.radiance.astype(np.float64) for f in frames]
+            ms = 1e3 * float(np.mean([f.seconds for f in frames][1:]))
+            wall[variant] = min(wall.get(variant, ms), ms)
+            t0 = time.process_time()
+            list(bake_scene(scene, prepared=prepared, scheduler="inline", processes=1))
+            ms = 1e3 * (time.process_time() - t0) / len(frames)
+            cpu[variant] = min(cpu.get(variant, ms), ms)
+    scene, prepared = preps["old"]
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+    rng = np.random.default_rng(0)
+    offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
+    ref, got = {}, {}
+    for k, t in enumerate(scene.frame_times()):
+        state = pose_frame(prepared, float(t), with_meshes=True)
+        meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
+        for o, obj in enumerate(prepared.receivers):
+            a, b = offsets[o], offsets[o + 1]
+            sel = np.sort(rng.choice(np.arange(a, b), min(subset, b - a), replace=False))
+            v, n = state.vertices[sel], state.normals[sel]
+            g = raytrace_visibility(v, n, meshes, 4, n_dirs)
+            ref.setdefault(obj.spec.name, []).append(
+                shader.shade(g, v, n, prepared.env_sh, state.lights))
+            for variant in preps:
+                got.setdefault((obj.spec.name, variant), []).append(baked[variant][k][sel])
+    load = os.getloadavg()[0]
+    accuracy = []
+    for receiver, r in ref.items():
+        row = {"scene": name, "receiver": receiver}
+        for variant in preps:
+            row[variant] = relative_rmse(np.concatenate(got[(receiver, variant)]),
+                                         np.concatenate(r))
+        accuracy.append(row)
+    timing = []
+    for variant in preps:
+        timing.append({"scene": name, "variant": variant,
+                       "wall ms/frame": round(wall[variant], 1),
+                       "wall ratio": round(wall[variant] / wall["old"], 2),
+                       "CPU ms/frame (1 process)": round(cpu[variant], 1),
+                       "CPU ratio": round(cpu[variant] / cpu["old"], 2),
+                       "set-up CPU s": round(cpu[variant + " set-up"], 2),
+                       "load": round(load, 1)})
+    return accuracy, timing
+
+
+def skinned_main(names) -> int:
+    """``--skinned``: quadrature of the per-frame tracing, then the variants' table."""
+    specs = scenes(False, names or ["cesiumman", "fox"])
+    quad, acc, tim = [], [], []
+    for name, spec in specs.items():
+        quad += skinned_quadrature(name, spec)
+        print(f"\n### Per-frame tracing quadrature, {name} (load {os.getloadavg()[0]:.2f} on "
+              f"{os.cpu_count()} cores)\n\n" + _markdown(quad[-18:]), flush=True)
+        a, t = evaluate_skinned(name, spec)
+        acc += a
+        tim += t
+        print(f"\n### {name}: radiance vs the real posed mesh (order 4, 3,200 directions)\n\n"
+              + _markdown(a) + "\n\n" + _markdown(t), flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="spot only, coarse")
@@ -355,6 +621,11 @@ def main(argv=None) -> int:
                         help="an extra variant for experiments (parse_variant)")
     parser.add_argument("--repeats", type=int, default=REPEATS,
                         help="alternating repeats of the bakes (the fastest is kept)")
+    parser.add_argument("--deformable", action="store_true",
+                        help="the skinned scenes with a deformable shadow field instead of "
+                             "their bound spheres (issue 12)")
+    parser.add_argument("--skinned", action="store_true",
+                        help="skinned objects' per-frame tracing: quadrature and variants")
     args = parser.parse_args(argv)
     known = dict(VARIANTS)
     known.update(parse_variant(v) for v in args.variant)
@@ -362,7 +633,19 @@ def main(argv=None) -> int:
     if not (DATA / "meshes").is_dir():
         print(f"bench_fidelity: {DATA} not present; nothing to measure")
         return 0
+    if args.skinned:
+        return skinned_main(args.scene)
     n_dirs, subset = (1600, 600) if args.quick else (3200, 2500)
+    if args.deformable:
+        rows = []
+        for name, spec in scenes(False, args.scene or ["cesiumman", "fox"]).items():
+            rows += deformable_variants(name, spec, n_dirs=n_dirs, subset=subset)
+        load = os.getloadavg()
+        print(f"\n### Skinned characters: bound spheres vs deformable shadow field (order 4, "
+              f"{n_dirs} directions, {subset} vertices per receiver and frame; one runtime "
+              f"process; load {load[0]:.2f} on {os.cpu_count()} cores)\n")
+        print(_markdown(rows))
+        return 0
     all_rows, sums, pre = [], [], {}
     for name, spec in scenes(args.quick, args.scene).items():
         out = evaluate(name, spec, n_dirs=n_dirs, subset=subset, variants=variants,

@@ -83,8 +83,9 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
     ``settings.field_space`` ("log" default, or "product") says how it combines
     (:mod:`~shtools.runtime.fields`).
 ``SelfVisibility(log (R, n_acc^2), rows, rotation=None, blocker=None)``
-    An object's precomputed self-visibility (``transfer`` asset) on its own
-    receiver rows, added in log space in place of its own spheres
+    An object's self-visibility log (a rigid object's ``transfer`` asset, or a
+    skinned object's posed mesh traced this frame) on its own receiver rows,
+    added in log space in place of its own blocker (spheres or a log blocker)
     (``visibility(..., self_visibility=[...])``).
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;

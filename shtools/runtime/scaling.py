@@ -165,15 +165,59 @@ class ScalingTable:
             rows = sl.stop - sl.start
             # (receiver, channel) rows, coefficients last: X is one GEMM for all rows
             x = np.swapaxes(g[sl], 1, 2).reshape(rows * n_c, size)
-            ca, sa = self._trig(np.repeat(alpha[sl], n_c))
-            cb, sb = self._trig(np.repeat(beta[sl], n_c))
-            x = self._zrot(x, ca, -sa) @ xt  # D = X^T Z(-beta) X Z(-alpha)
-            x = self._zrot(x, cb, -sb) @ self._x
-            x = self._scale(np.repeat(vals[sl], n_c, axis=0), x)
-            x = self._zrot(x @ xt, cb, sb) @ self._x  # D^T = Z(alpha) X^T Z(beta) X
-            out[sl] = self._zrot(x, ca, sa).reshape(rows, n_c, size)
+            trig = (*self._trig(np.repeat(alpha[sl], n_c)), *self._trig(np.repeat(beta[sl], n_c)))
+            x = self._scale(np.repeat(vals[sl], n_c, axis=0), self._to_z(x, trig, xt))
+            out[sl] = self._from_z(x, trig, xt).reshape(rows, n_c, size)
         out = np.swapaxes(out, 1, 2)
         return out[..., 0] if vec else out
+
+    def to_axis_frame(self, f, axes) -> np.ndarray:
+        """``D f``: SH vectors ``(V, n*n)`` re-expressed in the frame whose ``+z`` is each axis.
+
+        The frame of the axis with polar angle ``beta`` and azimuth ``alpha`` is
+        ``R_z(alpha) R_y(beta)`` (the spin :meth:`apply` uses); :meth:`from_axis_frame`
+        inverts it, and ``apply(f, k, a) = from_axis_frame(scale(to_axis_frame(f, a), k), a)``.
+        """
+        return self._frame_pass(f, axes, self._to_z)
+
+    def from_axis_frame(self, x, axes) -> np.ndarray:
+        """``D^T x``: SH vectors ``(V, n*n)`` given in each axis' frame, back to the world."""
+        return self._frame_pass(x, axes, self._from_z)
+
+    def scale(self, x, k) -> np.ndarray:
+        """``M(k) x`` per row: SH vectors ``(V, n*n)`` already in their axis' frame."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1, self.order * self.order)
+        k = np.asarray(k, dtype=np.float64).reshape(-1)
+        out = np.empty_like(x)
+        for s in range(0, k.size, APPLY_CHUNK):
+            sl = slice(s, min(s + APPLY_CHUNK, k.size))
+            out[sl] = self._scale(self.values_at(k[sl]), x[sl])
+        return out
+
+    def _frame_pass(self, x, axes, step) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64).reshape(-1, self.order * self.order)
+        a = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
+        alpha = np.arctan2(a[:, 1], a[:, 0])
+        beta = np.arctan2(np.hypot(a[:, 0], a[:, 1]), a[:, 2])
+        xt = np.ascontiguousarray(self._x.T)
+        out = np.empty_like(x)
+        for s in range(0, x.shape[0], APPLY_CHUNK):
+            sl = slice(s, min(s + APPLY_CHUNK, x.shape[0]))
+            out[sl] = step(x[sl], (*self._trig(alpha[sl]), *self._trig(beta[sl])), xt)
+        return out
+
+    def _to_z(self, x, trig, xt):
+        """Rows ``x`` to the axis frame: ``D = X^T Z(-beta) X Z(-alpha)`` (``trig`` =
+        cos/sin of ``|m| alpha`` and of ``|m| beta``)."""
+        ca, sa, cb, sb = trig
+        x = self._zrot(x, ca, -sa) @ xt
+        return self._zrot(x, cb, -sb) @ self._x
+
+    def _from_z(self, x, trig, xt):
+        """Rows ``x`` back from the axis frame: ``D^T = Z(alpha) X^T Z(beta) X``."""
+        ca, sa, cb, sb = trig
+        x = self._zrot(x @ xt, cb, sb) @ self._x
+        return self._zrot(x, ca, sa)
 
     def _trig(self, angle):
         """``cos(|m| angle)``, ``sin(|m| angle)`` per coefficient, shape ``(R, n*n)``."""
@@ -205,7 +249,7 @@ class ScalingTable:
 
 
 #: Receivers per pass of :meth:`ScalingTable.apply` (bounds the temporaries).
-APPLY_CHUNK = 8192
+APPLY_CHUNK = 1024
 
 
 def rotation_to_z(axes) -> np.ndarray:
