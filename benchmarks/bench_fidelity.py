@@ -516,6 +516,55 @@ def skinned_quadrature(name: str, spec: dict, *, n_ref: int = 3200) -> list[dict
     return rows
 
 
+def skinned_interpolation(name: str, spec: dict, *, n_ref: int = 3200,
+                          times=(0.2, 0.45, 0.7), fps: float = 24.0) -> list[dict]:
+    """Would tracing every k-th frame do?  The worst case of linear interpolation.
+
+    At each time, the traced visibility (the default 32 rays) against the mean of
+    the traces ``k/2`` frames before and after (at ``fps``): the midpoint between
+    two traced frames, where interpolation is furthest from a trace.  Order-4
+    radiance of the character's own vertices vs the ray tracer at ``n_ref``.
+    """
+    import trimesh
+
+    from shtools.reference import raytrace_visibility, relative_rmse
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import pose_frame, prepare_scene
+    from shtools.scene.scene import load_scene
+    from shtools.scene.transfer import traced_self_visibility
+
+    scene = load_scene(_skinned_scene_file(name, spec, "old", SKINNED_VARIANTS["old"]))
+    prepared = prepare_scene(scene)
+    own = slice(len(prepared.receivers[0].vertices), None)
+    shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
+
+    def traced(t):
+        state = pose_frame(prepared, t, with_meshes=True)
+        return traced_self_visibility(state.vertices[own], state.normals[own],
+                                      state.blocker_meshes[0][1], 4, 32)
+
+    got: dict = {}
+    for t in times:
+        state = pose_frame(prepared, t, with_meshes=True)
+        v, n = state.vertices[own], state.normals[own]
+        mv, mf = state.blocker_meshes[0]
+        ref = raytrace_visibility(v, n, [trimesh.Trimesh(mv, mf, process=False)], 4, n_ref)
+        r_ref = shader.shade(ref, v, n, prepared.env_sh, state.lights)
+        got.setdefault(1, []).append((traced(t), r_ref, v, n, state.lights))
+        for k in (2, 4, 8):
+            dt = 0.5 * k / fps
+            got.setdefault(k, []).append((0.5 * (traced(t - dt) + traced(t + dt)), r_ref, v, n,
+                                          state.lights))
+    rows = []
+    for k, items in got.items():
+        r = np.concatenate([shader.shade(g, v, n, prepared.env_sh, lights)
+                            for g, _, v, n, lights in items])
+        ref = np.concatenate([r_ref for _, r_ref, *_ in items])
+        rows.append({"scene": name, "traced every k-th frame (24 fps), midpoint": k,
+                     "radiance vs 3,200": relative_rmse(r, ref)})
+    return rows
+
+
 def _skinned_scene_file(name: str, spec: dict, variant: str, settings: str) -> Path:
     path = CACHE / f"{name}.skinned.{variant.replace(' ', '')}.toml"
     path.write_text(f'[settings]\norder = 4\nframes = {spec["frames"]}\n'
@@ -602,6 +651,7 @@ def skinned_main(names) -> int:
         quad += skinned_quadrature(name, spec)
         print(f"\n### Per-frame tracing quadrature, {name} (load {os.getloadavg()[0]:.2f} on "
               f"{os.cpu_count()} cores)\n\n" + _markdown(quad[-18:]), flush=True)
+        print("\n" + _markdown(skinned_interpolation(name, spec)), flush=True)
         a, t = evaluate_skinned(name, spec)
         acc += a
         tim += t
