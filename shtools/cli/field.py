@@ -53,7 +53,9 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     points is projected to SH (rays outside the cone of the bounding sphere are
     not cast: they are unoccluded), the shell is reduced while eq. (1) stays
     below --threshold at every initial sample, and the kept samples and their
-    SH logs are quantized.
+    SH logs are quantized.  The object's self-visibility O_v on its own vertices
+    (--self-order) is stored too: a bake with `blocker = { field = ... }` then
+    shadows the object itself with its real mesh, with no other asset.
     """
     from shtools.data_formats.field import write_field
     from shtools.errors import InputError
