@@ -376,9 +376,8 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     for label, text in texts.items():
         for method in methods:
             variant = f"{label}, {method}"
-            # the settings this comparison was measured with (wave 2's defaults)
-            v = dict(VARIANTS["wave2"])
-            v["settings"] += f'method = "{method}"\nprocesses = 1\n'
+            # the current defaults; only the method and one runtime process set
+            v = {"blocker": "tree", "settings": f'method = "{method}"\nprocesses = 1\n'}
             scene = load_scene(_scene_file(f"{name}.{label.split()[0]}.{method}",
                                            {**spec, "text": text}, "new", v))
             preps[variant] = (scene, prepare_scene(scene))
@@ -386,7 +385,8 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     for _ in range(REPEATS):
         for variant, (scene, prepared) in preps.items():
             c0 = time.process_time()
-            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline"))
+            frames = list(bake_scene(scene, prepared=prepared, scheduler="inline",
+                                     processes=1))
             cpu = 1e3 * (time.process_time() - c0) / len(frames)
             baked[variant] = [f.radiance.astype(np.float64) for f in frames]
             ms = 1e3 * float(np.mean([f.seconds for f in frames][1:] or frames[0].seconds))
@@ -414,8 +414,9 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     for variant in preps:
         row = {"scene": name, "blocker, method": variant}
         for obj_name, e in acc.items():
-            row[f"{obj_name} vs mesh"] = relative_rmse(np.concatenate(e[variant]),
-                                                       np.concatenate(e["ref"]))
+            role = "ground" if obj_name == "ground" else "character"
+            row[f"{role} vs mesh"] = relative_rmse(np.concatenate(e[variant]),
+                                                   np.concatenate(e["ref"]))
         row["ms/frame wall"], row["ms/frame CPU"] = times[variant]
         rows.append(row)
     return rows
@@ -690,6 +691,7 @@ def main(argv=None) -> int:
         rows = []
         for name, spec in scenes(False, args.scene or ["cesiumman", "fox"]).items():
             rows += deformable_variants(name, spec, n_dirs=n_dirs, subset=subset)
+            print(_markdown(rows), flush=True)
         load = os.getloadavg()
         print(f"\n### Skinned characters: bound spheres vs deformable shadow field (order 4, "
               f"{n_dirs} directions, {subset} vertices per receiver and frame; one runtime "
