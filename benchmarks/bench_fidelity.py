@@ -43,6 +43,7 @@ several direction counts, accuracy and frame time (wall and CPU) side by side.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import os
 import subprocess
@@ -276,13 +277,16 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants: dict,
             times[variant] = min(times.get(variant, ms), ms)
     # the references pose the scene with sphere trees (for the sphere-union split) and
     # the probe as given, whatever the variants do
-    scene = load_scene(_scene_file(name, spec, "reference", VARIANTS["old"]))
+    ref_scene = _scene_file(name, spec, "reference", VARIANTS["old"])
+    scene = load_scene(ref_scene)
     prepared = prepare_scene(scene)
     preps["reference"] = (scene, prepared)
     # the references are shaded raw (no de-ringing): what order-4 shading of the real
     # visibility gives, negative lobes included
     shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
-    ref_path = CACHE / f"{name.replace('+', '_')}.ref{n_dirs}x{subset}.npz"
+    # keyed by the scene text too: another placement or mesh is another reference
+    digest = hashlib.sha256(ref_scene.read_bytes()).hexdigest()[:12]
+    ref_path = CACHE / f"{name.replace('+', '_')}.ref{n_dirs}x{subset}.{digest}.npz"
     refs = dict(np.load(ref_path)) if ref_path.exists() else {}
     rng = np.random.default_rng(0)
     offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
