@@ -20,7 +20,9 @@ in-process row and its fraction of the ideal ``min(workers, cores)``;
 ``overhead``, the busy worker time per frame beyond the in-process frame
 (``wall x min(workers, cores) / frames``), as a fraction of a frame.
 
-Wall clocks need an idle machine.  So that a busy one still says something,
+Wall clocks need an idle machine (on a busy one, a row with more processes also
+gets a bigger share of the cores from the other users' processes, so its
+speed-up can even exceed the ideal).  So that a busy machine still says something,
 CPU is counted too, per process, between the first and the last frame (set-up
 excluded): ``cpu ms/f`` is the CPU of every process of the row (the caller --
 writer, Dask client, scheduler and nannies: ``caller`` -- plus the workers) per

@@ -71,7 +71,10 @@ LOCAL_NAMES = ("inline", "processes", "local")
 #: (every 100 ms) are slowed to once a second.  These periodic callbacks had
 #: cost the scheduler/nanny loop and each worker's loop about 3x more CPU per
 #: frame, on cores the frames need (measured per thread, docs/scale-out.md).
+#: The active memory manager (every 2 s) is off: its one policy drops extra
+#: replicas, and the only replicated data is the shared state broadcast on purpose.
 EMBEDDED_CLUSTER_CONFIG = {
+    "distributed.scheduler.active-memory-manager.start": False,
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",
     "distributed.admin.tick.interval": "1s",
@@ -301,8 +304,6 @@ class TaskPool:
             _SHARED = None
 
     def _dask(self, fn, items, shared_ref, window):
-        from distributed import wait
-
         client = self.client
         items = iter(items)
         pending: collections.deque = collections.deque()
@@ -321,7 +322,6 @@ class TaskPool:
                 if not pending:
                     return
                 future = pending.popleft()
-                wait([future])
                 result, worker, seconds, cpu = future.result()
                 future.release()
                 self._record(worker, seconds, cpu)

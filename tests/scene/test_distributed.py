@@ -209,6 +209,27 @@ def test_dask_frame_parts_identical_bytes_for_1_2_3_workers(scene_file, split_ev
 @pytest.mark.slow
 @DASK_LEAKS[0]
 @DASK_LEAKS[1]
+def test_cli_split_frames_runs_parts_on_the_cluster(scene_file, split_every_frame, run_cli,
+                                                    tmp_path):
+    import json
+
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    want, out = tmp_path / "inline.h5", tmp_path / "cli.h5"
+    code, _, err = run_cli("bake", scene_file, "-o", want, "--frames", "0:3", "--workers", 1,
+                           "--processes", 1)
+    assert code == 0, err
+    code, stdout, err = run_cli("bake", scene_file, "-o", out, "--frames", "0:3",
+                                "--scheduler", "local", "--workers", 2, "--split-frames",
+                                "--json")
+    assert code == 0, err
+    pool = json.loads(stdout)["pool"]
+    assert sum(w["tasks"] for w in pool["per_worker"].values()) > 3  # 3 frames, in parts
+    assert filecmp.cmp(out, want, shallow=False)
+
+
+@pytest.mark.slow
+@DASK_LEAKS[0]
+@DASK_LEAKS[1]
 def test_dask_moving_receivers_identical_bytes(tmp_path):
     pytest.importorskip("distributed", reason="the distributed extra is not installed")
     scene = tmp_path / "moving.toml"
