@@ -99,6 +99,23 @@ def test_setup_runs_once_per_worker_before_its_tasks(scheduler, workers):
     assert len({pid for pid, _ in first}) <= workers
 
 
+def _failing_setup(shared):
+    raise ValueError(f"cannot set up {shared}")
+
+
+def _task_with_failing_setup(shared, item):
+    _failing_setup(shared)  # a task repeats its (cached) set-up, as the bake's do
+
+
+@pytest.mark.parametrize("scheduler, workers", [("inline", 1), (None, 2)])
+def test_failing_setup_reports_its_own_error(scheduler, workers):
+    """Not "a worker died": the set-up's own error, from the set-up or the first task."""
+    with pytest.raises(ValueError, match="cannot set up state"), \
+            task_pool(scheduler, workers) as pool:
+        list(pool.map_ordered(_task_with_failing_setup, range(4), shared="state",
+                              setup=_failing_setup))
+
+
 def test_bad_scheduler_values():
     with pytest.raises(InputError, match="neither 'local'"), task_pool("no-such-file.json"):
         pass
