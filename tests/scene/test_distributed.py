@@ -247,13 +247,19 @@ def test_cli_split_frames_runs_parts_on_the_cluster(scene_file, split_every_fram
 @pytest.mark.slow
 @DASK_LEAKS[0]
 @DASK_LEAKS[1]
-def test_dask_moving_receivers_identical_bytes(tmp_path):
+def test_dask_frames_grouped_in_tasks_moving_receivers_identical_bytes(tmp_path):
+    """17 frames on 1 worker: tasks of 2 frames (the last of 1), float32 poses back."""
     pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    from shtools.scene.bake import frames_per_task
+
     scene = tmp_path / "moving.toml"
-    scene.write_text(scene_text(order=3, frames=4, moving_ground=True))
+    scene.write_text(scene_text(order=2, frames=17, moving_ground=True))
     inline, dask = tmp_path / "inline.h5", tmp_path / "dask.h5"
     bake_to_file(load_scene(scene), inline, scheduler="inline", processes=1)
-    bake_to_file(load_scene(scene), dask, scheduler="local", workers=2)
+    summary = bake_to_file(load_scene(scene), dask, scheduler="local", workers=1)
+    assert frames_per_task("dask", 17, 1) == 2
+    assert sum(w["tasks"] for w in summary["pool"]["per_worker"].values()) == 9
+    assert summary["frames"] == 17
     assert filecmp.cmp(dask, inline, shallow=False)
 
 
