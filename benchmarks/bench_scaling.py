@@ -9,12 +9,18 @@ Four tables, side by side in one run:
    receivers like the seed's Table 1 planes): relative RMSE of
    per-vertex radiance against ray tracing of the posed mesh, on the ground and
    on the character itself, for (a) the deformable shadow field (re-sampled on
-   the bounding sphere every frame, scaled per receiver; log space with one exp,
-   and product space) and (b) today's bound sphere set (``spheres bind``: a
-   variational fit on the rest mesh, bound to the skin, radii grown to cover the
-   animation), with the visibility time per frame of each.  The cone model's
-   half-angle alpha is swept, and the log/product commutation difference of the
-   field is reported.
+   the bounding sphere every frame, scaled per receiver; log space with one exp
+   at several samplings and both logs, and product space) and (b) today's bound
+   sphere set (the 48-sphere ``spheres fit`` + ``spheres bind`` sets of
+   ``bench_fidelity``, cached in ``build/bench_fidelity``), through the runtime
+   at its defaults in one process.  The character's own vertices are also given
+   other self paths (nothing, the local visibility ``g_p``, the sphere set, a
+   per-frame ray-traced self-visibility), combined with the field on the
+   ground in log space.  Frame time = the sum of the per-frame components
+   (sampling, lookups, self path, one exp), wall and CPU (this process), with
+   the components listed; ratios are of CPU time.  The cone model's
+   half-angle alpha is swept, and the log/product commutation difference of
+   the field is reported.
 3. **Mid-range lighting** -- a teapot on a plane inside an environment sphere
    (the seed's Fig. 11 set-up, probe ``uffizi.hdr``): radiance error against
    per-vertex ray-traced environment lighting (rays hit the sphere, the probe --
@@ -198,11 +204,15 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     difference (mean, max) of the field.
     """
     from shtools.fields.deformable import sample_deformable_field
-    from shtools.fields.self_visibility import self_visibility, self_visibility_log
-    from shtools.runtime import SphereBlocker
-    from shtools.runtime.deformable import deformable_visibility
+    from shtools.fields.self_visibility import (
+        HEMISPHERE_DIRECTIONS,
+        self_visibility,
+        self_visibility_log,
+    )
+    from shtools.runtime import SelfVisibility, SphereBlocker
+    from shtools.runtime.deformable import DeformableBlocker, deformable_visibility
     from shtools.runtime.spheres import pose_bound_spheres
-    from shtools.scene.transfer import posed_local_log
+    from shtools.scene.transfer import posed_local_log, traced_self_visibility
     from shtools.sh import exp as sh_exp
     from shtools.sh import log as sh_log
 
@@ -222,6 +232,24 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     g = put("spheres", _timed2(lambda: rt.visibility(pts, fr.nrm, [spheres_blocker()],
                                                      clusters=clusters["all"])))
     err.setdefault("spheres", []).append(fr.errors(g))
+    # the scenes' defaults (issue 16): the character's posed mesh traced on its own
+    # vertices every frame, multiplied in after the exp, its own blocker skipped there
+    own = slice(n_g, None)
+
+    def with_traced(blocker):
+        traced = traced_self_visibility(fr.verts, fr.nrm[n_g:], model.faces, ORDER,
+                                        HEMISPHERE_DIRECTIONS)
+        return rt.visibility(pts, fr.nrm, [blocker()], clusters=clusters["all"],
+                             self_visibility=[SelfVisibility(None, own, blocker=0,
+                                                             visibility=traced)])
+
+    g = put("default spheres", _timed2(lambda: with_traced(spheres_blocker)))
+    err.setdefault("default spheres", []).append(fr.errors(g))
+    _, layout0, rays0, method0 = SAMPLINGS[0]
+    g = put("default field", _timed2(lambda: with_traced(lambda: DeformableBlocker(
+        sample_deformable_field(fr.verts, model.faces, acc, layout=layout0, rays=rays0,
+                                log_method=method0), tables[45.0]))))
+    err.setdefault("default field", []).append(fr.errors(g))
     # components of the combined paths
     logs = {}
     for label, layout, rays, method in SAMPLINGS:
@@ -304,16 +332,23 @@ def _frame_time(secs, parts):
 
 def _character_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
     """Table rows of one character: every (ground, self) combination with its frame time."""
+    from shtools.fields.self_visibility import HEMISPHERE_DIRECTIONS
+
     rows = []
     sph = _frame_time(secs, ["spheres"])
 
-    def row(label, key, parts):
+    def row(label, key, parts, base=sph):
         e = np.mean(err[key], axis=0)
         wall, cpu = _frame_time(secs, parts)
         rows.append(f"| {name} | {n_v} | {label} | {100 * e[0]:.1f} % | {100 * e[1]:.1f} % | "
-                    f"{wall:.3f} | {cpu:.3f} | {cpu / sph[1]:.2f}x |")
+                    f"{wall:.3f} | {cpu:.3f} | {cpu / base[1]:.2f}x |")
 
     row(f"bound sphere set ({SPHERES}) / the same", "spheres", ["spheres"])
+    row(f"**scene default**: bound sphere set ({SPHERES}) / traced posed mesh "
+        f"({HEMISPHERE_DIRECTIONS} rays, after the exp)", "default spheres", ["default spheres"])
+    row(f"**scene default**: field, log, {SAMPLINGS[0][0]} / traced posed mesh "
+        f"({HEMISPHERE_DIRECTIONS} rays) (ratio to the sphere set's scene default)",
+        "default field", ["default field"], base=_frame_time(secs, ["default spheres"]))
     first = SAMPLINGS[0][0]
     for label, *_ in SAMPLINGS:
         base = [f"sample {label}", f"ground {label}", "exp"]

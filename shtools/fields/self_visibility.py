@@ -274,6 +274,30 @@ def self_visibility_log(g, *, floor: float = LOG_FLOOR, eps: float | None = None
     return sh_log(lifted, "eigen", **kwargs)
 
 
+def self_visibility_log_at(g, order: int, *, floor: float = LOG_FLOOR) -> np.ndarray:
+    """The log of stored visibility at another SH order, shape ``(V, order*order)`` float32.
+
+    A log is order-specific (a truncated order-8 log is not the order-6 log), so a
+    visibility stored at a higher order is truncated *before* the log; one stored
+    at a lower order is logged at its own order and zero above.
+
+    Parameters
+    ----------
+    g : array_like, shape (V, m*m)
+        Projected visibility at order ``m``.
+    order : int
+        The order of the result (the accumulation order).
+    floor : float
+        See :func:`self_visibility_log`.
+    """
+    g = np.asarray(g, dtype=np.float64)
+    m = math.isqrt(g.shape[-1])
+    k = min(m, order) ** 2
+    out = np.zeros((g.shape[0], order * order), dtype=np.float32)
+    out[:, :k] = self_visibility_log(g[:, :k], floor=floor)
+    return out
+
+
 def mesh_transfer(mesh, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
                   floor: float = LOG_FLOOR, normals=None, max_distance: float | None = None,
                   progress: Callable[[int, int], None] | None = None

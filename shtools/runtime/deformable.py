@@ -143,11 +143,16 @@ def interpolate_samples(samples, layout, directions) -> np.ndarray:
 
 
 def _local_samples(field: DeformableField, table: ScalingTable, log: bool) -> np.ndarray:
-    """The field's samples in their axis frames ``(S, n*n)`` (made once per field)."""
+    """The field's samples in their axis frames ``(S, n*n)`` float32 (made once per field).
+
+    Only the table's SH rotations are used, which depend on its order alone, so
+    the cache holds for every table of the field's order (any alpha).
+    """
     key = "log" if log else "vis"
     if key not in field._local:
         samples = field.log_visibility if log else field.visibility
-        field._local[key] = table.to_axis_frame(samples, -layout_directions(*field.layout))
+        local = table.to_axis_frame(samples, -layout_directions(*field.layout))
+        field._local[key] = local.astype(np.float32)
     return field._local[key]
 
 
@@ -159,21 +164,33 @@ def interpolate_local(field: DeformableField, table: ScalingTable, directions, *
     nearest ring's world samples, expressed in the receiver's own frame (so the
     world-frame result is continuous across the poles).
 
+    Parameters
+    ----------
+    field : DeformableField
+    table : ScalingTable
+        Of the field's order (its SH rotations give the axis frames).
+    directions : array_like, shape (V, 3)
+        Unit directions from the field's centre to the receivers.
+    log : bool
+        The log samples, or the visibility samples.
+
     Returns
     -------
-    ndarray, shape (V, n*n)
+    ndarray, shape (V, n*n) float32
+        (the runtime accumulates logs in float32; half the memory traffic)
     """
     rings, az = field.layout
     world = field.log_visibility if log else field.visibility
     local = _local_samples(field, table, log).reshape(rings, az, -1)
-    pad = np.zeros((1, az, local.shape[2]))
+    pad = np.zeros((1, az, local.shape[2]), dtype=np.float32)
     grid = np.concatenate([pad, local, pad])
     i0, j0, j1, tu, tv = _bilinear(field.layout, directions)
+    tu, tv = tu.astype(np.float32), tv.astype(np.float32)
     out = _gather(grid, i0, j0, j1, tu, tv)
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     for cap, ring, weight in ((i0 == 0, 0, 1 - tu), (i0 == rings, rings - 1, tu)):
         if cap.any():
-            mean = world.reshape(rings, az, -1)[ring].mean(axis=0)
+            mean = world.reshape(rings, az, -1)[ring].mean(axis=0).astype(np.float32)
             pole = table.to_axis_frame(np.broadcast_to(mean, (int(cap.sum()), mean.size)),
                                        -d[cap])
             out[cap] += weight[cap] * pole

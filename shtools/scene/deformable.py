@@ -14,11 +14,12 @@ sample, default ``[16, 32]`` = 512), ``log`` (``"naive"``, the default, or
 measured the same accuracy on Fox and CesiumMan, and the eigen logs of the 384
 samples cost more than the rest of the field's frame).
 
-The object's own vertices: where the object has a self-visibility that names
-its blocker (:class:`shtools.runtime.SelfVisibility`), the field is not
-evaluated on its rows; otherwise they get the field's ``k < 1`` scaling (plus
-the local visibility ``g_p`` when that is on), the most accurate of those
-measured without a per-frame self-visibility.
+The object's own vertices: by default its posed mesh is traced there every
+frame (``self_visibility``; :mod:`shtools.scene.transfer`) and that
+:class:`shtools.runtime.SelfVisibility` names this blocker, so the runtime does
+not evaluate the field on those rows (the cone model's ``k < 1`` is far less
+accurate on a character's own limbs, ``benchmarks/bench_scaling.py``); with
+``self_visibility = false`` they get the field's ``k < 1`` scaling.
 """
 
 from __future__ import annotations

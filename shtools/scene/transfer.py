@@ -54,6 +54,11 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
                     ) -> tuple[np.ndarray, Path | None]:
     """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32.
 
+    From the first source that applies: the ``transfer`` asset the scene names
+    (``self_visibility = "x.transfer.h5"``); the O_v stored in the object's
+    shadow-field asset (``blocker = { field = ... }``, :mod:`shtools.scene.field_blocker`);
+    zero for a convex mesh; ray traced now.
+
     Parameters
     ----------
     obj : PreparedObject
@@ -67,7 +72,7 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     -------
     log : ndarray, shape (V, acc_order^2) float32
     path : Path or None
-        The ``transfer`` asset read (for the bake's inputs), None when computed.
+        The ``transfer`` asset read (for the bake's inputs), None otherwise.
     """
     import trimesh
 
@@ -75,6 +80,9 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     size = acc_order * acc_order
     if isinstance(source, str | Path):
         return _from_asset(obj, Path(source), acc_order), Path(source)
+    stored = getattr(obj.blocker_data, "self_log", None)
+    if stored is not None:  # the O_v of the object's field asset (already an input)
+        return stored, None
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if is_convex(obj.vertices, obj.faces):
         return np.zeros((len(obj.vertices), size), dtype=np.float32), None
@@ -109,7 +117,7 @@ def is_convex(vertices, faces) -> bool:
 
 def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
     from shtools.data_formats.transfer import read_transfer
-    from shtools.fields.self_visibility import self_visibility_log
+    from shtools.fields.self_visibility import self_visibility_log_at
 
     t = read_transfer(path)
     name = obj.spec.name
@@ -127,10 +135,8 @@ def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
                          path)
     if t.order == acc_order:
         return t.log_visibility
-    # a log is order-specific: truncate the visibility, then take its log at this order
-    floor = float(t.parameters.get("floor", 0.0))
-    vis = t.visibility[:, :acc_order * acc_order].astype(np.float64)
-    return self_visibility_log(vis, floor=floor).astype(np.float32)
+    return self_visibility_log_at(t.visibility, acc_order,
+                                  floor=float(t.parameters.get("floor", 0.0)))
 
 
 #: Ray length of the local visibility of skinned objects, relative to the rest mesh's

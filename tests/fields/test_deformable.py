@@ -107,7 +107,8 @@ def test_lookup_at_the_samples_scales_each_sample_about_its_axis(posed_tube, con
     for k in (0.4, 1.0, 2.5):
         got = deformable_visibility(field, cone_table, field.center + k * field.radius * w)
         want = cone_table.apply(field.visibility, np.full(len(w), k), -w)
-        np.testing.assert_allclose(got, want, atol=1e-12)
+        # the lookup runs in float32 (as the runtime's log sum): ~1e-6 of sqrt(4 pi)
+        np.testing.assert_allclose(got, want, atol=2e-5)
 
 
 def test_lookup_is_continuous_across_the_poles(posed_tube, cone_table):
