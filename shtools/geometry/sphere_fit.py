@@ -180,11 +180,16 @@ class Solid:
     neighbors : ndarray, shape (P, k), int
     cover : ndarray, shape (C, 3)
         Every point the final spheres must contain (samples and vertices).
+    cover_tree : scipy.spatial.cKDTree
+        Of ``cover``.
     volume : float
     diag : float
     evaluations : int
         Outside-volume evaluations of single spheres by the inner loop so far
         (a radial profile counts once): a deterministic measure of the work.
+    sample_terms : int
+        Flux-sample terms summed by the centre searches so far (one sample
+        for one candidate centre): the deterministic measure of their cost.
     recentred : dict
         Results of :func:`_recenter` by (start, step, points) digest.
     """
@@ -196,9 +201,11 @@ class Solid:
     points: np.ndarray
     neighbors: np.ndarray
     cover: np.ndarray
+    cover_tree: cKDTree
     volume: float
     diag: float
     evaluations: int = 0
+    sample_terms: int = 0
     recentred: dict = field(default_factory=dict)
 
 
@@ -272,7 +279,7 @@ def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | N
                                                          seed=seed + 2)[0], dtype=np.float64)
     cover = np.vstack([points, v, even])
     return Solid(mesh, evaluator, flux, surface, points, np.asarray(nb)[:, 1:], cover,
-                 float(volume), diag)
+                 cKDTree(cover), float(volume), diag)
 
 
 def fit_spheres(
@@ -612,6 +619,14 @@ _COMPASS = np.vstack([np.eye(3), -np.eye(3)])
 #: reach POWELL_XTOL and the rest allow moves.
 COMPASS_ITERATIONS = 18
 
+#: A compass pass keeps in its exact sum the samples within the current radius
+#: plus NEAR_REACH steps of the centre (a move of one step changes the radius
+#: and the distance by at most one step each; the rest allow a few more moves
+#: before the far field's first-order expansion is re-made); the rest join the
+#: far field once fewer than KEEP_FRACTION of the samples remain.
+NEAR_REACH = 4.0
+KEEP_FRACTION = 0.8
+
 
 def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.ndarray):
     """Move every centre within its box ``p0 ± delta`` to minimise V(S_i - T), the
@@ -663,9 +678,10 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
     near = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
     near_starts = np.concatenate([[0], np.cumsum([len(ix) for ix in lists])])
     near_owner = np.repeat(np.arange(m), np.diff(near_starts))
-    # far field about p0: all samples minus the near ones, spheres in chunks
-    g0 = np.empty(m)
-    grad = np.empty((m, 3))
+    # far field about p0: all samples minus the near ones, spheres in chunks;
+    # Σ_far s_k/ρ_k³ ≈ far_c + far_g · e for a centre p0 + e
+    far_c = np.empty(m)
+    far_g = np.empty((m, 3))
     per = max(1, 2_000_000 // max(len(flux.points), 1))
     for a in range(0, m, per):
         b = min(a + per, m)
@@ -676,52 +692,100 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
         far[near_owner[sel] - a, near[sel]] = False
         inv3 = np.where(far, 1.0 / np.maximum(rho2, 1e-300) ** 1.5, 0.0)
         sk = np.einsum("mkj,kj->mk", d, flux.q)
-        g0[a:b] = np.sum(sk * inv3, axis=1)
-        grad[a:b] = (-inv3 @ flux.q
-                     + 3.0 * np.einsum("mk,mkj->mj", sk * inv3 / np.maximum(rho2, 1e-300), d))
+        far_c[a:b] = np.sum(sk * inv3, axis=1)
+        far_g[a:b] = (-inv3 @ flux.q
+                      + 3.0 * np.einsum("mk,mkj->mj", sk * inv3 / np.maximum(rho2, 1e-300), d))
     # near samples and hull points relative to p0: a compass move along axis
     # k by t changes |y|² by -2 t y_k + t² and y·q by -t q_k, so the six
     # candidates of every sphere cost a few elementwise passes
     xn = flux.points[near] - p0[near_owner]
     qn = flux.q[near]
+    own = near_owner
     hr = hull - p0[hull_owner]
-    segments = scipy.sparse.csr_matrix(
-        (np.ones(len(near)), np.arange(len(near)), near_starts), shape=(m, len(near)))
-    q6 = np.hstack([qn, -qn])
+    hown = hull_owner
 
-    def outside(e: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """V(S - T) at centres ``p0 + e`` (``e (M, 3)``), shape (M,), and at
-        their six axis moves by ``h (M,)``, shape (M, 6)."""
-        y = xn - e[near_owner]
-        yh = hr - e[hull_owner]
-        t = h[near_owner, None]
-        th = h[hull_owner, None]
-        a = np.einsum("ij,ij->i", y, y)[:, None]
-        ah = np.einsum("ij,ij->i", yh, yh)[:, None]
-        # column 0: no move; 1-6: +x, +y, +z, -x, -y, -z
-        rho2 = np.maximum(np.hstack([a, a - 2.0 * t * np.hstack([y, -y]) + t * t]), 1e-300)
-        sn = np.einsum("ij,ij->i", y, qn)[:, None] - np.hstack([np.zeros((len(y), 1)), t * q6])
-        r2 = np.maximum.reduceat(np.hstack([ah, ah - 2.0 * th * np.hstack([yh, -yh]) + th * th]),
-                                 hull_starts[:-1], axis=0)
-        r3 = np.maximum(r2, 0.0) ** 1.5
-        inter = segments @ (sn * np.minimum(1.0, r3[near_owner] / (rho2 * np.sqrt(rho2))))
-        moves = e[:, None, :] + h[:, None, None] * np.vstack([np.zeros(3), _COMPASS])
-        inter += r3 * (g0[:, None] + np.einsum("mj,mdj->md", grad, moves))
-        solid.evaluations += 7 * m
-        f = FOUR_PI / 3.0 * r3 - inter
-        return f[:, 0], f[:, 1:]
+    def segment_sums(owner: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Sums of ``values (L, C)`` per sphere, ``owner (L,)`` sorted -> (M, C)."""
+        starts = np.searchsorted(owner, np.arange(m + 1))
+        seg = scipy.sparse.csr_matrix((np.ones(len(owner)), np.arange(len(owner)), starts),
+                                      shape=(m, len(owner)))
+        return seg @ values
 
-    # compass search in units of delta, inside the box [-1, 1]^3
+    # value at p0
+    s0 = np.einsum("ij,ij->i", xn, qn)
+    w = np.minimum(r0[own] ** 2 / np.maximum(np.einsum("ij,ij->i", xn, xn), 1e-300), 1.0)
+    r3 = r0**3
+    f0 = FOUR_PI / 3.0 * r3 - (segment_sums(own, (s0 * w * np.sqrt(w))[:, None])[:, 0]
+                               + r3 * far_c)
+    solid.evaluations += m
+    solid.sample_terms += len(own)
+    best = f0.copy()
+    r2u = r0**2  # squared radius at the current centre
+
+    # compass search in units of delta, inside the box [-1, 1]^3; each pass
+    # evaluates the six moves of the spheres still searching, over the
+    # samples within their reach (the others are dropped into the far field)
     u = np.zeros((m, 3))
     step = np.full(m, 0.5)
-    f0 = None
     for _ in range(COMPASS_ITERATIONS):
         active = step >= POWELL_XTOL
         if not np.any(active):
             break
-        here, f = outside(delta[:, None] * u, delta * step)
-        if f0 is None:
-            f0 = best = here
+        e = delta[:, None] * u
+        h = delta * step
+        y = xn - e[own]
+        a = np.einsum("ij,ij->i", y, y)
+        # samples a move of this pass (or the next few) cannot bring inside
+        # the sphere, and every sample of a sphere that has converged, leave
+        # the exact sum: the first ones enter the far field through a
+        # first-order expansion about the current centre
+        reach = np.sqrt(r2u) + NEAR_REACH * h
+        keep = active[own] & (a <= (reach * reach)[own])
+        if keep.sum() < KEEP_FRACTION * len(keep):
+            drop = ~keep & active[own]
+            yd, qd, od = y[drop], qn[drop], own[drop]
+            inv2 = 1.0 / np.maximum(a[drop], 1e-300)
+            inv3 = inv2 * np.sqrt(inv2)
+            sd = np.einsum("ij,ij->i", yd, qd)
+            g = -qd * inv3[:, None] + (3.0 * sd * inv3 * inv2)[:, None] * yd
+            gsum = np.stack([np.bincount(od, weights=g[:, k], minlength=m) for k in range(3)],
+                            axis=1)
+            far_c += np.bincount(od, weights=sd * inv3, minlength=m) - np.sum(gsum * e, axis=1)
+            far_g += gsum
+            xn, qn, own, y, a = xn[keep], qn[keep], own[keep], y[keep], a[keep]
+            hkeep = active[hown]
+            hr, hown = hr[hkeep], hown[hkeep]
+        # columns: +x, +y, +z, -x, -y, -z
+        t = h[own]
+        ty = (2.0 * t)[:, None] * y
+        base = (a + t * t)[:, None]
+        rho2 = np.concatenate([base - ty, base + ty], axis=1)
+        np.maximum(rho2, 1e-300, out=rho2)
+        sq = np.einsum("ij,ij->i", y, qn)[:, None]
+        tq = t[:, None] * qn
+        sn = np.concatenate([sq - tq, sq + tq], axis=1)
+        yh = hr - e[hown]
+        th = h[hown]
+        tyh = (2.0 * th)[:, None] * yh
+        baseh = (np.einsum("ij,ij->i", yh, yh) + th * th)[:, None]
+        starts = np.searchsorted(hown, np.arange(m + 1))
+        present = starts[:-1] < starts[1:]
+        r2 = np.zeros((m, 6))
+        r2[present] = np.maximum.reduceat(np.concatenate([baseh - tyh, baseh + tyh], axis=1),
+                                          starts[:-1][present], axis=0)
+        np.maximum(r2, 0.0, out=r2)
+        # min(1, r³/ρ³) = min(1, r²/ρ²)^1.5
+        w = r2[own] / rho2
+        np.minimum(w, 1.0, out=w)
+        w *= np.sqrt(w)
+        w *= sn
+        r3 = r2 * np.sqrt(r2)
+        moves = e[:, None, :] + h[:, None, None] * _COMPASS  # (M, 6, 3)
+        inter = segment_sums(own, w) + r3 * (far_c[:, None] + np.einsum("mj,mdj->md", far_g,
+                                                                          moves))
+        solid.evaluations += 6 * int(active.sum())
+        solid.sample_terms += 6 * len(own)
+        f = FOUR_PI / 3.0 * r3 - inter
         # moves that would leave the box are not taken
         cand = u[:, None, :] + step[:, None, None] * _COMPASS  # (M, 6, 3)
         f = np.where(np.all(np.abs(cand) <= 1.0, axis=-1), f, np.inf)
@@ -730,6 +794,7 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
         better = active & (fj < best - 1e-12 * np.abs(best))
         u[better] = cand[better, j[better]]
         best = np.where(better, fj, best)
+        r2u = np.where(better, r2[np.arange(m), j], r2u)
         step[active & ~better] *= 0.5
     centers = p0 + delta[:, None] * u
     for k, c, b, f in zip(keys, centers, best, f0, strict=True):
@@ -1087,68 +1152,75 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     E sums each sphere's outside volume, so a point already inside another
     sphere need not hold a radius up.  Largest spheres shrink first; each
     sphere keeps bounding the points only it covers, so the union still covers
-    every point.  With ``recenter``, Powell then moves each centre for its own
-    points.
+    every point.  With ``recenter``, the compass search then moves each centre
+    for its own points.  Each sphere visits only the cover points inside it (a
+    k-d tree query), not all of them: the cost is the points times the
+    spheres' overlap, not points x spheres.
     """
     pts = solid.cover
-    # distances through |p|² - 2 p·c + |c|² (one mat-mul instead of a (P, N, 3)
-    # temporary), about the points' mean to keep the cancellation small; the
-    # final cover step re-checks containment exactly
-    origin = pts.mean(axis=0)
-    pts = pts - origin
-    pp = np.einsum("ij,ij->i", pts, pts)
     slack = SHRINK_SLACK * solid.diag
-
-    def distances(c: np.ndarray) -> np.ndarray:
-        c = c - origin
-        return np.sqrt(np.maximum(pp[:, None] - 2.0 * (pts @ c.T) + np.sum(c * c, axis=-1), 0.0))
-
     centers = centers.copy()
     radii = radii.copy()
+    n = len(centers)
     order = np.argsort(-radii, kind="stable")
+
+    def members(idx: np.ndarray):
+        """Cover points inside spheres ``idx``: (points, owner sphere, distance),
+        grouped by sphere in the order of ``idx``."""
+        lists = solid.cover_tree.query_ball_point(centers[idx], radii[idx] + 2.0 * slack)
+        flat = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
+        owner = np.repeat(idx, [len(ix) for ix in lists])
+        dist = np.linalg.norm(pts[flat] - centers[owner], axis=1)
+        keep = dist <= radii[owner] + slack  # the same test as every later one
+        return flat[keep], owner[keep], dist[keep]
+
+    everyone = np.arange(n)
     for _ in range(rounds):
         before = (centers.copy(), radii.copy())
-        dist = distances(centers)  # (P, N)
-        inside = dist <= radii[None, :] + slack
-        count = inside.sum(axis=1)
+        flat, owner, dist = members(everyone)
+        starts = np.searchsorted(owner, np.arange(n + 1))
+        count = np.bincount(flat, minlength=len(pts))
+        alive = np.ones(len(flat), dtype=bool)
         for i in order:
-            own = inside[:, i] & (count == 1)
+            s, e = starts[i], starts[i + 1]
+            ix, d, a = flat[s:e], dist[s:e], alive[s:e]
+            own = a & (count[ix] == 1)
             if not np.any(own):
                 continue
-            radii[i] = float(dist[own, i].max())
-            lost = inside[:, i] & (dist[:, i] > radii[i] + slack)
-            count[lost] -= 1
-            inside[lost, i] = False
+            radii[i] = float(d[own].max())
+            lost = a & (d > radii[i] + slack)
+            count[ix[lost]] -= 1
+            a &= ~lost  # a view: updates alive
         if not recenter:
             break
         # all spheres at once, each for the points only it covers (disjoint sets)
-        owners = np.flatnonzero(count == 1)
-        owner_of = np.argmax(inside[owners], axis=1)
-        movers = [i for i in order if np.any(owner_of == i)]
-        if movers:
-            hulls = [hull_vertices(pts[owners[owner_of == i]]) + origin for i in movers]
-            movers = np.asarray(movers)
-            p0 = centers[movers]
-            p, fp, f0 = _recenter(solid, hulls, p0, CENTER_STEP * radii[movers] + 1e-3 * solid.diag)
+        mine = alive & (count[flat] == 1)
+        per = np.bincount(owner[mine], minlength=n)
+        movers = order[per[order] > 0]
+        if len(movers):
+            groups = np.split(flat[mine], np.cumsum(per)[:-1])
+            hulls = [hull_vertices(pts[groups[i]]) for i in movers]
+            p, fp, f0 = _recenter(solid, hulls, centers[movers],
+                                  CENTER_STEP * radii[movers] + 1e-3 * solid.diag)
             moved_ok = fp < f0
-            for k in np.flatnonzero(moved_ok):
-                i = movers[k]
-                centers[i] = p[k]
-                radii[i] = float(np.sqrt(np.max(np.sum((hulls[k] - p[k]) ** 2, axis=1))))
             if np.any(moved_ok):
                 changed = movers[moved_ok]
-                dist[:, changed] = distances(centers[changed])
-                covered = count > 0
-                inside[:, changed] = dist[:, changed] <= radii[changed] + slack
-                count = inside.sum(axis=1)
+                for k in np.flatnonzero(moved_ok):
+                    i = movers[k]
+                    centers[i] = p[k]
+                    radii[i] = float(np.sqrt(np.max(np.sum((hulls[k] - p[k]) ** 2, axis=1))))
                 # a point two moved spheres shared may have been left by both:
                 # the sphere that needs the least growth takes it back
-                lost = np.flatnonzero(covered & (count == 0))
+                was = np.isin(owner, changed) & alive
+                left = count.copy()
+                np.subtract.at(left, flat[was], 1)
+                new_flat, _, _ = members(changed)
+                np.add.at(left, new_flat, 1)
+                lost = np.unique(flat[was][left[flat[was]] == 0])
                 if len(lost):
-                    j = np.argmin(dist[lost] - radii, axis=1)
-                    np.maximum.at(radii, j, dist[lost, j])
-                    inside = dist <= radii + slack
-                    count = inside.sum(axis=1)
+                    d = np.linalg.norm(pts[lost, None, :] - centers[None, :, :], axis=-1)
+                    j = np.argmin(d - radii, axis=1)
+                    np.maximum.at(radii, j, d[np.arange(len(lost)), j])
         # a fixed point: no sphere moved or shrank noticeably this round
         moved = np.max(np.linalg.norm(centers - before[0], axis=1) + before[1] - radii)
         if moved <= SHRINK_TOLERANCE * solid.diag:
