@@ -74,7 +74,10 @@ MIN_POINTS = 2000
 MAX_POINTS = 8000
 
 #: Mesh vertices added to the surface points (a random subset beyond this).
-MAX_VERTEX_POINTS = 20_000
+#: The whole surface is covered at the end anyway (:func:`_cover`); these only
+#: steer the clustering, and the flood fill costs points x N per round
+#: (dragon N = 64: 20 000 of them cost twice the CPU for no better E).
+MAX_VERTEX_POINTS = 5_000
 
 #: Neighbours per point in the flood-fill graph.
 NEIGHBOURS = 10
@@ -90,7 +93,7 @@ ZERO_VOLUME_FRACTION = 1e-7
 FLUX_EDGE_DIVISOR = 120
 FLUX_SAMPLES_PER_SPHERE = 500
 MIN_FLUX_SAMPLES = 4_000
-MAX_FLUX_SAMPLES = 25_000
+MAX_FLUX_SAMPLES = 16_000
 
 #: Largest centre move per update, as a fraction of the cluster radius (bounds
 #: the samples the objective must visit; the next round continues the walk).
@@ -109,12 +112,11 @@ SHRINK_TOLERANCE = 1e-5
 #: sphere during shrinking: absorbs the rounding of the mat-mul distances.
 SHRINK_SLACK = 1e-9
 
-#: Default iteration cap: rounds cost about (cover points) x N, so the cap is
-#: this work budget divided by that (a 100k-triangle mesh at N = 64 gets ~75
-#: rounds, inside two minutes), clipped to [MIN_ITERATIONS, MAX_ITERATIONS].
-ITERATION_WORK = 3.6e8
-MIN_ITERATIONS = 40
-MAX_ITERATIONS = 150
+#: Default round budget (rounds at N spheres; see ``max_iterations``).  E
+#: falls little after it, and the surface cover at the end
+#: (:func:`_settle_cover`) matters more: CesiumMan at N = 32, E 1.231 after 30
+#: rounds, 1.235 after 40; with the growth-only cover 1.282 after 100.
+ROUNDS = 30
 
 #: Teleportation candidates (split cluster, deleted sphere) tried per stall;
 #: the one with the lowest E after a Lloyd step is refined and kept if E drops.
@@ -154,6 +156,10 @@ COVER_PIECE = 2e-4
 #: Evenly spread surface points added to the points the spheres must contain.
 COVER_SURFACE_POINTS = 20_000
 
+#: Rounds of adding the surface pieces no sphere holds to the cover points and
+#: re-centring the spheres for them (see :func:`_settle_cover`).
+COVER_PASSES = 1
+
 #: Fresh, evenly spread surface points on which the reported coverage is measured.
 COVERAGE_SAMPLES = 20_000
 
@@ -192,6 +198,8 @@ class Solid:
         for one candidate centre): the deterministic measure of their cost.
     recentred : dict
         Results of :func:`_recenter` by (start, step, points) digest.
+    hulls : dict
+        Convex hulls by point-index digest (see :meth:`hull`).
     """
 
     mesh: trimesh.Trimesh
@@ -207,6 +215,16 @@ class Solid:
     evaluations: int = 0
     sample_terms: int = 0
     recentred: dict = field(default_factory=dict)
+    hulls: dict = field(default_factory=dict)
+
+    def hull(self, points: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """Convex-hull vertices of ``points[index]``, remembered by ``index``
+        (settled clusters keep their points from round to round)."""
+        index = np.sort(index)
+        key = (id(points), hashlib.blake2b(index.tobytes(), digest_size=16).digest())
+        if key not in self.hulls:
+            self.hulls[key] = hull_vertices(points[index])
+        return self.hulls[key]
 
 
 def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | None = None,
@@ -277,7 +295,7 @@ def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | N
     # between the sparser fitting samples that the final cover must close
     even = np.asarray(trimesh.sample.sample_surface_even(mesh, COVER_SURFACE_POINTS,
                                                          seed=seed + 2)[0], dtype=np.float64)
-    cover = np.vstack([points, v, even])
+    cover = np.vstack([points, even])
     return Solid(mesh, evaluator, flux, surface, points, np.asarray(nb)[:, 1:], cover,
                  cKDTree(cover), float(volume), diag)
 
@@ -316,9 +334,7 @@ def fit_spheres(
         Budget of clustering + centre-update rounds (variational), counted
         in rounds at ``n`` spheres: the coarse stages (ceil(n/2), ... spheres)
         spend their share of it in proportionally cheaper rounds, so the total
-        round count reported in ``info`` can exceed it.  Default
-        ``ITERATION_WORK / (cover points * n)`` clipped to
-        [MIN_ITERATIONS, MAX_ITERATIONS], a round costing about points x n.
+        round count reported in ``info`` can exceed it.  Default ``ROUNDS``.
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
     samples : int, optional
@@ -396,8 +412,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
             "use fewer spheres", path)
     if max_iterations is None:
-        max_iterations = int(np.clip(ITERATION_WORK / (len(solid.cover) * n), MIN_ITERATIONS,
-                                     MAX_ITERATIONS))
+        max_iterations = ROUNDS
     bar.total = max_iterations  # known once the solid is sampled; shown at the next update
 
     def progress(rounds: float, energy: float) -> None:
@@ -413,7 +428,9 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             max_teleport_failures=max_teleport_failures, progress=progress)
         info.update(extra)
         centers, radii, info["revived"] = _revive(solid, centers, radii)
+        centers, radii = _settle_cover(solid, centers, radii)
         info["evaluations"] = solid.evaluations
+        info["sample_terms"] = solid.sample_terms
     elif method == "octree":
         centers, radii, _ = _octree(solid, n)
     else:
@@ -468,7 +485,8 @@ def _covered_fraction(centers, radii, points) -> float:
     return float(SphereSet(centers, radii).contains(points).mean())
 
 
-def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list | None = None,
+           ) -> np.ndarray:
     """Grow radii (least growth first) until every cover point and every
     point of the mesh's surface lies in some sphere.
 
@@ -481,35 +499,48 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
     sphere grow.
     """
     radii = np.asarray(radii, dtype=np.float64).copy()
-    pts = solid.cover
-    inside = SphereSet(centers, radii).contains(pts)
-    rest = pts[~inside]
-    if len(rest):
-        d = np.linalg.norm(rest[:, None, :] - centers[None, :, :], axis=-1)
-        j = np.argmin(d - radii[None, :], axis=1)
-        np.maximum.at(radii, j, d[np.arange(len(rest)), j])
+    n = len(centers)
+
+    def grow_for(pieces_: np.ndarray) -> None:
+        """Grow, for each piece ``(T, K, 3)``, the sphere that needs least growth."""
+        per = max(1, 2_000_000 // (pieces_.shape[1] * n))
+        for a in range(0, len(pieces_), per):
+            t = pieces_[a:a + per]
+            # the radius each sphere needs to hold each piece, (T, N)
+            need = np.sqrt(np.max(np.sum((t[:, :, None, :] - centers[None, None]) ** 2,
+                                         axis=-1), axis=1))
+            j = np.argmin(need - radii[None, :], axis=1)
+            np.maximum.at(radii, j, need[np.arange(len(t)), j])
+
+    def held(pieces_: np.ndarray, tree: cKDTree) -> np.ndarray:
+        """Which pieces ``(T, K, 3)`` lie inside one sphere; ``tree`` of a point
+        of each piece (inside a sphere if the piece is): k-d tree candidates
+        instead of pieces x spheres."""
+        lists = tree.query_ball_point(centers, radii)
+        ti = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
+        sj = np.repeat(np.arange(n), [len(ix) for ix in lists])
+        d2 = np.max(np.sum((pieces_[ti] - centers[sj, None, :]) ** 2, axis=-1), axis=1)
+        out = np.zeros(len(pieces_), dtype=bool)
+        out[ti[d2 <= radii[sj] ** 2]] = True
+        return out
+
+    lost = ~held(solid.cover[:, None, :], solid.cover_tree)
+    grow_for(solid.cover[lost][:, None, :])
     # the surface: a triangle inside one sphere is covered (a ball is convex);
     # the others are split in four until inside one sphere or smaller than
     # COVER_PIECE, and those pieces grow the sphere that needs least growth
     tri = solid.mesh.vertices[solid.mesh.faces]  # (F, 3, 3)
-    per = max(1, 2_000_000 // (3 * len(centers)))
     for _ in range(COVER_LEVELS + 1):
-        small = np.max(np.linalg.norm(tri - tri.mean(axis=1, keepdims=True), axis=-1),
+        centroid = tri.mean(axis=1)
+        small = np.max(np.linalg.norm(tri - centroid[:, None], axis=-1),
                        axis=1) <= COVER_PIECE * solid.diag
-        rest = []
-        for a in range(0, len(tri), per):
-            t = tri[a:a + per]
-            # the radius each sphere needs to hold each piece, (T, N)
-            need = np.sqrt(np.max(np.sum((t[:, :, None, :] - centers[None, None]) ** 2,
-                                         axis=-1), axis=1))
-            short = need - radii[None, :]
-            out = np.all(short > 0, axis=1)
-            grow = np.flatnonzero(out & small[a:a + per])
-            if len(grow):
-                j = np.argmin(short[grow], axis=1)
-                np.maximum.at(radii, j, need[grow, j])
-            rest.append(t[out & ~small[a:a + per]])
-        tri = np.concatenate(rest)
+        out = ~held(tri, cKDTree(centroid))
+        grow = tri[out & small]
+        if len(grow):
+            grow_for(grow)
+            if pieces is not None:
+                pieces.append(grow.reshape(-1, 3))
+        tri = tri[out & ~small]
         if len(tri) == 0:
             break
         mid = 0.5 * (tri[:, [0, 1, 2]] + tri[:, [1, 2, 0]])  # edge midpoints 01, 12, 20
@@ -518,11 +549,33 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
                               np.stack([mid[:, 2], mid[:, 1], tri[:, 2]], axis=1),
                               mid])
     if len(tri):  # pieces left after COVER_LEVELS splits: grow for them
-        need = np.sqrt(np.max(np.sum((tri[:, :, None, :] - centers[None, None]) ** 2,
-                                     axis=-1), axis=1))
-        j = np.argmin(need - radii[None, :], axis=1)
-        np.maximum.at(radii, j, need[np.arange(len(tri)), j])
+        grow_for(tri)
+        if pieces is not None:
+            pieces.append(tri.reshape(-1, 3))
     return radii * (1.0 + 1e-12) + COVER_SLACK * solid.diag
+
+
+def _settle_cover(solid: Solid, centers: np.ndarray, radii: np.ndarray):
+    """Cover the whole surface, then let the spheres that grew re-centre.
+
+    The fit bounds sample points; the surface between them that no sphere
+    holds (at seams between spheres, gaps of about the sample spacing) makes
+    :func:`_cover` grow spheres, and growing alone is costly (CesiumMan at
+    N = 32: E 0.95 -> 1.28).  The corners of the pieces that made spheres
+    grow join the cover points and the shrink-and-re-centre steps run again,
+    so that the spheres move to hold them instead of only growing; then
+    :func:`_cover` closes what is left.  COVER_PASSES times at most.
+    """
+    for _ in range(COVER_PASSES):
+        pieces: list = []
+        grown = _cover(solid, centers, radii, pieces=pieces)
+        if not pieces:
+            break
+        extra = np.unique(np.concatenate(pieces), axis=0)
+        solid.cover = np.vstack([solid.cover, extra])
+        solid.cover_tree = cKDTree(solid.cover)
+        centers, radii = _shrink(solid, centers, grown, rounds=SHRINK_ROUNDS)
+    return centers, radii
 
 
 def _revive(solid: Solid, centers: np.ndarray, radii: np.ndarray):
@@ -685,16 +738,15 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
     per = max(1, 2_000_000 // max(len(flux.points), 1))
     for a in range(0, m, per):
         b = min(a + per, m)
-        d = flux.points[None, :, :] - p0[a:b, None, :]  # (m, K, 3)
-        rho2 = np.einsum("mkj,mkj->mk", d, d)
-        far = np.ones(rho2.shape, dtype=bool)
+        rho2, sk = flux.relative(p0[a:b])  # (m, K)
+        inv3 = 1.0 / (rho2 * np.sqrt(rho2))
         sel = (near_owner >= a) & (near_owner < b)
-        far[near_owner[sel] - a, near[sel]] = False
-        inv3 = np.where(far, 1.0 / np.maximum(rho2, 1e-300) ** 1.5, 0.0)
-        sk = np.einsum("mkj,kj->mk", d, flux.q)
+        inv3[near_owner[sel] - a, near[sel]] = 0.0
         far_c[a:b] = np.sum(sk * inv3, axis=1)
-        far_g[a:b] = (-inv3 @ flux.q
-                      + 3.0 * np.einsum("mk,mkj->mj", sk * inv3 / np.maximum(rho2, 1e-300), d))
+        # d/de of s/ρ³ = -q/ρ³ + 3 s (x - c)/ρ⁵, with x - c = x - p0 summed by mat-muls
+        w5 = sk * inv3 / rho2
+        far_g[a:b] = (-inv3 @ flux.q + 3.0 * (w5 @ flux.points
+                                               - np.sum(w5, axis=1)[:, None] * p0[a:b]))
     # near samples and hull points relative to p0: a compass move along axis
     # k by t changes |y|² by -2 t y_k + t² and y·q by -t q_k, so the six
     # candidates of every sphere cost a few elementwise passes
@@ -821,9 +873,9 @@ def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
     zero = 1e-9 * solid.volume
     hulls, which = [], []
     for i in range(n):
-        members = solid.points[order[bounds_idx[i]:bounds_idx[i + 1]]]
+        members = order[bounds_idx[i]:bounds_idx[i + 1]]
         if len(members):
-            hulls.append(hull_vertices(members))
+            hulls.append(solid.hull(solid.points, members))
             which.append(i)
     if not which:
         return new_c, radii, outside
@@ -864,8 +916,7 @@ def _lloyd_step(solid: Solid, centers: np.ndarray) -> _State:
     labels, _ = _flood_fill(solid, centers, table, r_grid[1])
     c, r, _ = _update_centers(solid, centers, labels)
     c, r = _shrink(solid, c, r, rounds=1)
-    out = np.array([max(FOUR_PI / 3 * ri**3 - solid.flux.intersection_volume(ci, ri), 0.0)
-                    for ci, ri in zip(c, r, strict=True)])
+    out = np.maximum(FOUR_PI / 3 * r**3 - solid.flux.intersection_volumes(c, r), 0.0)
     return _State(c, r, labels, out, float(out.sum() / solid.volume))
 
 
@@ -932,6 +983,12 @@ def _initial_centers(points: np.ndarray, n: int, rng: np.random.Generator) -> np
     return points[chosen].copy()
 
 
+def _box_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """The sphere about the bounding box's centre that holds ``points (P, 3)``."""
+    c = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    return c, float(np.sqrt(np.max(np.sum((points - c) ** 2, axis=1))))
+
+
 def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits: int,
                     ) -> _State:
     """The state after splitting the ``splits`` spheres whose split gains most.
@@ -968,17 +1025,26 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
             return best
         mean = own.mean(axis=0)
         _, _, axes = np.linalg.svd(own - mean, full_matrices=False)
+        # the three cuts are ranked with the halves' box-centred spheres (a
+        # minimal sphere costs an SLSQP solve); only the best cut's halves get
+        # their minimal spheres
+        ranked = []
         for axis in axes:
             side = (own - mean) @ axis > 0
             if side.all() or not side.any():
                 continue
-            halves = [minimal_bounding_sphere(own[side]), minimal_bounding_sphere(own[~side])]
+            halves = [_box_sphere(own[side]), _box_sphere(own[~side])]
             if min(halves[0][1], halves[1][1]) <= MIN_CHILD_RADIUS * solid.diag:
                 continue  # a (near) point-sized child would be a vanishing sphere
-            out = [outside(c, r) for c, r in halves]
-            if parent - sum(out) > best[0]:
-                best = (parent - sum(out), halves, out)
-        return best
+            ranked.append((sum(outside(c, r) for c, r in halves), side))
+        if not ranked:
+            return best
+        side = min(ranked, key=lambda x: x[0])[1]
+        halves = [minimal_bounding_sphere(own[side]), minimal_bounding_sphere(own[~side])]
+        if min(halves[0][1], halves[1][1]) <= MIN_CHILD_RADIUS * solid.diag:
+            return best
+        out = [outside(c, r) for c, r in halves]
+        return (parent - sum(out), halves, out)
 
     inside = [covers(c, r) for c, r in zip(centers, radii, strict=True)]
     count = np.sum(inside, axis=0)
@@ -1199,7 +1265,7 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
         movers = order[per[order] > 0]
         if len(movers):
             groups = np.split(flat[mine], np.cumsum(per)[:-1])
-            hulls = [hull_vertices(pts[groups[i]]) for i in movers]
+            hulls = [solid.hull(pts, groups[i]) for i in movers]
             p, fp, f0 = _recenter(solid, hulls, centers[movers],
                                   CENTER_STEP * radii[movers] + 1e-3 * solid.diag)
             moved_ok = fp < f0
