@@ -9,12 +9,18 @@ Four tables, side by side in one run:
    receivers like the seed's Table 1 planes): relative RMSE of
    per-vertex radiance against ray tracing of the posed mesh, on the ground and
    on the character itself, for (a) the deformable shadow field (re-sampled on
-   the bounding sphere every frame, scaled per receiver; log space with one exp,
-   and product space) and (b) today's bound sphere set (``spheres bind``: a
-   variational fit on the rest mesh, bound to the skin, radii grown to cover the
-   animation), with the visibility time per frame of each.  The cone model's
-   half-angle alpha is swept, and the log/product commutation difference of the
-   field is reported.
+   the bounding sphere every frame, scaled per receiver; log space with one exp
+   at several samplings and both logs, and product space) and (b) today's bound
+   sphere set (the 48-sphere ``spheres fit`` + ``spheres bind`` sets of
+   ``bench_fidelity``, cached in ``build/bench_fidelity``), through the runtime
+   at its defaults in one process.  The character's own vertices are also given
+   other self paths (nothing, the local visibility ``g_p``, the sphere set, a
+   per-frame ray-traced self-visibility), combined with the field on the
+   ground in log space.  Frame time = the sum of the per-frame components
+   (sampling, lookups, self path, one exp), wall and CPU (this process), with
+   the components listed; ratios are of CPU time.  The cone model's
+   half-angle alpha is swept, and the log/product commutation difference of
+   the field is reported.
 3. **Mid-range lighting** -- a teapot on a plane inside an environment sphere
    (the seed's Fig. 11 set-up, probe ``uffizi.hdr``): radiance error against
    per-vertex ray-traced environment lighting (rays hit the sphere, the probe --
@@ -109,6 +115,18 @@ def accuracy() -> list[str]:
 
 
 CHARACTERS = {"Fox": ("Fox.glb", "Walk"), "CesiumMan": ("CesiumMan.glb", 0)}
+#: bound sphere sets shared with bench_fidelity (48 spheres, `spheres fit` + `spheres bind`)
+SPHERE_CACHE = REPO / "build" / "bench_fidelity"
+SPHERES = 48
+#: field samplings compared: (label, layout, rays, log method)
+SAMPLINGS = (("384 x 512 rays, naive log", (16, 24), (16, 32), "naive"),
+             ("384 x 512 rays, eigen log", (16, 24), (16, 32), "eigen"),
+             ("384 x 128 rays, naive log", (16, 24), (8, 16), "naive"),
+             ("192 x 128 rays, naive log", (12, 16), (8, 16), "naive"))
+#: ray-traced per-frame self-visibility of the character's own vertices (an estimate
+#: of issue 16's per-frame self path): key "traced <directions> <log>", label
+SELF_TRACED = (("traced 256 eigen", "ray-traced self (256 dirs, eigen log)"),
+               ("traced 96 naive", "ray-traced self (96 dirs, naive log)"))
 
 
 def _vertex_normals(vertices, faces):
@@ -118,94 +136,254 @@ def _vertex_normals(vertices, faces):
     return np.asarray(mesh.vertex_normals, dtype=np.float64)
 
 
-def _sphere_set(model, count: int, quick: bool):
-    """Variational fit on the rest mesh, bound to the skin, radii grown over the clip."""
-    import trimesh
+def _bound_spheres(name: str, file: str):
+    """The bench_fidelity bound sphere set of a character (built with the CLI if missing)."""
+    import subprocess
+    import sys
 
-    from shtools.geometry.binding import bind_spheres, covering_radii
-    from shtools.geometry.sphere_fit import fit_spheres
+    from shtools.data_formats.bound import read_bound
 
-    rest = trimesh.Trimesh(model.rest_vertices, model.faces, process=True)
-    fit = fit_spheres(rest, count, method="kmeans" if quick else "variational", seed=0)
-    binding = bind_spheres(fit.centers, model)
-    radii = covering_radii(binding, fit.radii, model, frames=8)
-    return binding, radii
+    rig = DATA / "skinned" / file
+    sph = SPHERE_CACHE / f"{name.lower()}{SPHERES}.spheres.h5"
+    bound = SPHERE_CACHE / f"{name.lower()}{SPHERES}.bound.h5"
+    t0 = time.perf_counter()
+    SPHERE_CACHE.mkdir(parents=True, exist_ok=True)
+    if not sph.exists():
+        subprocess.run([sys.executable, "-m", "shtools", "spheres", "fit", str(rig), "-n",
+                        str(SPHERES), "-o", str(sph)], check=True)
+    if not bound.exists():
+        subprocess.run([sys.executable, "-m", "shtools", "spheres", "bind", str(sph), str(rig),
+                        "-o", str(bound)], check=True)
+    return read_bound(bound), time.perf_counter() - t0
 
 
-def _skinned_frame(rt, env, model, joints, ground, gnorm, binding, radii, tables, table4,
-                   acc, acc_err, secs):
-    """One frame of the skinned benchmark: every method against ray tracing.
+def _timed2(fn, repeat=2):
+    """Result, best wall seconds and best CPU seconds (this process) over ``repeat`` runs."""
+    wall = cpu = math.inf
+    out = None
+    for _ in range(repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        wall = min(wall, time.perf_counter() - t0)
+        cpu = min(cpu, time.process_time() - c0)
+    return out, wall, cpu
 
-    Appends (ground, self) relative RMSEs to ``acc_err[key]`` and visibility
-    seconds to ``secs[key]``; returns the self vertex count and the commutation
+
+class _Frame:
+    """One posed frame: receivers, the ray-traced truth and the shading."""
+
+    def __init__(self, rt, env, model, joints, ground, gnorm):
+        import trimesh
+
+        from shtools.reference.raytrace import raytrace_visibility
+
+        self.rt, self.env = rt, env
+        self.verts = model.skin(joints)
+        self.n_g = len(ground)
+        self.pts = np.concatenate([ground, self.verts])
+        self.nrm = np.concatenate([gnorm, _vertex_normals(self.verts, model.faces)])
+        self.mesh = trimesh.Trimesh(self.verts, model.faces, process=False)
+        self.truth = rt.shade(raytrace_visibility(self.pts, self.nrm, [self.mesh], ORDER, 1024),
+                              self.pts, self.nrm, env)
+
+    def errors(self, g):
+        """(ground, self) relative RMSE of radiance shaded with visibility ``g``."""
+        from shtools.reference.metrics import relative_rmse
+
+        rad = self.rt.shade(g, self.pts, self.nrm, self.env)
+        return (relative_rmse(rad[:self.n_g], self.truth[:self.n_g]),
+                relative_rmse(rad[self.n_g:], self.truth[self.n_g:]))
+
+
+def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables, table4,
+                   acc, err, secs):
+    """Every method and self path of one frame against ray tracing.
+
+    Appends (ground, self) relative RMSEs to ``err[key]`` and (wall, CPU) seconds
+    of each per-frame component to ``secs[key]``; returns the commutation
     difference (mean, max) of the field.
     """
-    import trimesh
-
     from shtools.fields.deformable import sample_deformable_field
-    from shtools.reference.metrics import relative_rmse
-    from shtools.reference.raytrace import raytrace_visibility
-    from shtools.runtime import SphereBlocker
-    from shtools.runtime.deformable import deformable_visibility
+    from shtools.fields.self_visibility import (
+        HEMISPHERE_DIRECTIONS,
+        self_visibility,
+        self_visibility_log,
+    )
+    from shtools.runtime import SelfVisibility, SphereBlocker
+    from shtools.runtime.deformable import DeformableBlocker, deformable_visibility
+    from shtools.runtime.spheres import pose_bound_spheres
+    from shtools.scene.transfer import posed_local_log, traced_self_visibility
     from shtools.sh import exp as sh_exp
+    from shtools.sh import log as sh_log
 
-    verts = model.skin(joints)
-    pts = np.concatenate([ground, verts])
-    nrm = np.concatenate([gnorm, _vertex_normals(verts, model.faces)])
-    mesh = trimesh.Trimesh(verts, model.faces, process=False)
-    truth = rt.shade(raytrace_visibility(pts, nrm, [mesh], ORDER, 1024), pts, nrm, env)
-    n_g = len(ground)
+    rt, pts, n_g = fr.rt, fr.pts, fr.n_g
+    size = acc * acc
 
-    def errors(g, key):
-        rad = rt.shade(g, pts, nrm, env)
-        acc_err[key].append((relative_rmse(rad[:n_g], truth[:n_g]),
-                             relative_rmse(rad[n_g:], truth[n_g:])))
+    def put(key, value):
+        g, wall, cpu = value
+        secs.setdefault(key, []).append((wall, cpu))
+        return g
 
-    def field_log():  # (a) sample, scale the logs, one exp
-        field = sample_deformable_field(verts, model.faces, acc)
-        return rt.exponentiate(deformable_visibility(field, tables[45.0], pts, log=True)), field
+    def spheres_blocker():
+        return SphereBlocker(pose_bound_spheres(bound.bone_index, bound.bone_vectors, joints),
+                             bound.radii)
 
-    def field_fast():  # 192 samples x 128 rays, naive log
-        fld = sample_deformable_field(verts, model.faces, acc, layout=(12, 16), rays=(8, 16),
-                                      log_method="naive")
-        return rt.exponentiate(deformable_visibility(fld, tables[45.0], pts, log=True))
+    # (b) the bound sphere set through the SHEXP runtime (all rows, its own exp)
+    g = put("spheres", _timed2(lambda: rt.visibility(pts, fr.nrm, [spheres_blocker()],
+                                                     clusters=clusters["all"])))
+    err.setdefault("spheres", []).append(fr.errors(g))
+    # the scenes' defaults (issue 16): the character's posed mesh traced on its own
+    # vertices every frame, multiplied in after the exp, its own blocker skipped there
+    own = slice(n_g, None)
 
-    def field_product():
-        fld = sample_deformable_field(verts, model.faces, ORDER, log=False)
-        return deformable_visibility(fld, table4, pts)
+    def with_traced(blocker):
+        traced = traced_self_visibility(fr.verts, fr.nrm[n_g:], model.faces, ORDER,
+                                        HEMISPHERE_DIRECTIONS)
+        return rt.visibility(pts, fr.nrm, [blocker()], clusters=clusters["all"],
+                             self_visibility=[SelfVisibility(None, own, blocker=0,
+                                                             visibility=traced)])
 
-    def spheres():  # (b) the bound sphere set through the SHEXP runtime
-        return rt.visibility(pts, nrm, [SphereBlocker(binding.pose(joints), radii)])
+    g = put("default spheres", _timed2(lambda: with_traced(spheres_blocker)))
+    err.setdefault("default spheres", []).append(fr.errors(g))
+    _, layout0, rays0, method0 = SAMPLINGS[0]
+    g = put("default field", _timed2(lambda: with_traced(lambda: DeformableBlocker(
+        sample_deformable_field(fr.verts, model.faces, acc, layout=layout0, rays=rays0,
+                                log_method=method0), tables[45.0]))))
+    err.setdefault("default field", []).append(fr.errors(g))
+    # components of the combined paths
+    logs = {}
+    for label, layout, rays, method in SAMPLINGS:
+        field = put(f"sample {label}", _timed2(lambda la=layout, ra=rays, me=method:
+                                               sample_deformable_field(
+                                                   fr.verts, model.faces, acc, layout=la,
+                                                   rays=ra, log_method=me)))
+        logs[f"ground {label}"] = put(f"ground {label}", _timed2(
+            lambda f=field: (f._local.clear(),
+                             deformable_visibility(f, tables[45.0], pts[:n_g], log=True))[1]))
+        logs[f"self {label}"] = put(f"self {label}", _timed2(
+            lambda f=field: deformable_visibility(f, tables[45.0], pts[n_g:], log=True)))
+        if label == SAMPLINGS[0][0]:
+            field0 = field  # the default sampling: the alpha sweep
+        if method == "eigen":
+            field_eigen = field  # the log that inverts exp: the commutation check
+    logs["self none"] = np.zeros((len(pts) - n_g, size))
+    logs["self g_p"] = put("self g_p", _timed2(
+        lambda: posed_local_log(local_log, model.blend_matrices(joints), np.eye(4))))
+    logs["self spheres"] = put("self spheres", _timed2(
+        lambda: rt.log_visibility(pts[n_g:], fr.nrm[n_g:], [spheres_blocker()],
+                                  clusters=clusters["self"])))
+    for key, _ in SELF_TRACED:  # "traced <dirs> <log>"
+        _, dirs, method = key.split()
 
-    (g, field), s = _timed(field_log, repeat=2)
-    secs["field-log"].append(s)
-    errors(g, "field-log")
-    for key, fn in (("field-fast", field_fast), ("field-product", field_product),
-                    ("spheres", spheres)):
-        g, s = _timed(fn, repeat=2)
-        secs[key].append(s)
-        errors(g, key)
+        def traced(dirs=int(dirs), method=method):
+            g = self_visibility(fr.verts, fr.nrm[n_g:], fr.mesh, acc, n_dirs=dirs)
+            return self_visibility_log(g) if method == "eigen" else sh_log(g, "naive")
+
+        logs[f"self {key}"] = put(f"self {key}", _timed2(traced, repeat=1))
+
+    def combined_log(ground_key, self_keys):
+        return np.concatenate([logs[ground_key], sum(logs[k] for k in self_keys)]
+                              ).astype(np.float32)
+
+    def combined(ground_key, self_keys):
+        return rt.exponentiate(combined_log(ground_key, self_keys))
+
+    first = SAMPLINGS[0][0]
+    one = combined_log(f"ground {first}", [f"self {first}"])
+    put("exp", _timed2(lambda: rt.exponentiate(one)))
+
+    for label, *_ in SAMPLINGS:
+        err.setdefault(f"field {label} | field k<1", []).append(
+            fr.errors(combined(f"ground {label}", [f"self {label}"])))
+    for key, selfs in (("none", ["self none"]), ("g_p", ["self g_p"]),
+                       ("field k<1 + g_p", [f"self {first}", "self g_p"]),
+                       ("spheres", ["self spheres"]),
+                       ("spheres + g_p", ["self spheres", "self g_p"]),
+                       *[(key, [f"self {key}"]) for key, _ in SELF_TRACED]):
+        for label, *_ in SAMPLINGS:
+            if label == first or key not in ("none", "field k<1 + g_p", "spheres + g_p"):
+                err.setdefault(f"field {label} | {key}", []).append(
+                    fr.errors(combined(f"ground {label}", selfs)))
+    # product space: the order-4 field's visibility on every row
+    fld4 = put("sample product", _timed2(lambda: sample_deformable_field(
+        fr.verts, model.faces, ORDER, log=False)))
+    g = put("lookup product", _timed2(lambda: (fld4._local.clear(),
+                                              deformable_visibility(fld4, table4, pts))[1]))
+    err.setdefault("product | field k<1", []).append(fr.errors(g))
     for a, table in tables.items():
-        errors(rt.exponentiate(deformable_visibility(field, table, pts, log=True)), f"a{a}")
+        err.setdefault(f"alpha {a:g}", []).append(fr.errors(rt.exponentiate(
+            deformable_visibility(field0, table, pts, log=True).astype(np.float32))))
     # commutation: exp(scale(log S)) against scale(S), both at the accumulation order
     # (receivers within 8 bounding radii, a subset of at most 2000)
-    near = np.flatnonzero(np.linalg.norm(pts - field.center, axis=1) < 8 * field.radius)
+    near = np.flatnonzero(np.linalg.norm(pts - field_eigen.center, axis=1) < 8 * field_eigen.radius)
     near = near[:: max(1, len(near) // 2000)]
-    scaled = deformable_visibility(field, tables[45.0], pts[near])
-    via_log = sh_exp(deformable_visibility(field, tables[45.0], pts[near], log=True), "exact")
+    scaled = deformable_visibility(field_eigen, tables[45.0], pts[near])
+    via_log = sh_exp(deformable_visibility(field_eigen, tables[45.0], pts[near], log=True), "exact")
     diff = np.linalg.norm(via_log[:, :16] - scaled[:, :16], axis=1) / math.sqrt(4 * math.pi)
-    return len(verts), (float(np.mean(diff)), float(np.max(diff)))
+    return float(np.mean(diff)), float(np.max(diff))
+
+
+def _frame_time(secs, parts):
+    """Mean (wall, CPU) of a frame made of the given components."""
+    per = np.array([[sum(secs[p][f][c] for p in parts) for c in (0, 1)]
+                    for f in range(len(secs[parts[0]]))])
+    return per.mean(axis=0)
+
+
+def _character_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
+    """Table rows of one character: every (ground, self) combination with its frame time."""
+    from shtools.fields.self_visibility import HEMISPHERE_DIRECTIONS
+
+    rows = []
+    sph = _frame_time(secs, ["spheres"])
+
+    def row(label, key, parts, base=sph):
+        e = np.mean(err[key], axis=0)
+        wall, cpu = _frame_time(secs, parts)
+        rows.append(f"| {name} | {n_v} | {label} | {100 * e[0]:.1f} % | {100 * e[1]:.1f} % | "
+                    f"{wall:.3f} | {cpu:.3f} | {cpu / base[1]:.2f}x |")
+
+    row(f"bound sphere set ({SPHERES}) / the same", "spheres", ["spheres"])
+    row(f"**scene default**: bound sphere set ({SPHERES}) / traced posed mesh "
+        f"({HEMISPHERE_DIRECTIONS} rays, after the exp)", "default spheres", ["default spheres"])
+    row(f"**scene default**: field, log, {SAMPLINGS[0][0]} / traced posed mesh "
+        f"({HEMISPHERE_DIRECTIONS} rays) (ratio to the sphere set's scene default)",
+        "default field", ["default field"], base=_frame_time(secs, ["default spheres"]))
+    first = SAMPLINGS[0][0]
+    for label, *_ in SAMPLINGS:
+        base = [f"sample {label}", f"ground {label}", "exp"]
+        row(f"field, log, {label} / field k<1", f"field {label} | field k<1",
+            [*base, f"self {label}"])
+        if label == first:
+            row(f"field, log, {label} / nothing", f"field {label} | none", base)
+            row(f"field, log, {label} / field k<1 + g_p", f"field {label} | field k<1 + g_p",
+                [*base, f"self {label}", "self g_p"])
+            row(f"field, log, {label} / spheres + g_p", f"field {label} | spheres + g_p",
+                [*base, "self spheres", "self g_p"])
+        row(f"field, log, {label} / g_p", f"field {label} | g_p", [*base, "self g_p"])
+        row(f"field, log, {label} / spheres", f"field {label} | spheres",
+            [*base, "self spheres"])
+        for key, what in SELF_TRACED:
+            row(f"field, log, {label} / {what}", f"field {label} | {key}",
+                [*base, f"self {key}"])
+    row("field, product (order 4, 384 x 512) / field k<1", "product | field k<1",
+        ["sample product", "lookup product"])
+    return rows
 
 
 def skinned(quick: bool) -> tuple[list[str], list[str]]:
+    import types
+
     from shtools.geometry.skin import load_skinned_gltf
     from shtools.lighting import load_hdr_image, project_latlong
     from shtools.reference.scenes import ground_grid
     from shtools.runtime import ShadowRuntime, ShadowSettings
     from shtools.runtime.scaling import ScalingTable
+    from shtools.scene.transfer import object_local_log
     from shtools.sh.scaling import build_scaling_table
 
-    settings = ShadowSettings(order=ORDER, processes=1, hierarchy=False)
+    # the runtime's defaults (hierarchy on), one process: CPU time is comparable
+    settings = ShadowSettings(order=ORDER, processes=1)
     acc = settings.resolved_acc_order()
     env = project_latlong(load_hdr_image(DATA / "probes" / "uffizi.hdr"), ORDER)
     frames = 2 if quick else 4
@@ -213,9 +391,9 @@ def skinned(quick: bool) -> tuple[list[str], list[str]]:
     tables = {a: ScalingTable(build_scaling_table(acc, "cone", alpha=math.radians(a)))
               for a in alphas}
     table4 = ScalingTable(build_scaling_table(ORDER, "cone"))
-    head = ["| character | receivers (ground + self) | method | ground rel. RMSE | "
-            "self rel. RMSE | visibility s / frame | ratio to spheres |",
-            "|---|---:|---|---:|---:|---:|---:|"]
+    head = ["| character | receivers (ground + self) | method: ground / self | ground rel. RMSE "
+            "| self rel. RMSE | frame s wall | frame s CPU | CPU ratio to spheres |",
+            "|---|---:|---|---:|---:|---:|---:|---:|"]
     rows, alpha_rows = [], ["| character | alpha (deg) | ground rel. RMSE | self rel. RMSE |",
                             "|---|---:|---:|---:|"]
     commutation = []
@@ -223,12 +401,16 @@ def skinned(quick: bool) -> tuple[list[str], list[str]]:
         for name, (file, clip) in CHARACTERS.items():
             path = DATA / "skinned" / file
             if not path.exists():
-                rows.append(f"| {name} | - | (missing {path}) | | | | |")
+                rows.append(f"| {name} | - | (missing {path}) | | | | | |")
                 continue
             model = load_skinned_gltf(path)
+            bound, fit_s = _bound_spheres(name, file)
+            rest = types.SimpleNamespace(vertices=model.rest_vertices, faces=model.faces,
+                                         normals=_vertex_normals(model.rest_vertices,
+                                                                 model.faces))
             t0 = time.perf_counter()
-            binding, radii = _sphere_set(model, 16 if quick else 32, quick)
-            fit_s = time.perf_counter() - t0
+            local_log = object_local_log(rest, acc)
+            local_s = time.perf_counter() - t0
             duration = model.duration(clip)
             times = np.linspace(0.1, 0.9, frames) * duration
             posed0 = model.skin(model.joint_matrices(times[0], clip))
@@ -236,31 +418,29 @@ def skinned(quick: bool) -> tuple[list[str], list[str]]:
             size = float(np.max(hi - lo))
             ground, gnorm = ground_grid(24 if quick else 100, 0.5 * (lo + hi)[[0, 2]],
                                         0.9 * size, y=float(lo[1]) - 1e-3 * size)
-            acc_err = {key: [] for key in ("field-log", "field-product", "field-fast",
-                                           "spheres", *[f"a{a}" for a in alphas])}
-            secs = {key: [] for key in ("field-log", "field-product", "field-fast", "spheres")}
-            n_self = 0
+            n_g = len(ground)
+            clusters = {"all": rt.clusters(np.concatenate([ground, posed0]),
+                                           groups=np.r_[np.zeros(n_g), np.ones(len(posed0))]),
+                        "self": rt.clusters(posed0)}
+            err, secs = {}, {}
             for t in times:
                 joints = model.joint_matrices(t, clip)
-                n_self, comm = _skinned_frame(rt, env, model, joints, ground, gnorm, binding,
-                                              radii, tables, table4, acc, acc_err, secs)
-                commutation.append((name, *comm))
-            sph_s = float(np.mean(secs["spheres"]))
-            n_v = f"{len(ground)} + {n_self}"
-            for key, label in (("field-log", "deformable field, log space (acc 6, one exp; "
-                                              "384 samples x 512 rays, eigen log)"),
-                               ("field-fast", "deformable field, log space (192 x 128 rays, "
-                                              "naive log)"),
-                               ("field-product", "deformable field, product space (order 4)"),
-                               ("spheres", f"bound sphere set ({len(radii)} spheres, fit "
-                                           f"{fit_s:.0f} s)")):
-                e = np.mean(acc_err[key], axis=0)
-                s = float(np.mean(secs[key]))
-                rows.append(f"| {name} | {n_v} | {label} | {100 * e[0]:.1f} % | "
-                            f"{100 * e[1]:.1f} % | {s:.3f} | {s / sph_s:.2f}x |")
+                fr = _Frame(rt, env, model, joints, ground, gnorm)
+                commutation.append((name, *_skinned_frame(fr, model, joints, bound, local_log,
+                                                          clusters, tables, table4, acc,
+                                                          err, secs)))
+            rows += _character_rows(name, f"{n_g} + {len(posed0)}", err, secs)
+            rows.append(f"| {name} | | (one-off: sphere fit + bind {fit_s:.0f} s if not "
+                        f"cached; local g_p {local_s:.1f} s) | | | | | |")
             for a in alphas:
-                e = np.mean(acc_err[f"a{a}"], axis=0)
+                e = np.mean(err[f"alpha {a:g}"], axis=0)
                 alpha_rows.append(f"| {name} | {a:g} | {100 * e[0]:.1f} % | {100 * e[1]:.1f} % |")
+            parts = ["| component | wall s | CPU s |", "|---|---:|---:|"]
+            for key in secs:
+                wall, cpu = _frame_time(secs, [key])
+                parts.append(f"| {key} | {wall:.4f} | {cpu:.4f} |")
+            print(f"\nPer-frame components, {name} (mean of {frames} frames; {_load()}):\n")
+            print("\n".join(parts), flush=True)
     comm = ["| character | mean ‖exp(M log S) − M S‖ / √(4π) (order-4 part) | max |",
             "|---|---:|---:|"]
     for name in dict.fromkeys(c[0] for c in commutation):

@@ -64,6 +64,22 @@ CONNECT_TIMEOUT = 10.0
 MAX_LOCAL_WORKERS = 256
 #: Scheduler names that are not addresses or files.
 LOCAL_NAMES = ("inline", "processes", "local")
+#: Dask settings of the ``LocalCluster`` that ``"local"`` starts.  Nobody looks
+#: at an embedded cluster's dashboard, so nothing needs the statistical profiler
+#: (which takes the GIL from the task every 10 ms) nor half-second system
+#: metrics; the event-loop health check (every 20 ms) and the memory monitor
+#: (every 100 ms) are slowed to once a second.  These periodic callbacks had
+#: cost the scheduler/nanny loop and each worker's loop about 3x more CPU per
+#: frame, on cores the frames need (measured per thread, docs/scale-out.md).
+#: The active memory manager (every 2 s) is off: its one policy drops extra
+#: replicas, and the only replicated data is the shared state broadcast on purpose.
+EMBEDDED_CLUSTER_CONFIG = {
+    "distributed.scheduler.active-memory-manager.start": False,
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
 
 
 def default_workers() -> int:
@@ -81,10 +97,16 @@ def can_fork() -> bool:
 
 @dataclass
 class WorkerStats:
-    """Tasks run and seconds spent by one worker (``--json`` summaries)."""
+    """Tasks run, and wall and CPU seconds spent in them, by one worker (``--json``).
+
+    ``cpu_seconds`` is the CPU time of the thread running the tasks: against
+    ``seconds`` it shows how much of a task's wall time other processes on a
+    busy machine took.
+    """
 
     tasks: int = 0
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
 
 
 @dataclass
@@ -113,9 +135,61 @@ class TaskPool:
     stats: dict = field(default_factory=dict)
     #: Seconds spent starting a cluster and connecting to it.
     startup_seconds: float = 0.0
+    #: Seconds spent shipping shared state to the workers and running their
+    #: one-time ``setup`` (:meth:`share`), before any task.
+    setup_seconds: float = 0.0
+
+    @contextmanager
+    def share(self, shared: Any, setup: Callable[[Any], None] | None = None
+              ) -> Iterator[Shared]:
+        """Ship ``shared`` to the workers once, for any number of :meth:`map_ordered` calls.
+
+        Parameters
+        ----------
+        shared : object
+            State every task needs (a prepared scene, tables, options).
+        setup : callable, optional
+            ``setup(shared)``, the one-time work of a worker before its first
+            task (building a runtime from the shared state, ...): run on every
+            Dask worker here, before any task, and timed into
+            :attr:`setup_seconds` (start-up, not task time); in each forked
+            local worker when it starts; once in this process for ``inline``.
+            Tasks must still work without it (a Dask worker that joins later
+            or replaces a dead one runs its first task without the set-up), so
+            ``setup`` is the same cached initialisation the task function does.
+
+        Yields
+        ------
+        Shared
+            Pass it as ``shared=`` to :meth:`map_ordered`.
+        """
+        start = time.perf_counter()
+        if self.scheduler != "dask":
+            if setup is not None and self.scheduler == "inline":
+                setup(shared)
+            self.setup_seconds += time.perf_counter() - start
+            yield Shared(shared, None, setup)
+            return
+        from distributed import wait
+
+        client = self.client
+        ref = None if shared is None else client.scatter(shared, broadcast=True, hash=False)
+        try:
+            if setup is not None:
+                # One set-up task per worker; loose restrictions so a worker
+                # that dies meanwhile does not leave its set-up waiting forever.
+                wait([client.submit(_setup_dask, setup, ref, workers=[w],
+                                    allow_other_workers=True, pure=False)
+                      for w in client.scheduler_info().get("workers", {})])
+            self.setup_seconds += time.perf_counter() - start
+            yield Shared(shared, ref, setup)
+        finally:
+            if ref is not None:
+                ref.release()
 
     def map_ordered(self, fn: Callable[[Any, Any], Any], items: Iterable, *,
-                    shared: Any = None, window: int | None = None) -> Iterator[Any]:
+                    shared: Any = None, window: int | None = None,
+                    setup: Callable[[Any], None] | None = None) -> Iterator[Any]:
         """Yield ``fn(shared, item)`` for each item, in the order of ``items``.
 
         Parameters
@@ -124,39 +198,46 @@ class TaskPool:
             A module-level function (picklable by reference) of ``(shared, item)``.
         items : iterable
             Task inputs (small, picklable).
-        shared : object, optional
+        shared : object or Shared, optional
             State every task needs (a prepared scene, options): forked into
-            local workers, scattered once to Dask workers.
+            local workers, scattered once to Dask workers; a :class:`Shared`
+            from :meth:`share` is reused as it is (no second shipping).
         window : int, optional
             Tasks in flight at most (default ``WINDOW_PER_WORKER * workers``).
+        setup : callable, optional
+            Per-worker one-time set-up of ``shared`` (see :meth:`share`).
 
         Yields
         ------
         object
             Each task's result, in submission order.
         """
+        if not isinstance(shared, Shared):
+            with self.share(shared, setup) as handle:
+                yield from self.map_ordered(fn, items, shared=handle, window=window)
+            return
         window = max(1, window or WINDOW_PER_WORKER * self.workers)
         if self.scheduler == "inline":
-            yield from self._inline(fn, items, shared)
+            yield from self._inline(fn, items, shared.value)
         elif self.scheduler == "processes":
-            yield from self._processes(fn, items, shared, window)
+            yield from self._processes(fn, items, shared.value, window, shared.setup)
         else:
-            yield from self._dask(fn, items, shared, window)
+            yield from self._dask(fn, items, shared.ref, window)
 
     # ------------------------------------------------------------------ schedulers
-    def _record(self, worker: str, seconds: float) -> None:
+    def _record(self, worker: str, seconds: float, cpu: float) -> None:
         s = self.stats.setdefault(worker, WorkerStats())
         s.tasks += 1
         s.seconds += seconds
+        s.cpu_seconds += cpu
 
     def _inline(self, fn, items, shared):
         for item in items:
-            start = time.perf_counter()
-            result = fn(shared, item)
-            self._record(f"pid {os.getpid()}", time.perf_counter() - start)
+            result, worker, seconds, cpu = _timed(fn, shared, item, f"pid {os.getpid()}")
+            self._record(worker, seconds, cpu)
             yield result
 
-    def _processes(self, fn, items, shared, window):
+    def _processes(self, fn, items, shared, window, setup):
         from concurrent.futures import ProcessPoolExecutor
         from concurrent.futures.process import BrokenProcessPool
 
@@ -172,7 +253,7 @@ class TaskPool:
 
         def new_pool():
             return ProcessPoolExecutor(self.workers, mp_context=context,
-                                       initializer=_worker_init, initargs=(os.getpid(),))
+                                       initializer=_worker_init, initargs=(os.getpid(), setup))
 
         def submit(index):
             try:
@@ -200,7 +281,7 @@ class TaskPool:
                 try:
                     if futures[first] is None:
                         raise BrokenProcessPool("a worker died")
-                    result, worker, seconds = futures[first].result()
+                    result, worker, seconds, cpu = futures[first].result()
                 except BrokenProcessPool:
                     # A worker died (killed, out of memory): rebuild the pool and
                     # resubmit every unfinished task; finished ones are kept.
@@ -216,18 +297,14 @@ class TaskPool:
                     continue
                 del pending[first]
                 del futures[first]
-                self._record(worker, seconds)
+                self._record(worker, seconds, cpu)
                 yield result
         finally:
             _terminate(pool)
             _SHARED = None
 
-    def _dask(self, fn, items, shared, window):
-        from distributed import wait
-
+    def _dask(self, fn, items, shared_ref, window):
         client = self.client
-        shared_ref = client.scatter(shared, broadcast=True, hash=False) if shared is not None \
-            else None
         items = iter(items)
         pending: collections.deque = collections.deque()
         exhausted = False
@@ -245,16 +322,13 @@ class TaskPool:
                 if not pending:
                     return
                 future = pending.popleft()
-                wait([future])
-                result, worker, seconds = future.result()
+                result, worker, seconds, cpu = future.result()
                 future.release()
-                self._record(worker, seconds)
+                self._record(worker, seconds, cpu)
                 yield result
         finally:
             for future in pending:
                 future.cancel()
-            if shared_ref is not None:
-                shared_ref.release()
 
     def summary(self) -> dict:
         """Scheduler, worker count and per-worker task counts and seconds (for ``--json``)."""
@@ -263,21 +337,44 @@ class TaskPool:
             "address": self.address,
             "workers": self.workers,
             "startup_seconds": round(self.startup_seconds, 4),
-            "per_worker": {name: {"tasks": s.tasks, "seconds": round(s.seconds, 4)}
+            "setup_seconds": round(self.setup_seconds, 4),
+            "per_worker": {name: {"tasks": s.tasks, "seconds": round(s.seconds, 4),
+                                  "cpu_seconds": round(s.cpu_seconds, 4)}
                            for name, s in sorted(self.stats.items())},
         }
+
+
+@dataclass
+class Shared:
+    """State shipped once to a pool's workers (:meth:`TaskPool.share`).
+
+    Attributes
+    ----------
+    value : object
+        The state itself (what local workers get through ``fork``).
+    ref : distributed.Future or None
+        The state scattered to the Dask workers.
+    setup : callable or None
+        The workers' one-time set-up of the state.
+    """
+
+    value: Any
+    ref: Any = None
+    setup: Callable[[Any], None] | None = None
 
 
 # ---------------------------------------------------------------------- worker side
 _SHARED: Any = None
 
 
-def _worker_init(parent_pid: int) -> None:
-    """Local workers die with their parent and leave Ctrl-C to it."""
+def _worker_init(parent_pid: int, setup=None) -> None:
+    """Local workers die with their parent, leave Ctrl-C to it, and run the set-up."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent cancels and terminates us
     die_with_parent(parent_pid)
+    if setup is not None:
+        setup(_SHARED)
 
 
 def die_with_parent(parent_pid: int) -> None:
@@ -311,10 +408,15 @@ def die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="shtools-parent-watch", daemon=True).start()
 
 
+def _timed(fn, shared, item, worker: str):
+    """``fn(shared, item)``, the worker's name, and the call's wall and thread-CPU seconds."""
+    start, cpu = time.perf_counter(), time.thread_time()
+    result = fn(shared, item)
+    return result, worker, time.perf_counter() - start, time.thread_time() - cpu
+
+
 def _run_local(fn, item):
-    start = time.perf_counter()
-    result = fn(_SHARED, item)
-    return result, f"pid {os.getpid()}", time.perf_counter() - start
+    return _timed(fn, _SHARED, item, f"pid {os.getpid()}")
 
 
 #: glibc malloc settings a Dask worker gets back (see :func:`_undo_dask_malloc_trim`):
@@ -352,13 +454,16 @@ def _undo_dask_malloc_trim() -> None:
         pass
 
 
+def _setup_dask(setup, shared) -> None:
+    _undo_dask_malloc_trim()
+    setup(shared)
+
+
 def _run_dask(fn, shared, item):
     from distributed import get_worker
 
     _undo_dask_malloc_trim()
-    start = time.perf_counter()
-    result = fn(shared, item)
-    return result, get_worker().address, time.perf_counter() - start
+    return _timed(fn, shared, item, get_worker().address)
 
 
 def _terminate(pool) -> None:
@@ -431,11 +536,14 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
     start = time.perf_counter()
     try:
         if scheduler == "local":
+            import dask
+
             # Single-threaded workers: each task uses NumPy/BLAS on one core.
-            cluster = distributed.LocalCluster(
-                n_workers=workers or default_workers(), threads_per_worker=1,
-                processes=True, dashboard_address=":0", silence_logs=50)
-            client = distributed.Client(cluster, timeout=CONNECT_TIMEOUT)
+            with dask.config.set(EMBEDDED_CLUSTER_CONFIG):
+                cluster = distributed.LocalCluster(
+                    n_workers=workers or default_workers(), threads_per_worker=1,
+                    processes=True, dashboard_address=":0", silence_logs=50)
+                client = distributed.Client(cluster, timeout=CONNECT_TIMEOUT)
         elif "://" in scheduler:
             client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
         else:

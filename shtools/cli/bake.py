@@ -32,11 +32,15 @@ from shtools.scene.shadows import bake_method_names
                    "evaluated in this process (a single frame, or --workers 1); default one "
                    "per core.")
 @scheduler_options("frames")
+@click.option("--split-frames/--no-split-frames", default=None,
+              help="With --scheduler: evaluate frames one after the other here and run each "
+                   "large frame's parts as tasks on the cluster (for one huge frame).  "
+                   "Default: when the bake has fewer frames than workers.  Same bytes.")
 @click.option("--force", is_flag=True,
               help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option
 def bake(scene, output, frames_text, method, store_visibility, processes, scheduler, workers,
-         force, as_json):
+         split_frames, force, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.
 
     Frames are independent tasks spread over the local cores (or a Dask
@@ -54,7 +58,8 @@ def bake(scene, output, frames_text, method, store_visibility, processes, schedu
     frames = parse_frames(frames_text, parsed.settings.frames, scene)
     summary = bake_to_file(parsed, output, frames=frames, method=method,
                            store_visibility=store_visibility, processes=processes,
-                           scheduler=scheduler, workers=workers, progress=progress, force=force)
+                           scheduler=scheduler, workers=workers, progress=progress, force=force,
+                           split_frames=split_frames)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

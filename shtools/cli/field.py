@@ -36,20 +36,26 @@ def field():
               help="Check every halving against the initial samples (beyond the paper, "
                    "which compares with the previous level only).")
 @click.option("--no-self-visibility", is_flag=True,
-              help="Do not store the per-vertex self-visibility O_v.")
+              help="Do not store the per-vertex self-visibility O_v (the object's own "
+                   "vertices then need a transfer asset or are not self-shadowed).")
+@click.option("--self-order", default=None, type=int,
+              help="SH order of the stored O_v [default: the bake's accumulation order at "
+                   "--order, 6 at order 4].")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Recorded for reproducibility (sampling is deterministic).")
 @scheduler_options("shells")
 @json_option
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
-           bits, cumulative, no_self_visibility, seed, scheduler, workers, as_json):
+           bits, cumulative, no_self_visibility, self_order, seed, scheduler, workers, as_json):
     """Sample the shadow field of MESH into a field asset.
 
     Per shell, the object's binary visibility over the direction map at R x R
     points is projected to SH (rays outside the cone of the bounding sphere are
     not cast: they are unoccluded), the shell is reduced while eq. (1) stays
     below --threshold at every initial sample, and the kept samples and their
-    SH logs are quantized.
+    SH logs are quantized.  The object's self-visibility O_v on its own vertices
+    (--self-order) is stored too: a bake with `blocker = { field = ... }` then
+    shadows the object itself with its real mesh, with no other asset.
     """
     from shtools.data_formats.field import write_field
     from shtools.errors import InputError
@@ -58,7 +64,8 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
 
     params = FieldParameters(shells=shells, resolution=resolution, map_size=map_size,
                              order=order, threshold=threshold, min_resolution=min_resolution,
-                             bits=bits, cumulative=cumulative, seed=seed)
+                             bits=bits, cumulative=cumulative, seed=seed,
+                             self_order=self_order)
     try:
         params.validate()
     except InputError as exc:
@@ -82,6 +89,8 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     parameters = {k: getattr(params, k) for k in (
         "shells", "resolution", "map_size", "order", "threshold", "min_resolution", "bits",
         "cumulative", "log_floor", "log_eps", "seed")}
+    if not no_self_visibility:
+        parameters["self_order"] = params.resolved_self_order()
     write_field(output, fld, inputs={"mesh": mesh_path}, parameters=parameters)
     fixed = shells * resolution * resolution * order * order
     summary = {
@@ -100,6 +109,7 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         "closed": fld.attrs["closed"],
         "boundary_edges": fld.attrs["boundary_edges"],
         "self_visibility": fld.self_visibility is not None,
+        "self_order": fld.self_order,
     }
     human = (f"wrote {output}: {shells} shells, R_c {summary['resolution']}, "
              f"{summary['bytes']} B ({summary['reduction_percent']:.1f} % below fixed), "

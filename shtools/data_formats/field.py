@@ -5,8 +5,9 @@ Layout (``docs/formats.md``): ``center (3,)``, ``shell_radii (C,)``,
 with ``shells/<c>/offset`` and ``shells/<c>/step (n*n,) f4`` (value =
 ``offset + q * step``), and the same for the SH log of the visibility
 (``shells/<c>/log``, ``log_offset``, ``log_step``).  Optional
-``self_visibility (V, n*n) f4`` (per-vertex self-visibility O_v of the object
-on its own mesh vertices, object frame).  Per-shell reduction statistics:
+``self_visibility (V, m*m) f4`` (per-vertex self-visibility O_v of the object
+on its own mesh vertices, object frame, at an order ``m >= n``: by default the
+runtime's accumulation order, 6 at order 4).  Per-shell reduction statistics:
 ``reduction_error (C,)`` (cumulative L1 error of the stored float field
 against the full-resolution one, eq. 1), ``level_error (C,)`` (largest error of
 the last accepted halving).
@@ -20,6 +21,7 @@ Sample ``(s, t)`` of a shell of resolution ``R`` is the object-frame direction
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 
@@ -59,8 +61,9 @@ class ShadowField:
         Quantized SH log of each sample's visibility.
     log_offset, log_step : ndarray, shape (C, n*n) float32
     order : int
-    self_visibility : ndarray, shape (V, n*n) or None
-        O_v on the object's own mesh vertices (object frame).
+    self_visibility : ndarray, shape (V, m*m) or None
+        O_v on the object's own mesh vertices (object frame), at SH order ``m >= n``
+        (:attr:`self_order`).
     reduction_error, level_error : ndarray, shape (C,)
     attrs : dict
         Everything else recorded (quadrature, thresholds, leak information ...).
@@ -86,6 +89,13 @@ class ShadowField:
     def n_shells(self) -> int:
         return int(self.shell_radii.shape[0])
 
+    @property
+    def self_order(self) -> int | None:
+        """SH order of the stored O_v (None without one)."""
+        if self.self_visibility is None:
+            return None
+        return math.isqrt(np.shape(self.self_visibility)[-1])
+
     def stored_bytes(self) -> int:
         """Bytes of the quantized OCV samples (Table 2's measure): ``sum_c R_c^2 n^2``."""
         return int(sum(int(r) ** 2 for r in self.resolution) * self.order ** 2)
@@ -93,7 +103,8 @@ class ShadowField:
 
 def _check(f, ctx) -> None:
     path = ctx["path"]
-    n2 = int(ctx["attrs"]["sh_order"]) ** 2
+    n = int(ctx["attrs"]["sh_order"])
+    n2 = n * n
     radii = f["shell_radii"][()]
     res = f["shell_resolution"][()]
     if radii.shape[0] < 1:
@@ -119,8 +130,12 @@ def _check(f, ctx) -> None:
             arr = f[key][()]
             if not np.all(np.isfinite(arr)) or (name.endswith("step") and np.any(arr < 0)):
                 raise AssetError(f"dataset '{key}' holds NaN/inf or a negative step", path)
-    if "self_visibility" in f and f["self_visibility"].shape[-1] != n2:
-        raise AssetError(f"self_visibility must have {n2} columns", path)
+    if "self_visibility" in f:
+        cols = f["self_visibility"].shape[-1]
+        m = math.isqrt(cols)
+        if m * m != cols or m < n:
+            raise AssetError(f"self_visibility must have m*m columns with m >= the field's "
+                             f"order {n} (got {cols}); resample the field", path)
 
 
 SCHEMA = register(

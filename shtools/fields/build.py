@@ -59,6 +59,18 @@ class FieldParameters:
     log_floor: float = LOG_FLOOR
     log_eps: float = LOG_EPS
     seed: int = 0
+    #: SH order of the stored self-visibility O_v (None: the runtime's default
+    #: accumulation order at ``order``, 6 at order 4, so the object's own vertices get
+    #: the same accuracy as a ``transfer`` asset; ``order`` stores the paper's O_v)
+    self_order: int | None = None
+
+    def resolved_self_order(self) -> int:
+        """The O_v order actually stored."""
+        if self.self_order is not None:
+            return int(self.self_order)
+        from shtools.runtime.settings import ShadowSettings
+
+        return ShadowSettings(order=self.order).resolved_acc_order()
 
     def validate(self) -> None:
         """Raise :class:`InputError` naming the bad option."""
@@ -82,6 +94,10 @@ class FieldParameters:
             raise InputError(f"--bits must be an integer 1..8, got {self.bits!r}")
         if not 0 < self.log_floor < 1:
             raise InputError(f"log floor must be in (0, 1), got {self.log_floor!r}")
+        if self.self_order is not None and not (
+                isinstance(self.self_order, int) and self.order <= self.self_order <= 10):
+            raise InputError(f"--self-order must be an integer {self.order}..10 (at least "
+                             f"--order), got {self.self_order!r}")
 
 
 @dataclass
@@ -252,8 +268,9 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         The object in its own frame (validated, see :func:`shtools.geometry.mesh.load_mesh`).
     params : FieldParameters, optional
     self_visibility : callable, optional
-        ``f(vertices, normals, meshes, order) -> (V, n*n)``: per-vertex
-        self-visibility O_v stored with the field (rigid objects;
+        ``f(vertices, normals, meshes, order) -> (V, m*m)``: per-vertex
+        self-visibility O_v stored with the field at ``m =
+        params.resolved_self_order()`` (rigid objects;
         :func:`shtools.fields.self_visibility.self_visibility`).
     progress : callable, optional
         Called with the number of samples done after each shell.
@@ -325,8 +342,8 @@ def build_field(sampled: SampledShells, params: FieldParameters | None = None, *
     ts = time.perf_counter()
     if self_visibility is not None and mesh is not None:
         sv = np.asarray(self_visibility(np.asarray(mesh.vertices, dtype=np.float64),
-                                        np.asarray(mesh.vertex_normals), [mesh], params.order),
-                        dtype=np.float32)
+                                        np.asarray(mesh.vertex_normals), [mesh],
+                                        params.resolved_self_order()), dtype=np.float32)
     t_sv = time.perf_counter() - ts
     n_boundary = len(boundary_edges(mesh)) if mesh is not None else 0
     attrs = {

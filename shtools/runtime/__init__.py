@@ -82,9 +82,11 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
     refuses non-uniform scale and shear.  Pass it in ``blockers`` with the others;
     ``settings.field_space`` ("log" default, or "product") says how it combines
     (:mod:`~shtools.runtime.fields`).
-``SelfVisibility(log (R, n_acc^2), rows, rotation=None, blocker=None)``
-    An object's precomputed self-visibility (``transfer`` asset) on its own
-    receiver rows, added in log space in place of its own spheres
+``SelfVisibility(log (R, n_acc^2) | None, rows, rotation=None, blocker=None, visibility=None)``
+    An object's self-visibility on its own receiver rows, in place of its own
+    blocker there (spheres or a log blocker): a rigid object's ``transfer`` log,
+    added in log space, or ``visibility (R, m^2)`` (a skinned object's posed mesh
+    traced this frame), multiplied in after the exp
     (``visibility(..., self_visibility=[...])``).
 ``ShadowRuntime(settings=None, tables=None)`` (also a context manager; ``.close()``)
     ``.clusters(vertices, groups=None) -> ReceiverClusters``;

@@ -141,17 +141,20 @@ class SphereLight:
 
 @dataclass
 class SelfVisibility:
-    """Precomputed log visibility of an object's real mesh on its own receiver vertices.
+    """An object's self-visibility on its own receiver vertices, from its real mesh.
 
-    The runtime adds ``log`` (rotated by ``rotation``) to the accumulated log of
-    the receiver rows ``rows`` and skips the spheres of ``blocker`` there: the
-    object's own spheres then shadow only the other receivers (exact
-    self-shadowing of rigid objects, combined in log space with every other
-    blocker).
+    Given as a **log** (``log``), the runtime adds it (rotated by ``rotation``)
+    to the accumulated log of the receiver rows ``rows`` before the exp (a rigid
+    object's precomputed ``transfer``); given as a **visibility** (``visibility``),
+    it multiplies the rows' visibility after the exp (a skinned object's posed
+    mesh, ray traced this frame: no log to take per frame, see
+    :mod:`shtools.scene.transfer`).  Either way the runtime skips the object's own
+    blocker ``blocker`` on those rows: it then shadows only the other receivers
+    (exact self-shadowing, combined with every other blocker).
 
     Parameters
     ----------
-    log : array_like, shape (R, n_acc*n_acc)
+    log : array_like, shape (R, n_acc*n_acc), or None
         Log visibility at the runtime's accumulation order, in the object's own
         frame (from a ``transfer`` asset).
     rows : array_like of int, shape (R,), or slice
@@ -160,22 +163,42 @@ class SelfVisibility:
         The object's rotation this frame (own frame -> world); None: identity.
     blocker : int, optional
         Index, in the ``blockers`` list of the same call, of the object's own
-        sphere blocker, skipped on ``rows``.
+        blocker, skipped on ``rows``: a sphere set, or a log blocker (a
+        deformable field), which is then not evaluated on those rows.
+    visibility : array_like, shape (R, m*m), optional
+        Instead of ``log``: world-space visibility vectors (any order ``m``;
+        truncated or zero-padded to the shading order), multiplied in by the
+        exact truncated SH product at the shading order (no ``rotation``).
     """
 
     log: Any
     rows: Any
     rotation: Any = None
     blocker: int | None = None
+    visibility: Any = None
 
     def __post_init__(self):
-        self.log = np.asarray(self.log, dtype=np.float32)
-        if self.log.ndim != 2:
-            raise InputError(f"self-visibility log must have shape (R, n*n), got {self.log.shape}")
-        if not np.isfinite(self.log).all():
-            raise InputError("self-visibility log contains NaN or infinite values")
+        if (self.log is None) == (self.visibility is None):
+            raise InputError("self-visibility needs exactly one of a log and a visibility")
+        if self.log is not None:
+            self.log = _checked("log", self.log)
+        else:
+            self.visibility = _checked("visibility", self.visibility)
         if self.rotation is not None:
             r = np.asarray(self.rotation, dtype=np.float64)
             if r.shape != (3, 3):
                 raise InputError(f"self-visibility rotation must be (3, 3), got {r.shape}")
             self.rotation = r
+            if self.visibility is not None:
+                raise InputError("a self-visibility given as visibility is in world space; "
+                                 "it takes no rotation")
+
+
+def _checked(name: str, value) -> np.ndarray:
+    """A self-visibility array as float32 ``(R, k)``, finite."""
+    value = np.asarray(value, dtype=np.float32)
+    if value.ndim != 2:
+        raise InputError(f"self-visibility {name} must have shape (R, n*n), got {value.shape}")
+    if not np.isfinite(value).all():
+        raise InputError(f"self-visibility {name} contains NaN or infinite values")
+    return value

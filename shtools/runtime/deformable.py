@@ -4,13 +4,22 @@ A :class:`DeformableField` holds an object's visibility sampled this frame on
 its bounding sphere (:mod:`shtools.fields.deformable` samples it).  For a
 receiver ``p`` with ``w = (p - c)/|p - c|`` and ``k = |p - c| / r``:
 
-1. ``S_r(w)``: bilinear interpolation of the samples on the polar layout (the
-   poles use the mean of the nearest ring, so the lookup is continuous);
-2. ``S_d = D^T M(k) D S_r(w)`` with ``D`` rotating the direction from ``p``
-   towards ``c`` to ``+z`` and ``M`` the plain **cone** scaling table
+1. every sample ``S_s`` is re-expressed once per frame in its own **axis frame**
+   (``+z`` from the sample point towards ``c``): ``L_s = D_s S_s``;
+2. ``L(w)``: bilinear interpolation of the ``L_s`` on the polar layout (near a
+   pole, the pole value is the mean of the nearest ring's world samples seen in
+   the receiver's own frame, so the lookup is continuous there);
+3. ``S_d = D_p^T M(k) L(w)`` with ``D_p`` the receiver's axis frame (the
+   direction from ``p`` towards ``c``) and ``M`` the plain **cone** scaling table
    (:class:`shtools.runtime.scaling.ScalingTable`); ``k < 1`` (receivers inside
    the bounding sphere, the object's own vertices) expands the occluded region:
    self-shadowing.
+
+At a sample's own direction this is ``D_s^T M(k) D_s S_s``, the scaling of the
+sample about its axis.  Between samples it interpolates the samples *in their
+axis frames* (a shadow centred on the axis stays centred) and costs one SH
+rotation per receiver instead of two (:func:`interpolate_samples` is the
+world-frame interpolation, for other uses).
 
 In **log space** the same is done to the sample's SH log: scaling is linear,
 so the scaled logs of several objects add and join the SHEXP accumulation
@@ -27,7 +36,7 @@ NumPy only (the runtime's import rule).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -74,10 +83,40 @@ class DeformableField:
     log_visibility: np.ndarray | None = None
     rays: int = 0
     occluded_fraction: float = 0.0
+    #: samples in their axis frames, per kind ("log"/"vis"), made on first lookup
+    _local: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def order(self) -> int:
         return math.isqrt(self.visibility.shape[1])
+
+
+def _bilinear(layout, directions):
+    """Cells and weights of the bilinear lookup on the pole-padded polar layout.
+
+    Row ``0`` of the padded grid is the north pole (``theta = 0``), row ``i + 1``
+    ring ``i``, row ``rings + 1`` the south pole; the pole is half a ring
+    spacing from the first ring.  Returns ``i0, j0, j1 (V,)`` and ``tu, tv (V, 1)``.
+    """
+    rings, az = int(layout[0]), int(layout[1])
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    theta = np.arccos(np.clip(d[:, 2], -1.0, 1.0))
+    phi = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * math.pi)
+    x = theta * rings / math.pi  # ring i at x = i + 1/2
+    u = np.where(x < 0.5, 2.0 * x,
+                 np.where(x > rings - 0.5, rings + 1.0 - 2.0 * (rings - x), x + 0.5))
+    u = np.clip(u, 0.0, rings + 1.0)
+    i0 = np.minimum(np.floor(u).astype(np.intp), rings)
+    v = phi * az / (2.0 * math.pi) - 0.5
+    j0f = np.floor(v)
+    j0 = np.mod(j0f.astype(np.intp), az)
+    return i0, j0, np.mod(j0 + 1, az), (u - i0)[:, None], (v - j0f)[:, None]
+
+
+def _gather(grid, i0, j0, j1, tu, tv):
+    """Bilinear combination of the padded grid ``(rings + 2, az, C)``."""
+    return ((1 - tu) * ((1 - tv) * grid[i0, j0] + tv * grid[i0, j1])
+            + tu * ((1 - tv) * grid[i0 + 1, j0] + tv * grid[i0 + 1, j1]))
 
 
 def interpolate_samples(samples, layout, directions) -> np.ndarray:
@@ -100,24 +139,62 @@ def interpolate_samples(samples, layout, directions) -> np.ndarray:
     # virtual pole rows (the ring mean) make the lookup continuous across the poles
     grid = np.concatenate([grid[:1].mean(axis=1, keepdims=True).repeat(az, axis=1), grid,
                            grid[-1:].mean(axis=1, keepdims=True).repeat(az, axis=1)])
+    return _gather(grid, *_bilinear(layout, directions))
+
+
+def _local_samples(field: DeformableField, table: ScalingTable, log: bool) -> np.ndarray:
+    """The field's samples in their axis frames ``(S, n*n)`` float32 (made once per field).
+
+    Only the table's SH rotations are used, which depend on its order alone, so
+    the cache holds for every table of the field's order (any alpha).
+    """
+    key = "log" if log else "vis"
+    if key not in field._local:
+        samples = field.log_visibility if log else field.visibility
+        local = table.to_axis_frame(samples, -layout_directions(*field.layout))
+        field._local[key] = local.astype(np.float32)
+    return field._local[key]
+
+
+def interpolate_local(field: DeformableField, table: ScalingTable, directions, *,
+                      log: bool) -> np.ndarray:
+    """The field at unit ``directions (V, 3)`` from its centre, in each direction's axis frame.
+
+    Bilinear in the samples' axis frames; the pole rows are the mean of the
+    nearest ring's world samples, expressed in the receiver's own frame (so the
+    world-frame result is continuous across the poles).
+
+    Parameters
+    ----------
+    field : DeformableField
+    table : ScalingTable
+        Of the field's order (its SH rotations give the axis frames).
+    directions : array_like, shape (V, 3)
+        Unit directions from the field's centre to the receivers.
+    log : bool
+        The log samples, or the visibility samples.
+
+    Returns
+    -------
+    ndarray, shape (V, n*n) float32
+        (the runtime accumulates logs in float32; half the memory traffic)
+    """
+    rings, az = field.layout
+    world = field.log_visibility if log else field.visibility
+    local = _local_samples(field, table, log).reshape(rings, az, -1)
+    pad = np.zeros((1, az, local.shape[2]), dtype=np.float32)
+    grid = np.concatenate([pad, local, pad])
+    i0, j0, j1, tu, tv = _bilinear(field.layout, directions)
+    tu, tv = tu.astype(np.float32), tv.astype(np.float32)
+    out = _gather(grid, i0, j0, j1, tu, tv)
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-    theta = np.arccos(np.clip(d[:, 2], -1.0, 1.0))
-    phi = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * math.pi)
-    # row coordinate in the padded grid: pole at 0 (theta 0), ring i at i + 1, the
-    # other pole at rings + 1; the pole is half a ring spacing from the first ring
-    x = theta * rings / math.pi  # ring i at x = i + 1/2
-    u = np.where(x < 0.5, 2.0 * x,
-                 np.where(x > rings - 0.5, rings + 1.0 - 2.0 * (rings - x), x + 0.5))
-    u = np.clip(u, 0.0, rings + 1.0)
-    i0 = np.minimum(np.floor(u).astype(np.intp), rings)
-    tu = (u - i0)[:, None]
-    v = phi * az / (2.0 * math.pi) - 0.5
-    j0f = np.floor(v)
-    tv = (v - j0f)[:, None]
-    j0 = np.mod(j0f.astype(np.intp), az)
-    j1 = np.mod(j0 + 1, az)
-    return ((1 - tu) * ((1 - tv) * grid[i0, j0] + tv * grid[i0, j1])
-            + tu * ((1 - tv) * grid[i0 + 1, j0] + tv * grid[i0 + 1, j1]))
+    for cap, ring, weight in ((i0 == 0, 0, 1 - tu), (i0 == rings, rings - 1, tu)):
+        if cap.any():
+            mean = world.reshape(rings, az, -1)[ring].mean(axis=0).astype(np.float32)
+            pole = table.to_axis_frame(np.broadcast_to(mean, (int(cap.sum()), mean.size)),
+                                       -d[cap])
+            out[cap] += weight[cap] * pole
+    return out
 
 
 def deformable_visibility(field: DeformableField, table: ScalingTable, points, *,
@@ -163,8 +240,9 @@ def deformable_visibility(field: DeformableField, table: ScalingTable, points, *
         return out
     w = np.where(dist[near, None] > 0, rel[near] / np.maximum(dist[near, None], 1e-300),
                  [0.0, 0.0, 1.0])
-    s_r = interpolate_samples(samples, field.layout, w)
-    out[near] = table.apply(s_r, k[near], -w)  # axis: from the receiver to the centre
+    local = interpolate_local(field, table, w, log=log)
+    # axis: from the receiver to the centre
+    out[near] = table.from_axis_frame(table.scale(local, k[near]), -w)
     return out
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import time
 from dataclasses import dataclass
 
@@ -13,13 +14,14 @@ from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
-from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
+from shtools.runtime.fast_exp import FAST_METHODS, QuadratureProducts, fast_exp
 from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.parallel import (
     FRAME_PARTS,
     MIN_PARALLEL_PAIRS,
+    PoolParts,
     VertexWorkers,
     resolve_processes,
     split_clusters,
@@ -50,6 +52,10 @@ class ShadowRuntime:
         or :func:`shtools.data_formats.tables.read_tables`; built when omitted.
         The cap log depends on the order it was computed at, so the tables must
         have exactly the accumulation order.
+    part_pool : shtools.tasks.TaskPool, optional
+        Run the parts of a large frame as tasks of this pool (e.g. a Dask
+        cluster; :class:`~shtools.runtime.parallel.PoolParts`) instead of on
+        forked worker processes; the bytes are the same.
 
     Attributes
     ----------
@@ -62,7 +68,8 @@ class ShadowRuntime:
         other jobs on the machine).
     """
 
-    def __init__(self, settings: ShadowSettings | None = None, tables: dict | None = None):
+    def __init__(self, settings: ShadowSettings | None = None, tables: dict | None = None,
+                 part_pool=None):
         self.settings = settings if settings is not None else ShadowSettings()
         self.settings.validate()
         self.order = self.settings.order
@@ -86,12 +93,15 @@ class ShadowRuntime:
         self._auto_groups: np.ndarray | None = None
         self._rotated_logs: dict = {}  # id(log) -> (rotation, rotated log), last frame
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._products: QuadratureProducts | None = None  # self-visibility products
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         #: processes sharing the per-vertex stages (worker processes start on the
         #: first frame of at least MIN_PARALLEL_PAIRS pairs)
         self.processes = resolve_processes(self.settings.processes)
         self._workers: VertexWorkers | None = None
+        self._part_pool = part_pool
+        self._pool_parts: PoolParts | None = None  # started on the first split frame
         self.last_stats: dict = {}
 
     # -- clusters --------------------------------------------------------------
@@ -120,12 +130,12 @@ class ShadowRuntime:
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        spheres, others = self._blockers(blockers)
-        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        spheres, _ = self._blockers(blockers)
+        own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
-        extra = _add(self._other_logs(pts, nrm, others), own)
+        extra = _add(self._other_logs(pts, nrm, blockers, skip), own)
         if extra is not None:
             f += extra
         self.last_stats["seconds"]["accumulate"] = time.process_time() - t1
@@ -151,10 +161,12 @@ class ShadowRuntime:
             are computed on the first call and reused while the vertex count
             stays the same (built per object when ``self_visibility`` is given).
         self_visibility : sequence of SelfVisibility
-            Precomputed log visibility of objects' real meshes on their own
-            receiver rows, added in log space; each skips its object's own
-            sphere blocker (an index into ``blockers``) on those rows.  Clusters
-            must not mix rows of different objects (build them with ``groups``).
+            Self-visibility of objects' real meshes on their own receiver rows:
+            logs are added in log space, visibilities multiply the result after
+            the exp; each skips its object's own blocker (an index into
+            ``blockers``: a sphere set or a log blocker such as a deformable
+            field) on those rows.  Clusters must not mix rows of different
+            objects (build them with ``groups``).
 
         Returns
         -------
@@ -171,13 +183,18 @@ class ShadowRuntime:
         count, so the result is the same bytes with any number of processes.
         """
         pts, nrm = _check_receivers(vertices, normals)
+        g = self._visibility(pts, nrm, blockers, clusters, self_visibility)
+        return self._multiply_self(g, self_visibility)
+
+    def _visibility(self, pts, nrm, blockers, clusters, self_visibility) -> np.ndarray:
+        """:meth:`visibility` before the self-visibilities given as visibility."""
         spheres, others = self._blockers(blockers)
         if any(isinstance(b, FieldBlocker) for b in others):
             return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
-        own, exclude = self._self_terms(self_visibility, pts.shape[0], blockers)
+        own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = _add(self._other_logs(pts, nrm, others), own)
+        extra = _add(self._other_logs(pts, nrm, blockers, skip), own)
         if stats["pairs"] >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
             g = self._split_visibility(work, pts, nrm, extra)
@@ -284,19 +301,34 @@ class ShadowRuntime:
         g = field_product_visibility(pts, nrm, fields, self.order, self.acc_order, base=base)
         return g.astype(np.float32)
 
-    def _other_logs(self, pts, nrm, others: list) -> np.ndarray | None:
-        """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None."""
+    def _other_logs(self, pts, nrm, blockers: list, skip: dict | None = None
+                    ) -> np.ndarray | None:
+        """Sum of the log visibilities of the non-sphere blockers, ``(V, n_acc^2)`` or None.
+
+        ``skip``: position in ``blockers`` -> bool mask ``(V,)`` of the rows that
+        blocker is not evaluated on (its object's own rows, which its
+        self-visibility covers).
+        """
+        others = [(k, b) for k, b in enumerate(blockers) if not isinstance(b, SphereBlocker)]
         if not others:
             return None
         t0 = time.process_time()
         total = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
-        for b in others:
-            f = np.asarray(b.log_visibility(pts, nrm, self.acc_order))
-            if f.shape != total.shape or not np.isfinite(f).all():
+        for k, b in others:
+            rows = None if not skip or k not in skip else np.flatnonzero(~skip[k])
+            if rows is not None and rows.size == 0:
+                continue
+            p, n = (pts, nrm) if rows is None else (pts[rows], nrm[rows])
+            f = np.asarray(b.log_visibility(p, n, self.acc_order))
+            want = (p.shape[0], total.shape[1])
+            if f.shape != want or not np.isfinite(f).all():
                 raise InputError(
                     f"{type(b).__name__}.log_visibility returned shape {f.shape} (or "
-                    f"non-finite values); expected finite values of shape {total.shape}")
-            total += f
+                    f"non-finite values); expected finite values of shape {want}")
+            if rows is None:
+                total += f
+            else:
+                total[rows] += f
         self.last_stats["seconds"]["other_blockers"] = time.process_time() - t0
         return total
 
@@ -309,6 +341,9 @@ class ShadowRuntime:
         if self._workers is not None:
             self._workers.close(kill=kill)
             self._workers = None
+        if self._pool_parts is not None:
+            self._pool_parts.close()
+            self._pool_parts = None
 
     def __enter__(self) -> ShadowRuntime:
         return self
@@ -317,15 +352,17 @@ class ShadowRuntime:
         self.close()
 
     def _self_terms(self, self_visibility, n_vertices: int, blockers: list):
-        """Rotated self-visibility logs ``(V, n_acc^2)`` and the sphere blocker each row skips.
+        """Rotated self-visibility logs ``(V, n_acc^2)`` and the own blocker each row skips.
 
-        Returns ``(None, None)`` without self-visibility; ``exclude (V,)`` indexes
-        the *sphere* blockers (-1: none).  A rotated log is kept while its
+        Returns ``(None, None, None)`` without self-visibility; ``exclude (V,)``
+        indexes the *sphere* blockers (-1: none); ``skip`` maps the position of a
+        log blocker (e.g. a deformable field) named by a self-visibility to the
+        bool mask ``(V,)`` of the rows it skips.  A rotated log is kept while its
         object's rotation does not change (static objects).
         """
         if not self_visibility:
             self._rotated_logs = {}
-            return None, None
+            return None, None, None
         size = self.acc_order * self.acc_order
         sphere_index = {}  # position in `blockers` -> position among the sphere blockers
         for k, b in enumerate(blockers):
@@ -333,22 +370,25 @@ class ShadowRuntime:
                 sphere_index[k] = len(sphere_index)
         extra = np.zeros((n_vertices, size), dtype=np.float32)
         exclude = np.full(n_vertices, -1, dtype=np.int64)
+        skip = {}
         kept = {}
         for sv in self_visibility:
             if not isinstance(sv, SelfVisibility):
                 raise InputError(f"self_visibility must hold SelfVisibility objects, got "
                                  f"{type(sv).__name__}")
-            if sv.log.shape[1] != size:
+            if sv.log is not None and sv.log.shape[1] != size:
                 raise InputError(
                     f"self-visibility log has {sv.log.shape[1]} coefficients but the runtime "
                     f"accumulates at order {self.acc_order} ({size}); rebuild the transfer "
                     f"with --order {self.acc_order}")
             rows = np.arange(n_vertices)[sv.rows]
-            if rows.shape[0] != sv.log.shape[0]:
-                raise InputError(f"self-visibility covers {sv.log.shape[0]} vertices but its "
-                                 f"rows select {rows.shape[0]}")
             log = sv.log
-            if sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
+            if log is None:  # a visibility: multiplied in after the exp (_multiply_self)
+                pass
+            elif rows.shape[0] != log.shape[0]:
+                raise InputError(f"self-visibility covers {log.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            elif sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
                 cached = self._rotated_logs.get(id(sv.log))
                 if cached is not None and np.array_equal(cached[0], sv.rotation):
                     log = cached[1]
@@ -356,14 +396,48 @@ class ShadowRuntime:
                     d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
                     log = sv.log @ d.T
                 kept[id(sv.log)] = (sv.rotation.copy(), log)
-            extra[rows] += log
+            if log is not None:
+                extra[rows] += log
             if sv.blocker is not None:
-                if int(sv.blocker) not in sphere_index:
+                k = int(sv.blocker)
+                if k in sphere_index:
+                    exclude[rows] = sphere_index[k]
+                elif 0 <= k < len(blockers) and isinstance(blockers[k], LogBlocker):
+                    skip.setdefault(k, np.zeros(n_vertices, dtype=bool))[rows] = True
+                else:
                     raise InputError(f"self-visibility names blocker {sv.blocker}, which is not "
-                                     f"a SphereBlocker of the {len(blockers)} given")
-                exclude[rows] = sphere_index[int(sv.blocker)]
+                                     f"one of the {len(blockers)} blockers given")
         self._rotated_logs = kept
-        return extra, (exclude if (exclude >= 0).any() else None)
+        if all(sv.log is None for sv in self_visibility):
+            extra = None  # visibilities only: nothing to add before the exp
+        return extra, (exclude if (exclude >= 0).any() else None), (skip or None)
+
+    def _multiply_self(self, g: np.ndarray, self_visibility) -> np.ndarray:
+        """``g`` with the self-visibilities given as visibility multiplied into their rows.
+
+        The exact truncated SH product at the shading order (quadrature); on rows
+        no other blocker reaches, ``g`` is the constant 1 and the product returns
+        the given visibility.
+        """
+        given = [sv for sv in self_visibility or () if sv.visibility is not None]
+        if not given:
+            return g
+        size = self.order * self.order
+        if self._products is None:
+            self._products = QuadratureProducts(self.order, np.float32)
+        for sv in given:
+            rows = np.arange(g.shape[0])[sv.rows]
+            values = sv.visibility
+            k = values.shape[1]
+            if math.isqrt(k) ** 2 != k:
+                raise InputError(f"self-visibility has {k} coefficients, not an SH order's n*n")
+            if values.shape[0] != rows.shape[0]:
+                raise InputError(f"self-visibility covers {values.shape[0]} vertices but its "
+                                 f"rows select {rows.shape[0]}")
+            vis = np.zeros((rows.shape[0], size), dtype=np.float32)
+            vis[:, :min(k, size)] = values[:, :size]
+            g[rows] = self._products.product(g[rows], vis)
+        return g
 
     def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:
         """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
@@ -450,7 +524,15 @@ class ShadowRuntime:
         g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
         evaluated = 0
         processes = 1
-        if self.processes == 1 or len(parts) == 1:
+        if self._part_pool is not None and len(parts) > 1:
+            if self._pool_parts is None:
+                self._pool_parts = PoolParts(self._part_pool, self.settings, self.tables)
+            results = self._pool_parts.map([task for _, task in parts])
+            for (rows, _), (g_part, count) in zip(parts, results, strict=True):
+                g[rows] = g_part
+                evaluated += count
+            processes = min(self._part_pool.workers, len(parts))
+        elif self.processes == 1 or len(parts) == 1:
             for rows, task in parts:
                 g[rows], count = self.run_part(task)
                 evaluated += count

@@ -147,6 +147,71 @@ class VertexWorkers:
         self._close()
 
 
+class PoolParts:
+    """A frame's parts as tasks of a :class:`shtools.tasks.TaskPool` (a Dask cluster).
+
+    For one huge frame, or fewer frames than workers, on a cluster: the
+    settings and log tables are shipped to every worker once (with a
+    one-time runtime set-up there), then each frame's parts go out as tasks
+    and their visibility comes back, in part order.  A part evaluates the
+    same bytes on any worker, so the frame is the same bytes as in one
+    process.
+
+    Parameters
+    ----------
+    pool : shtools.tasks.TaskPool
+    settings : ShadowSettings
+        The runtime's settings (the workers run single-process).
+    tables : dict
+        Log/OL tables of the runtime.
+    """
+
+    def __init__(self, pool, settings, tables: dict):
+        import uuid
+        from contextlib import ExitStack
+        from dataclasses import replace
+
+        self._pool = pool
+        self._stack = ExitStack()
+        job = _PartJob(replace(settings, processes=1), tables, uuid.uuid4().hex)
+        self._shared = self._stack.enter_context(pool.share(job, setup=_pool_runtime))
+
+    def map(self, tasks: list) -> list[tuple[np.ndarray, int]]:
+        """``run_part`` of each task on the pool: ``(g, pairs_evaluated)`` in task order."""
+        return list(self._pool.map_ordered(_run_pool_part, tasks, shared=self._shared,
+                                           window=len(tasks)))
+
+    def close(self) -> None:
+        """Release the shipped settings and tables (idempotent)."""
+        self._stack.close()
+
+
+class _PartJob:
+    """What the part tasks of one runtime share: its settings and tables."""
+
+    def __init__(self, settings, tables: dict, token: str):
+        self.settings, self.tables, self.token = settings, tables, token
+
+
+#: The part runtime of a pool worker, by job token (one job at a time).
+_POOL_RUNTIME: dict = {}
+
+
+def _pool_runtime(job: _PartJob):
+    """This worker's runtime for ``job`` (built once: the pool's per-worker set-up)."""
+    runtime = _POOL_RUNTIME.get(job.token)
+    if runtime is None:
+        from shtools.runtime.evaluator import ShadowRuntime
+
+        _POOL_RUNTIME.clear()
+        runtime = _POOL_RUNTIME[job.token] = ShadowRuntime(job.settings, tables=job.tables)
+    return runtime
+
+
+def _run_pool_part(job: _PartJob, task) -> tuple[np.ndarray, int]:
+    return _pool_runtime(job).run_part(task)
+
+
 def _worker_died() -> ShtoolsError:
     return ShtoolsError("a shadow worker process died (out of memory?); run with "
                         "processes=1 (bake: --processes 1) to evaluate in one process")

@@ -69,6 +69,7 @@ class ScalingTable:
         if np.unique(self._group_rows).size != self._group_rows.size:
             raise ValueError("scaling pattern rows are not grouped (expected the canonical "
                              "order m, l_out, l_in)")
+        self._by_dtype = {}  # the fixed arrays of apply per precision (_typed)
         #: every metadata entry of the table (function, alpha, energy_preserving, ...)
         self.info = {key: v for key, v in table.items()
                      if key not in ("k", "rows", "cols", "values")}
@@ -78,12 +79,14 @@ class ScalingTable:
         """Lowest and highest sampled ``k``."""
         return float(self.k[0]), float(self.k[-1])
 
-    def values_at(self, k) -> np.ndarray:
+    def values_at(self, k, dtype=np.float64) -> np.ndarray:
         """Interpolated pattern values.
 
         Parameters
         ----------
         k : array_like, shape (V,)
+        dtype : float64 or float32
+            Of the result (the table is interpolated in it).
 
         Returns
         -------
@@ -106,8 +109,9 @@ class ScalingTable:
         x = np.log(k) if self.interpolation == "linear-log-k" else k
         xs = self._x_k
         i = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, self.k.size - 2)
-        t = (x - xs[i]) / (xs[i + 1] - xs[i])
-        return (1.0 - t)[:, None] * self.values[i] + t[:, None] * self.values[i + 1]
+        t = ((x - xs[i]) / (xs[i + 1] - xs[i])).astype(dtype)[:, None]
+        values = self._typed(dtype)["values"]
+        return (1 - t) * values[i] + t * values[i + 1]
 
     def matrix(self, k) -> np.ndarray:
         """Interpolated dense ``M(k)``, shape ``(V, n*n, n*n)``."""
@@ -159,33 +163,91 @@ class ScalingTable:
         n_c = g.shape[-1]
         out = np.empty((k.size, n_c, size))
         vals = self.values_at(k)
-        xt = np.ascontiguousarray(self._x.T)
+        ops = self._typed(np.float64)
         for s in range(0, k.size, APPLY_CHUNK):
             sl = slice(s, min(s + APPLY_CHUNK, k.size))
             rows = sl.stop - sl.start
             # (receiver, channel) rows, coefficients last: X is one GEMM for all rows
             x = np.swapaxes(g[sl], 1, 2).reshape(rows * n_c, size)
-            ca, sa = self._trig(np.repeat(alpha[sl], n_c))
-            cb, sb = self._trig(np.repeat(beta[sl], n_c))
-            x = self._zrot(x, ca, -sa) @ xt  # D = X^T Z(-beta) X Z(-alpha)
-            x = self._zrot(x, cb, -sb) @ self._x
-            x = self._scale(np.repeat(vals[sl], n_c, axis=0), x)
-            x = self._zrot(x @ xt, cb, sb) @ self._x  # D^T = Z(alpha) X^T Z(beta) X
-            out[sl] = self._zrot(x, ca, sa).reshape(rows, n_c, size)
+            trig = (*self._trig(np.repeat(alpha[sl], n_c)), *self._trig(np.repeat(beta[sl], n_c)))
+            x = self._scale(np.repeat(vals[sl], n_c, axis=0), self._to_z(x, trig, ops))
+            out[sl] = self._from_z(x, trig, ops).reshape(rows, n_c, size)
         out = np.swapaxes(out, 1, 2)
         return out[..., 0] if vec else out
 
-    def _trig(self, angle):
+    def to_axis_frame(self, f, axes) -> np.ndarray:
+        """``D f``: SH vectors ``(V, n*n)`` re-expressed in the frame whose ``+z`` is each axis.
+
+        The frame of the axis with polar angle ``beta`` and azimuth ``alpha`` is
+        ``R_z(alpha) R_y(beta)`` (the spin :meth:`apply` uses); :meth:`from_axis_frame`
+        inverts it, and ``apply(f, k, a) = from_axis_frame(scale(to_axis_frame(f, a), k), a)``.
+        """
+        return self._frame_pass(f, axes, self._to_z)
+
+    def from_axis_frame(self, x, axes) -> np.ndarray:
+        """``D^T x``: SH vectors ``(V, n*n)`` given in each axis' frame, back to the world."""
+        return self._frame_pass(x, axes, self._from_z)
+
+    def scale(self, x, k) -> np.ndarray:
+        """``M(k) x`` per row: SH vectors ``(V, n*n)`` already in their axis' frame."""
+        dtype = _work_dtype(x)
+        x = np.asarray(x, dtype=dtype).reshape(-1, self.order * self.order)
+        k = np.asarray(k, dtype=np.float64).reshape(-1)
+        out = np.empty_like(x)
+        for s in range(0, k.size, APPLY_CHUNK):
+            sl = slice(s, min(s + APPLY_CHUNK, k.size))
+            out[sl] = self._scale(self.values_at(k[sl], dtype), x[sl])
+        return out
+
+    def _frame_pass(self, x, axes, step) -> np.ndarray:
+        """``step`` (:meth:`_to_z` / :meth:`_from_z`) over chunks of rows, in ``x``'s
+        precision (float32 rows stay float32: half the memory traffic)."""
+        dtype = _work_dtype(x)
+        x = np.asarray(x, dtype=dtype).reshape(-1, self.order * self.order)
+        a = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
+        alpha = np.arctan2(a[:, 1], a[:, 0])
+        beta = np.arctan2(np.hypot(a[:, 0], a[:, 1]), a[:, 2])
+        ops = self._typed(dtype)
+        out = np.empty_like(x)
+        for s in range(0, x.shape[0], APPLY_CHUNK):
+            sl = slice(s, min(s + APPLY_CHUNK, x.shape[0]))
+            trig = (*self._trig(alpha[sl], dtype), *self._trig(beta[sl], dtype))
+            out[sl] = step(x[sl], trig, ops)
+        return out
+
+    def _typed(self, dtype) -> dict:
+        """The fixed arrays of the factored apply in ``dtype`` (made once per dtype)."""
+        dtype = np.dtype(dtype)
+        if dtype not in self._by_dtype:
+            self._by_dtype[dtype] = {
+                "x": self._x.astype(dtype), "xt": np.ascontiguousarray(self._x.T, dtype=dtype),
+                "sign_m": self._sign_m.astype(dtype), "values": self.values.astype(dtype)}
+        return self._by_dtype[dtype]
+
+    def _to_z(self, x, trig, ops):
+        """Rows ``x`` to the axis frame: ``D = X^T Z(-beta) X Z(-alpha)`` (``trig`` =
+        cos/sin of ``|m| alpha`` and of ``|m| beta``; ``ops`` from :meth:`_typed`)."""
+        ca, sa, cb, sb = trig
+        x = self._zrot(x, ca, -sa, ops) @ ops["xt"]
+        return self._zrot(x, cb, -sb, ops) @ ops["x"]
+
+    def _from_z(self, x, trig, ops):
+        """Rows ``x`` back from the axis frame: ``D^T = Z(alpha) X^T Z(beta) X``."""
+        ca, sa, cb, sb = trig
+        x = self._zrot(x @ ops["xt"], cb, sb, ops) @ ops["x"]
+        return self._zrot(x, ca, sa, ops)
+
+    def _trig(self, angle, dtype=np.float64):
         """``cos(|m| angle)``, ``sin(|m| angle)`` per coefficient, shape ``(R, n*n)``."""
         ma = angle[:, None] * np.arange(self.order, dtype=np.float64)[None, :]
         m = self._abs_m.astype(np.intp)
-        return np.cos(ma)[:, m], np.sin(ma)[:, m]
+        return np.cos(ma).astype(dtype)[:, m], np.sin(ma).astype(dtype)[:, m]
 
-    def _zrot(self, x, cos_m, sin_m):
+    def _zrot(self, x, cos_m, sin_m, ops):
         """Rotation about +z of rows ``x (R, n*n)`` by the angle whose
         ``cos(|m| a)``, ``sin(|m| a)`` are given:
         ``out[l,m] = cos(|m| a) x[l,m] - sign(m) sin(|m| a) x[l,-m]``."""
-        return cos_m * x - self._sign_m * sin_m * x[:, self._partner]
+        return cos_m * x - ops["sign_m"] * sin_m * x[:, self._partner]
 
     def _scale(self, vals, x):
         """Sparse ``M x`` per row: ``vals (R, P)``, ``x (R, n*n)``."""
@@ -205,7 +267,12 @@ class ScalingTable:
 
 
 #: Receivers per pass of :meth:`ScalingTable.apply` (bounds the temporaries).
-APPLY_CHUNK = 8192
+APPLY_CHUNK = 1024
+
+
+def _work_dtype(x):
+    """float32 for float32 input, else float64."""
+    return np.float32 if getattr(x, "dtype", None) == np.float32 else np.float64
 
 
 def rotation_to_z(axes) -> np.ndarray:

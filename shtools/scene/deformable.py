@@ -9,7 +9,17 @@ field's SH log joins the runtime's log accumulation (one exp for all blockers).
 Options: ``alpha_deg`` (cone half-angle in (0, 90) degrees), ``samples``
 (``[rings, azimuths]`` of the polar layout, default ``[16, 24]`` = 384 like the
 seed), ``rays`` (``[cos nodes, azimuths]`` of the inward-hemisphere rule per
-sample, default ``[16, 32]`` = 512).
+sample, default ``[16, 32]`` = 512), ``log`` (``"naive"``, the default, or
+``"eigen"``: how each sample's SH log is taken; ``benchmarks/bench_scaling.py``
+measured the same accuracy on Fox and CesiumMan, and the eigen logs of the 384
+samples cost more than the rest of the field's frame).
+
+The object's own vertices: by default its posed mesh is traced there every
+frame (``self_visibility``; :mod:`shtools.scene.transfer`) and that
+:class:`shtools.runtime.SelfVisibility` names this blocker, so the runtime does
+not evaluate the field on those rows (the cone model's ``k < 1`` is far less
+accurate on a character's own limbs, ``benchmarks/bench_scaling.py``); with
+``self_visibility = false`` they get the field's ``k < 1`` scaling.
 """
 
 from __future__ import annotations
@@ -21,6 +31,7 @@ import numpy as np
 from pydantic import Field
 
 from shtools.scene.blockers import BlockerKind, register_blocker_kind
+from shtools.scene.schema import choice
 
 
 def _pair():
@@ -39,6 +50,7 @@ class DeformableKind(BlockerKind):
             "alpha_deg": (Annotated[float, Field(gt=0, lt=90)], 45.0),
             "samples": (_pair(), (16, 24)),
             "rays": (_pair(), (16, 32)),
+            "log": (choice(("naive", "eigen")), "naive"),
         }
 
     def check(self, spec, obj):
@@ -57,7 +69,8 @@ class DeformableKind(BlockerKind):
         table = build_scaling_table(acc, "cone", alpha=math.radians(spec.options["alpha_deg"]))
         prep.blocker_data = {"order": acc, "table": ScalingTable(table),
                              "samples": tuple(spec.options["samples"]),
-                             "rays": tuple(spec.options["rays"])}
+                             "rays": tuple(spec.options["rays"]),
+                             "log": spec.options["log"]}
 
     def pose(self, prep, world, joints):
         from shtools.fields.deformable import sample_deformable_field
@@ -68,7 +81,8 @@ class DeformableKind(BlockerKind):
         local = prep.motion.model.skin(joints) if joints is not None else prep.vertices
         posed = transform_points(world, np.asarray(local, dtype=float))
         field = sample_deformable_field(posed, prep.faces, data["order"],
-                                        layout=data["samples"], rays=data["rays"])
+                                        layout=data["samples"], rays=data["rays"],
+                                        log_method=data["log"])
         return DeformableBlocker(field, data["table"])
 
 

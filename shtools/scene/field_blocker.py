@@ -7,9 +7,12 @@ and poses a :class:`shtools.runtime.FieldBlocker` per frame from the object's
 world matrix.  The runtime combines it as ``settings.field_space`` says (log
 space by default, or product space).  The baker gives the posed blocker the
 object's own receiver rows (``skip_rows``: a surface point lies inside the
-field's innermost shells) and, unless the scene computes the object's
-self-visibility itself (``self_visibility``), adds the log of the O_v stored in
-the asset on those rows (:func:`shtools.scene.pose.pose_frame`).
+field's innermost shells); on those rows the object is shadowed by its own
+real mesh through the log of the O_v stored in the asset (by default at the
+accumulation order, rotated with the object), or of the ``transfer`` asset the
+scene names with ``self_visibility`` (:func:`shtools.scene.transfer.object_self_log`,
+:func:`shtools.scene.pose.pose_frame`).  So one asset gives a rigid object
+real-mesh shadows both on the other receivers and on itself (issue 16).
 """
 
 from __future__ import annotations
@@ -56,14 +59,13 @@ class FieldKind(BlockerKind):
                              "resample it from this mesh", spec.path)
         table = FieldTable(fld)
         if fld.self_visibility is not None and prep.spec.receives:
-            # the stored O_v as a self-visibility log at the accumulation order (zero above
-            # the field's order), used when the scene does not compute its own
-            from shtools.fields.self_visibility import self_visibility_log
+            # the stored O_v as a self-visibility log at the accumulation order (truncated
+            # before the log, or zero above an O_v of lower order): the object's exact
+            # self-shadowing unless the scene names a transfer asset or turns it off
+            from shtools.fields.self_visibility import self_visibility_log_at
 
-            acc = ctx.settings.resolved_acc_order()
-            log = np.zeros((len(prep.vertices), acc * acc), dtype=np.float32)
-            log[:, :order * order] = self_visibility_log(fld.self_visibility)
-            table.self_log = log
+            table.self_log = self_visibility_log_at(fld.self_visibility,
+                                                    ctx.settings.resolved_acc_order())
         prep.blocker_data = table
         ctx.inputs[f"{prep.spec.name}.field"] = spec.path
 

@@ -43,8 +43,9 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
     """
     from shtools.runtime import SelfVisibility, SphereLight
-    from shtools.scene.transfer import posed_local_log, rotation_of
+    from shtools.scene.transfer import posed_local_log, rotation_of, traced_self_visibility
 
+    st = prepared.scene.settings
     kinds = blocker_kinds()
     worlds = world_matrices(prepared.scene.objects, t)
     verts, norms, blockers, meshes, selfs = [], [], [], [], []
@@ -64,18 +65,23 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
                              f"finite or beyond +-{MAX_COORDINATE:g} (the runtime computes in "
                              "float32); check its translate/scale and its parents'",
                              prepared.scene.path)
+        world_n = transform_normals(m, local_n) if o.spec.receives else None
+        own = slice(n_rows, n_rows + len(world_v))
         rotation = rotation_of(m) if o.self_log is not None else None
         if rotation is not None:
             # exact self-shadowing: its own spheres (appended next) are skipped on its rows
-            selfs.append(SelfVisibility(o.self_log, slice(n_rows, n_rows + len(world_v)),
-                                        rotation=rotation, blocker=len(blockers)))
+            selfs.append(SelfVisibility(o.self_log, own, rotation=rotation,
+                                        blocker=len(blockers)))
+        if o.traced:  # its posed real mesh, traced this frame; its own blocker skipped
+            selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
+                traced_self_visibility(world_v, world_n, o.faces, st.order,
+                                       st.self_visibility_directions))))
         if o.local_log is not None and joints is not None:
             selfs.append(SelfVisibility(
-                posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m),
-                slice(n_rows, n_rows + len(world_v))))
+                posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m), own))
         if o.spec.receives:
             verts.append(world_v)
-            norms.append(transform_normals(m, local_n))
+            norms.append(world_n)
             n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))

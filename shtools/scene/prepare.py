@@ -47,6 +47,9 @@ class PreparedObject:
         :mod:`shtools.scene.transfer`); None when the object uses its spheres.
     local_log : ndarray, shape (V, n_acc^2) or None
         Rest-pose local visibility log of a skinned object (``local_visibility``).
+    traced : bool
+        A skinned object whose posed mesh is ray traced every frame on its own
+        vertices (``self_visibility``; :func:`shtools.scene.transfer.traced_self_log`).
     """
 
     spec: ObjectSpec
@@ -62,6 +65,7 @@ class PreparedObject:
     blocker_data: Any = None
     self_log: np.ndarray | None = None
     local_log: np.ndarray | None = None
+    traced: bool = False
 
     @property
     def moves(self) -> bool:
@@ -265,6 +269,7 @@ def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, 
         object_self_log,
         uses_local_visibility,
         uses_self_visibility,
+        uses_traced_visibility,
     )
 
     st = scene.settings
@@ -274,6 +279,8 @@ def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, 
             prep.self_log, path = object_self_log(prep, acc, log=log)
             if path is not None:
                 inputs[f"{prep.spec.name}.transfer"] = path
+        elif uses_traced_visibility(prep, st.self_visibility):
+            prep.traced = True  # every frame, in pose_frame
         elif uses_local_visibility(prep, st.local_visibility):
             if log:
                 log(f"ray tracing the local visibility of {prep.spec.name}")

@@ -28,6 +28,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from shtools.errors import InputError
+from shtools.fields.self_visibility import HEMISPHERE_DIRECTIONS
 from shtools.geometry.fit_methods import FIT_METHODS
 from shtools.runtime.settings import EXP_CHOICES, WINDOW_CHOICES, ShadowSettings, Unit, setting
 from shtools.runtime.settings import scene_fields as _scene_fields
@@ -64,9 +65,14 @@ class Settings(ShadowSettings):
     method: str = setting("default", "choice", choices=bake_method_names,
                           doc="visibility method (shtools.scene.shadows)")
     self_visibility: bool = setting(True, "bool",
-                                    doc="exact self-shadowing of rigid role-\"both\" objects")
-    local_visibility: bool = setting(True, "bool",
-                                     doc="local visibility g_p of skinned role-\"both\" objects")
+                                    doc="self-shadowing of role-\"both\" objects by their real "
+                                        "mesh (rigid: traced once; skinned: every frame)")
+    self_visibility_directions: int = setting(
+        HEMISPHERE_DIRECTIONS, "int", lo=4, hi=4096,
+        doc="rays per vertex and frame tracing skinned objects' posed mesh")
+    local_visibility: bool = setting(False, "bool",
+                                     doc="rest-pose local visibility g_p of skinned "
+                                         "role-\"both\" objects that do not trace their mesh")
 
 
 @dataclass
@@ -360,7 +366,7 @@ def _object(t: schema.Object, index: int, data: dict, settings: Settings, ctx: _
             obj.self_visibility = value
         elif isinstance(value, str) and obj.skin is not None:
             raise vctx.error("a skinned object deforms: its transfer cannot be precomputed; "
-                             "use true (local visibility) or false")
+                             "use true (its posed mesh traced every frame) or false")
         elif isinstance(value, str):
             obj.self_visibility = _file(value, base, vctx, (".h5",))
         else:

@@ -13,12 +13,18 @@ A convex mesh cannot shadow itself: its log is zero and nothing is traced.
 Scaling (uniform) does not change visibility; a non-uniform scale does, and is
 approximated by the rotation part of the transform.
 
-Skinned objects (``local_visibility``): their large-scale self-shadowing
-changes with the pose, so they keep their posed spheres; what they add is the
-paper's *local* visibility ``g_p`` (Ren et al. 2006 Sec. 7): the rest-pose
-self-visibility of fine detail, rays limited to :data:`LOCAL_DISTANCE` times
-the mesh's bounding-box diagonal, rotated per vertex with the rotation part of
-its blended skinning matrix and added in log space.
+Skinned objects deform, so nothing can be precomputed: every frame their
+**posed** real mesh is ray traced on their own vertices
+(:func:`traced_self_visibility`,
+:data:`~shtools.fields.self_visibility.HEMISPHERE_DIRECTIONS` directions per
+vertex over its hemisphere); the runtime multiplies that visibility into the
+vertices' visibility from every other blocker, the object's own blocker skipped
+on its rows.  The older
+alternative, kept behind ``local_visibility`` for objects that do not trace: the
+paper's *local* visibility ``g_p`` (Ren et al. 2006 Sec. 7), the rest-pose
+self-visibility of fine detail, rays limited to :data:`LOCAL_DISTANCE` times the
+mesh's bounding-box diagonal, rotated per vertex with the rotation part of its
+blended skinning matrix and added in log space to the posed spheres.
 """
 
 from __future__ import annotations
@@ -48,6 +54,11 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
                     ) -> tuple[np.ndarray, Path | None]:
     """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32.
 
+    From the first source that applies: the ``transfer`` asset the scene names
+    (``self_visibility = "x.transfer.h5"``); the O_v stored in the object's
+    shadow-field asset (``blocker = { field = ... }``, :mod:`shtools.scene.field_blocker`);
+    zero for a convex mesh; ray traced now.
+
     Parameters
     ----------
     obj : PreparedObject
@@ -61,7 +72,7 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     -------
     log : ndarray, shape (V, acc_order^2) float32
     path : Path or None
-        The ``transfer`` asset read (for the bake's inputs), None when computed.
+        The ``transfer`` asset read (for the bake's inputs), None otherwise.
     """
     import trimesh
 
@@ -69,6 +80,9 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     size = acc_order * acc_order
     if isinstance(source, str | Path):
         return _from_asset(obj, Path(source), acc_order), Path(source)
+    stored = getattr(obj.blocker_data, "self_log", None)
+    if stored is not None:  # the O_v of the object's field asset (already an input)
+        return stored, None
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if is_convex(obj.vertices, obj.faces):
         return np.zeros((len(obj.vertices), size), dtype=np.float32), None
@@ -103,7 +117,7 @@ def is_convex(vertices, faces) -> bool:
 
 def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
     from shtools.data_formats.transfer import read_transfer
-    from shtools.fields.self_visibility import self_visibility_log
+    from shtools.fields.self_visibility import self_visibility_log_at
 
     t = read_transfer(path)
     name = obj.spec.name
@@ -121,10 +135,8 @@ def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
                          path)
     if t.order == acc_order:
         return t.log_visibility
-    # a log is order-specific: truncate the visibility, then take its log at this order
-    floor = float(t.parameters.get("floor", 0.0))
-    vis = t.visibility[:, :acc_order * acc_order].astype(np.float64)
-    return self_visibility_log(vis, floor=floor).astype(np.float32)
+    return self_visibility_log_at(t.visibility, acc_order,
+                                  floor=float(t.parameters.get("floor", 0.0)))
 
 
 #: Ray length of the local visibility of skinned objects, relative to the rest mesh's
@@ -136,12 +148,51 @@ LOCAL_DISTANCE = 0.02
 LOCAL_ORDER = 4
 
 
-def uses_local_visibility(obj, default: bool) -> bool:
-    """Whether a skinned role-"both" object adds its local visibility ``g_p``."""
+def uses_traced_visibility(obj, default: bool = True) -> bool:
+    """Whether a skinned role-"both" object ray traces its posed mesh every frame."""
     choice = getattr(obj.spec, "self_visibility", None)
     if choice is None:
         choice = default
     return bool(choice) and obj.spec.receives and obj.spec.blocks and obj.motion is not None
+
+
+def uses_local_visibility(obj, default: bool) -> bool:
+    """Whether a skinned role-"both" object adds its local visibility ``g_p``.
+
+    Only objects that do not trace their posed mesh (the caller checks
+    :func:`uses_traced_visibility` first) and whose own ``self_visibility`` is not false.
+    """
+    if getattr(obj.spec, "self_visibility", None) is False:
+        return False
+    return bool(default) and obj.spec.receives and obj.spec.blocks and obj.motion is not None
+
+
+def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int) -> np.ndarray:
+    """Self-visibility ``(V, order^2)`` float32 of a posed mesh on its own vertices.
+
+    Binary visibility of the mesh over each vertex's hemisphere
+    (:func:`~shtools.fields.self_visibility.hemisphere_visibility`, ``n_dirs``
+    rays per vertex), projected to the shading order.  The runtime multiplies it
+    into the vertices' visibility after the exp (no per-frame log: the eigen log
+    of CesiumMan's vertices cost more than the rest of its frame,
+    ``bench_fidelity --skinned``).
+
+    Parameters
+    ----------
+    vertices, normals : array_like, shape (V, 3)
+        The posed mesh (world space) and its unit vertex normals.
+    faces : array_like, shape (F, 3)
+    order : int
+        Shading order.
+    n_dirs : int
+        Rays per vertex.
+    """
+    from shtools.fields.self_visibility import hemisphere_visibility
+    from shtools.geometry.raycast import RayCaster
+
+    caster = RayCaster(vertices, faces)
+    return hemisphere_visibility(vertices, normals, caster, order,
+                                 n_dirs=n_dirs).astype(np.float32)
 
 
 def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE) -> np.ndarray:

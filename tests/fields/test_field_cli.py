@@ -70,6 +70,8 @@ def _empty_obj(path):
     (None, ("--resolution", 48), "--resolution"),
     (None, ("--min-resolution", 3), "--min-resolution"),
     (None, ("--bits", 9), "--bits"),
+    (None, ("--self-order", 2), "--self-order"),  # below --order 3
+    (None, ("--self-order", 11), "--self-order"),
 ])
 def test_bad_input_gives_one_line_and_no_file(run_cli, tmp_path, box_obj, make, args, needle):
     mesh = box_obj
@@ -99,6 +101,16 @@ def test_field_reader_refuses_a_broken_asset(run_cli, tmp_path, box_obj):
         f["shell_resolution"][1] = 3
     code, _, err = run_cli("check", out)
     assert code == 1 and "power" in err
+    # a self-visibility below the field's order, or not of m*m columns
+    for cols in (4, 20):  # the field is order 3
+        out = tmp_path / f"sv{cols}.h5"
+        run_cli("field", "sample", box_obj, "-o", out, *SMALL)
+        with h5py.File(out, "a") as f:
+            v = f["self_visibility"].shape[0]
+            del f["self_visibility"]
+            f["self_visibility"] = np.zeros((v, cols), np.float32)
+        code, _, err = run_cli("check", out)
+        assert code == 1 and "self_visibility" in err and len(err.strip().splitlines()) == 1
     np.testing.assert_equal(True, True)
 
 

@@ -76,6 +76,29 @@ def test_killed_local_worker_is_replaced_and_nothing_is_lost(tmp_path):
     assert Path(marker).exists()  # a worker really died
 
 
+_SET_UP: list = []
+
+
+def _note_setup(shared):
+    _SET_UP.append(shared)
+
+
+def _setup_seen(shared, item):
+    """This process's pid and how many times its set-up ran before this task."""
+    return os.getpid(), len(_SET_UP)
+
+
+@pytest.mark.parametrize("scheduler, workers", [("inline", 1), (None, 2)])
+def test_setup_runs_once_per_worker_before_its_tasks(scheduler, workers):
+    _SET_UP.clear()
+    with task_pool(scheduler, workers) as pool, pool.share("state", setup=_note_setup) as shared:
+        first = list(pool.map_ordered(_setup_seen, range(8), shared=shared))
+        again = list(pool.map_ordered(_setup_seen, range(8), shared=shared))
+    # every task ran after its own process's one set-up (forked workers count their own)
+    assert {count for _, count in first + again} == {1}
+    assert len({pid for pid, _ in first}) <= workers
+
+
 def test_bad_scheduler_values():
     with pytest.raises(InputError, match="neither 'local'"), task_pool("no-such-file.json"):
         pass
@@ -108,6 +131,45 @@ def test_local_workers_give_identical_bytes(scene_file, inline_bake, tmp_path):
     assert filecmp.cmp(out, inline_bake, shallow=False)
 
 
+def test_local_workers_moving_receivers_identical_bytes(tmp_path):
+    """Moving receivers: the workers send float32 vertices and normals (what the
+    asset stores), and the asset is still the in-process bytes."""
+    scene = tmp_path / "moving.toml"
+    scene.write_text(scene_text(order=3, frames=4, moving_ground=True))
+    inline, pool = tmp_path / "inline.h5", tmp_path / "pool.h5"
+    bake_to_file(load_scene(scene), inline, scheduler="inline", processes=1)
+    bake_to_file(load_scene(scene), pool, workers=2)
+    assert filecmp.cmp(pool, inline, shallow=False)
+
+
+@pytest.fixture
+def split_every_frame(monkeypatch):
+    """Cut even these small frames into FRAME_PARTS parts (as a large frame is),
+    wherever they are evaluated: the split is decided where the frame is posed."""
+    import shtools.runtime.evaluator as evaluator
+
+    monkeypatch.setattr(evaluator, "MIN_PARALLEL_PAIRS", 0)
+
+
+@pytest.mark.parametrize("scheduler, workers", [("inline", 1), (None, 2)])
+def test_frame_parts_as_pool_tasks_give_identical_radiance(scene_file, split_every_frame,
+                                                           scheduler, workers):
+    from shtools.scene.bake import FrameBaker, bake_clusters, prepare_scene
+
+    prepared = prepare_scene(load_scene(scene_file))
+    clusters = bake_clusters(prepared, "default", 0.0)
+    with FrameBaker(prepared, "default", clusters, processes=1) as alone:
+        want = [alone.frame(f, f / 2).radiance for f in range(3)]
+    with task_pool(scheduler, workers) as pool, \
+            FrameBaker(prepared, "default", clusters, processes=1, part_pool=pool) as baker:
+        got = [baker.frame(f, f / 2).radiance for f in range(3)]
+        parts = baker.runtime.last_stats["processes"]
+    for a, b in zip(got, want, strict=True):
+        assert a.tobytes() == b.tobytes()
+    assert sum(s.tasks for s in pool.stats.values()) > 3  # parts, not frames, were the tasks
+    assert parts == min(workers, sum(s.tasks for s in pool.stats.values()) // 3)
+
+
 #: distributed leaves sockets for the garbage collector when a cluster closes (its
 #: own ResourceWarning, not ours); the tests that start a cluster let it pass.
 DASK_LEAKS = (pytest.mark.filterwarnings("ignore::ResourceWarning"),
@@ -123,6 +185,59 @@ def test_dask_local_cluster_gives_identical_bytes(scene_file, inline_bake, tmp_p
     summary = bake_to_file(load_scene(scene_file), out, scheduler="local", workers=2)
     assert summary["pool"]["scheduler"] == "dask"
     assert filecmp.cmp(out, inline_bake, shallow=False)
+
+
+@pytest.mark.slow
+@DASK_LEAKS[0]
+@DASK_LEAKS[1]
+def test_dask_frame_parts_identical_bytes_for_1_2_3_workers(scene_file, split_every_frame,
+                                                            tmp_path):
+    """One frame's parts as Dask tasks (split_frames): the in-process bytes on 1, 2, 3 workers."""
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    frames = range(2)
+    want = tmp_path / "inline.h5"
+    bake_to_file(load_scene(scene_file), want, frames=frames, scheduler="inline", processes=1)
+    for workers in (1, 2, 3):
+        out = tmp_path / f"parts{workers}.h5"
+        summary = bake_to_file(load_scene(scene_file), out, frames=frames, scheduler="local",
+                               workers=workers, split_frames=None if workers == 3 else True)
+        tasks = sum(w["tasks"] for w in summary["pool"]["per_worker"].values())
+        assert tasks > len(frames), summary["pool"]  # parts were the tasks
+        assert filecmp.cmp(out, want, shallow=False), workers
+
+
+@pytest.mark.slow
+@DASK_LEAKS[0]
+@DASK_LEAKS[1]
+def test_cli_split_frames_runs_parts_on_the_cluster(scene_file, split_every_frame, run_cli,
+                                                    tmp_path):
+    import json
+
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    want, out = tmp_path / "inline.h5", tmp_path / "cli.h5"
+    code, _, err = run_cli("bake", scene_file, "-o", want, "--frames", "0:3", "--workers", 1,
+                           "--processes", 1)
+    assert code == 0, err
+    code, stdout, err = run_cli("bake", scene_file, "-o", out, "--frames", "0:3",
+                                "--scheduler", "local", "--workers", 2, "--split-frames",
+                                "--json")
+    assert code == 0, err
+    pool = json.loads(stdout)["pool"]
+    assert sum(w["tasks"] for w in pool["per_worker"].values()) > 3  # 3 frames, in parts
+    assert filecmp.cmp(out, want, shallow=False)
+
+
+@pytest.mark.slow
+@DASK_LEAKS[0]
+@DASK_LEAKS[1]
+def test_dask_moving_receivers_identical_bytes(tmp_path):
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    scene = tmp_path / "moving.toml"
+    scene.write_text(scene_text(order=3, frames=4, moving_ground=True))
+    inline, dask = tmp_path / "inline.h5", tmp_path / "dask.h5"
+    bake_to_file(load_scene(scene), inline, scheduler="inline", processes=1)
+    bake_to_file(load_scene(scene), dask, scheduler="local", workers=2)
+    assert filecmp.cmp(dask, inline, shallow=False)
 
 
 @pytest.mark.slow
