@@ -12,8 +12,7 @@ import trimesh
 from shtools.fields.deformable import sample_deformable_field
 from shtools.reference import raytrace_visibility, relative_rmse
 from shtools.reference.scenes import ground_grid, sky_light
-from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker
-from shtools.runtime import evaluator
+from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker, evaluator
 from shtools.runtime.deformable import DeformableBlocker
 from shtools.runtime.scaling import ScalingTable
 from shtools.sh import product
