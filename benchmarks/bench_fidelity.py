@@ -16,7 +16,9 @@ blocker, the objects' own included, as spheres with the self-shadow rules),
 shadowing the other receivers) and **new**: every rigid object a shadow-field
 blocker (``blocker = { field = ... }``) whose asset also holds its O_v, so the
 real mesh shadows the other receivers and the object itself (skinned objects
-keep their bound spheres and local visibility).  The reference is the project's
+keep their bound spheres for the other receivers and, with ``self_visibility``
+on as in wave2 and new, trace their posed mesh on their own vertices every
+frame: wave 2's rest-pose ``g_p`` is a ``--skinned`` row).  The reference is the project's
 ray tracer of the posed **real meshes**
 (:func:`shtools.reference.raytrace_visibility`, >= 3,200 directions, projected
 to the same order and shaded the same way; cached per scene, it depends on no
