@@ -18,37 +18,12 @@ from shtools.scene.bake import bake_scene, prepare_scene
 from shtools.scene.scene import parse_scene
 
 sys.path.insert(0, str(Path(__file__).parent))
-from rig import write_bending_tube
-
-GROUND = 21 * 21  # the plane's vertices come first
+from rig import GROUND_VERTICES, tube_scene_text, write_bending_tube
 
 
 def _scene(folder, blocker: str, settings: str = "", object_key: str = ""):
-    text = f"""
-[settings]
-order = 3
-frames = 2
-fps = 1
-{settings}
-[environment]
-coeffs = [[1.0, 1.0, 1.0], [0, 0.6, 0], [0, 0.5, 0], [0, 0, 0],
-          [0, 0, 0], [0, 0, 0], [0, 0.2, 0], [0, 0, 0], [0, 0, 0]]
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [4.0, 4.0], subdivisions = 20 }}
-role = "receiver"
-
-[[objects]]
-name = "tube"
-mesh = "rig.glb"
-role = "both"
-translate = [0.0, 0.05, 0.0]
-blocker = {blocker}
-skin = {{ animation = "bend" }}
-{object_key}
-"""
-    return parse_scene(text, folder / "scene.toml")
+    return parse_scene(tube_scene_text(blocker, settings="frames = 2\n" + settings,
+                                       tube_keys=object_key), folder / "scene.toml")
 
 
 @pytest.fixture
@@ -66,7 +41,7 @@ def rig(tmp_path):
 
 def _tube_rows(scene, **kwargs):
     prepared = prepare_scene(scene)
-    return prepared, [f.radiance[GROUND:] for f in bake_scene(scene, prepared=prepared,
+    return prepared, [f.radiance[GROUND_VERTICES:] for f in bake_scene(scene, prepared=prepared,
                                                              processes=1, **kwargs)]
 
 
@@ -200,7 +175,7 @@ def test_deformable_field_in_product_space_shades_the_ground(rig):
 
     def ground(scene, **kwargs):
         prepared = prepare_scene(scene)
-        return np.concatenate([f.radiance[:GROUND] for f in
+        return np.concatenate([f.radiance[:GROUND_VERTICES] for f in
                                bake_scene(scene, prepared=prepared, processes=1, **kwargs)])
 
     ref = ground(_scene(rig, field), method="raytrace", raytrace_dirs=3200)
