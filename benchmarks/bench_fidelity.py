@@ -43,6 +43,7 @@ several direction counts, accuracy and frame time (wall and CPU) side by side.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import os
 import subprocess
@@ -276,13 +277,16 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants: dict,
             times[variant] = min(times.get(variant, ms), ms)
     # the references pose the scene with sphere trees (for the sphere-union split) and
     # the probe as given, whatever the variants do
-    scene = load_scene(_scene_file(name, spec, "reference", VARIANTS["old"]))
+    ref_scene = _scene_file(name, spec, "reference", VARIANTS["old"])
+    scene = load_scene(ref_scene)
     prepared = prepare_scene(scene)
     preps["reference"] = (scene, prepared)
     # the references are shaded raw (no de-ringing): what order-4 shading of the real
     # visibility gives, negative lobes included
     shader = ShadowRuntime(ShadowSettings(order=4, processes=1, deringing="none"))
-    ref_path = CACHE / f"{name.replace('+', '_')}.ref{n_dirs}x{subset}.npz"
+    # keyed by the scene text too: another placement or mesh is another reference
+    digest = hashlib.sha256(ref_scene.read_bytes()).hexdigest()[:12]
+    ref_path = CACHE / f"{name.replace('+', '_')}.ref{n_dirs}x{subset}.{digest}.npz"
     refs = dict(np.load(ref_path)) if ref_path.exists() else {}
     rng = np.random.default_rng(0)
     offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
@@ -350,8 +354,11 @@ def _markdown(rows: list[dict]) -> str:
 
 
 def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
-                        methods=("default", "product")) -> list[dict]:
+                        methods=("default", "product"), fields=None) -> list[dict]:
     """The skinned scene with its bound spheres vs a deformable shadow field, per method.
+
+    ``fields``: label -> blocker table of each field variant (default one,
+    ``{ deformable = true }``).
 
     Same scene, settings (the new default) and frames; only the character's
     blocker changes (``bound`` -> ``deformable = true``).  Each bake runs in
@@ -369,16 +376,19 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     from shtools.scene.bake import bake_scene, pose_frame, prepare_scene
     from shtools.scene.scene import load_scene
 
-    texts = {"bound spheres": spec["text"],
-             "deformable field": re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
-                                        "blocker = { deformable = true }", spec["text"])}
+    fields = fields or {"deformable field": "{ deformable = true }"}
+    texts = {"bound spheres": spec["text"]}
+    for label, table in fields.items():  # label -> blocker table of the field variant
+        texts[label] = re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
+                              f"blocker = {table}", spec["text"])
     preps = {}
     for label, text in texts.items():
         for method in methods:
             variant = f"{label}, {method}"
-            # the current defaults; only the method and one runtime process set
-            v = {"blocker": "tree", "settings": f'method = "{method}"\nprocesses = 1\n'}
-            scene = load_scene(_scene_file(f"{name}.{label.split()[0]}.{method}",
+            tag = re.sub(r"\W+", "_", label)
+            # the current defaults; only the method set (one runtime process: bake_scene)
+            v = {"blocker": "tree", "settings": f'method = "{method}"\n'}
+            scene = load_scene(_scene_file(f"{name}.{tag}.{method}",
                                            {**spec, "text": text}, "new", v))
             preps[variant] = (scene, prepare_scene(scene))
     baked, times = {}, {}
