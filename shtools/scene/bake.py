@@ -286,7 +286,9 @@ def bake_scene(
         run each large frame's parts (:data:`shtools.runtime.parallel.FRAME_PARTS`
         groups of receiver clusters) as tasks on the cluster, for a bake of one
         huge frame or of fewer frames than workers.  Default: when there are
-        fewer frames than workers.  The bytes are the same either way.
+        fewer frames than workers and than parts (a frame's 8 parts then keep
+        more workers busy than the frames would).  The bytes are the same
+        either way.
 
     Yields
     ------
@@ -318,7 +320,9 @@ def bake_scene(
         clusters = bake_clusters(prepared, method, 0.0)
         items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
         if split_frames is None:  # few frames for a cluster: share each frame instead
-            split_frames = len(frames) < pool.workers
+            from shtools.runtime.parallel import FRAME_PARTS
+
+            split_frames = len(frames) < min(pool.workers, FRAME_PARTS)
         parts_on_pool = bool(split_frames) and pool.scheduler == "dask"
         if pool.scheduler == "inline" or parts_on_pool:
             # Frames one after the other here; on Dask with split_frames, each
