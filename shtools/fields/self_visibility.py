@@ -146,7 +146,8 @@ def self_visibility(vertices, normals, meshes, order: int, *, n_dirs: int = DEFA
 #: frame): the issue's 5 % against the real mesh with about a point to spare for the
 #: rest (``benchmarks/bench_fidelity.py --skinned``, quadrature alone, radiance vs 3,200
 #: directions: 24 -> 4.5 / 4.8 %, 32 -> 3.6 / 3.7 %, 48 -> 2.7 / 2.8 % on CesiumMan / Fox);
-#: each direction costs ~0.14 us of Embree per vertex (CesiumMan's 3.3k: 0.45 ms a frame).
+#: each direction costs ~0.11 us of Embree per vertex with robust traversal off (CesiumMan's 3.3k:
+#: 0.36 ms a frame; 0.14 us with it on).
 HEMISPHERE_DIRECTIONS = 32
 #: Blocked (vertex, direction) pairs whose basis is evaluated at once (~16 MB at order 6).
 BLOCKED_PER_STEP = 1 << 17

@@ -156,7 +156,7 @@ def bake_clusters(prepared: PreparedScene, method: str, t: float):
 
     if not VISIBILITY_METHODS[method].uses_runtime:
         return None
-    state = pose_frame(prepared, float(t))
+    state = pose_frame(prepared, float(t), trace=False)  # only the vertices are used
     return receiver_clusters(prepared, state.vertices)
 
 
@@ -345,7 +345,7 @@ def bake_scene(
             results = itertools.chain.from_iterable(
                 pool.map_ordered(_bake_frames_task, groups, shared=job, setup=_worker_baker))
             if not moving:  # the workers send no static pose back (see _bake_frames_task)
-                results = _with_pose(results, pose_frame(prepared, float(times[0])))
+                results = _with_pose(results, pose_frame(prepared, float(times[0]), trace=False))
         for k, result in enumerate(results):
             if writer is not None:
                 writer.write_frame(k, result.radiance, vertices=result.vertices,
@@ -376,7 +376,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
     albedo = np.concatenate(albedo)
     static_v = static_n = None
     if not moving:
-        state = pose_frame(prepared, float(times[0]))
+        state = pose_frame(prepared, float(times[0]), trace=False)
         static_v, static_n = state.vertices, state.normals
     resolved = runtime_settings(scene, method)
     uses_runtime = VISIBILITY_METHODS[method].uses_runtime
