@@ -45,6 +45,7 @@ imported when a Dask scheduler is asked for (``pip install shtools[distributed]`
 from __future__ import annotations
 
 import collections
+import contextlib
 import multiprocessing
 import os
 import time
@@ -479,13 +480,21 @@ def _run_dask(fn, shared, item):
 
 def _terminate(pool) -> None:
     """Stop a process pool now: cancel queued tasks and kill running workers."""
-    processes = list(getattr(pool, "_processes", {}).values())
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    results_writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         if p.is_alive():
             p.terminate()
     for p in processes:
         p.join(timeout=5)
+    # a worker stopped halfway through sending a result leaves the pool's manager
+    # thread reading it forever (and the exit waiting for that thread): with the
+    # workers gone, closing this process's copy of the pipe's write end (only
+    # workers write to it) ends that read (shtools.runtime.parallel._shutdown)
+    if results_writer is not None:
+        with contextlib.suppress(OSError):
+            results_writer.close()
 
 
 # ---------------------------------------------------------------------- set-up

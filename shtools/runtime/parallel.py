@@ -17,7 +17,9 @@ They never outlive the caller: on Linux the kernel kills a worker when its
 parent dies (``prctl(PR_SET_PDEATHSIG)``, even after ``kill -9``); elsewhere a
 thread in the worker exits it when the parent is gone.  SIGTERM kills a worker
 (the default action, restored after fork), and an interrupted frame kills the
-workers instead of waiting for their parts (:meth:`VertexWorkers.close`).
+workers instead of waiting for their parts (:meth:`VertexWorkers.close`);
+a stop waits for killed workers a bounded time, and one interrupted by the next
+stop signal is finished by the next call or at exit (see ``_shutdown``).
 A part's result does not depend on the other parts, and the frame is always cut
 into the same :data:`FRAME_PARTS` parts (one process evaluates them one after
 the other), so the visibility is byte-identical for any process count.
@@ -29,8 +31,9 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import time
 import weakref
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
@@ -120,7 +123,8 @@ class VertexWorkers:
         self._pool = ProcessPoolExecutor(max_workers=int(count), mp_context=ctx,
                                          initializer=_init_worker,
                                          initargs=(settings, tables, os.getpid()))
-        self._close = weakref.finalize(self, _shutdown, self._pool)
+        self._stop = _PoolStop(self._pool)
+        self._close = weakref.finalize(self, _shutdown, self._stop)
 
     def submit(self, task):
         """Start one part on a worker; returns a future of ``(g, pairs_evaluated)``."""
@@ -138,14 +142,13 @@ class VertexWorkers:
             raise _worker_died() from exc
 
     def close(self, *, kill: bool = False) -> None:
-        """Stop the workers (idempotent); ``kill=True`` does not wait for running parts."""
-        if kill:
-            # ProcessPoolExecutor has no public way to stop busy workers (3.14 adds
-            # terminate_workers); its process table is stable across 3.11-3.13
-            for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
-                with contextlib.suppress(Exception):
-                    proc.kill()
-        self._close()
+        """Stop the workers (idempotent); ``kill=True`` does not wait for running parts.
+
+        A call interrupted by a stop signal (the CLI re-sends it every 0.2 s) is
+        finished by the next call, or at exit; once asked, every later call kills.
+        """
+        _shutdown(self._stop, kill=kill)
+        self._close.detach()
 
 
 class PoolParts:
@@ -220,8 +223,69 @@ def _worker_died() -> ShtoolsError:
                         "processes=1 (bake: --processes 1) to evaluate in one process")
 
 
-def _shutdown(pool: ProcessPoolExecutor) -> None:
-    pool.shutdown(wait=True, cancel_futures=True)
+#: Longest wait for killed workers (and the pool's manager thread that reaps them).
+KILL_WAIT_SECONDS = 10.0
+
+
+class _PoolStop:
+    """What stopping a pool needs, kept so that a later call can finish an interrupted stop."""
+
+    def __init__(self, pool: ProcessPoolExecutor):
+        self.pool = pool
+        self.kill = False
+        self.processes: list = []
+        self.manager = None  # the pool's manager thread, once started
+        self.results_writer = None  # this process's copy of the result pipe's write end
+
+
+def _shutdown(stop: _PoolStop, kill: bool = False) -> None:
+    """Stop a pool's workers: wait for running parts, or kill them (a stop signal).
+
+    Never ``Thread.join``: CPython 3.11 marks a thread stopped when a signal
+    handler's exception interrupts ``join`` while it runs (the bpo-45274 fix); the
+    pool's manager thread is then not waited for at exit, and the exit deadlocks
+    with a worker left waiting for work (seen as a bake that printed "stopped by"
+    and never exited).  Polling ``is_alive`` can be interrupted harmlessly.
+    """
+    stop.kill = stop.kill or kill  # first: an interrupted kill is still a kill next time
+    if stop.manager is None:  # ProcessPoolExecutor.shutdown drops these references
+        stop.processes = list((getattr(stop.pool, "_processes", None) or {}).values())
+        stop.manager = getattr(stop.pool, "_executor_manager_thread", None)
+        stop.results_writer = getattr(getattr(stop.pool, "_result_queue", None), "_writer",
+                                      None)
+    if stop.kill:
+        # ProcessPoolExecutor has no public way to stop busy workers (3.14 adds
+        # terminate_workers); its internals used here are stable across 3.11-3.13.
+        # Its manager thread fails a killed pool's work items with set_exception,
+        # which raises on the parts we cancelled (taken back, ShadowRuntime._split_visibility) in
+        # CPython 3.11: the thread dies, and the exit waits for its queue's thread
+        # forever.  Those items get a stand-in future nobody waits for.
+        for item in list((getattr(stop.pool, "_pending_work_items", None) or {}).values()):
+            if item.future.cancelled():
+                item.future = Future()
+        for proc in stop.processes:
+            with contextlib.suppress(Exception):
+                proc.kill()
+        # A worker killed between the header and the body of a result (sent as two
+        # writes above 16 KiB) leaves the manager thread reading the body forever:
+        # this process holds the pipe's write end too, so no end-of-file ever comes,
+        # and the exit waits for that thread.  Once the killed workers are gone,
+        # closing our copy (only workers write to it) ends that read with EOF.
+        for proc in stop.processes:
+            with contextlib.suppress(Exception):
+                proc.join(KILL_WAIT_SECONDS)
+        if stop.results_writer is not None:
+            with contextlib.suppress(OSError):
+                stop.results_writer.close()
+    stop.pool.shutdown(wait=False, cancel_futures=True)
+    # the manager thread joins the workers, then exits: wait for it.  Graceful:
+    # as long as the running parts take; killed: bounded (SIGKILL ends a worker
+    # at once, and its parent-death signal ends it at our exit at the latest)
+    deadline = time.monotonic() + KILL_WAIT_SECONDS
+    while stop.manager is not None and stop.manager.is_alive():
+        if stop.kill and time.monotonic() > deadline:
+            break
+        time.sleep(0.005)
 
 
 #: Linux ``prctl`` option: signal sent to this process when its parent dies.

@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import importlib
+import os
+import signal
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -107,3 +112,78 @@ def test_split_clusters_balances_cost():
 def test_processes_setting_is_validated():
     with pytest.raises(InputError, match="processes"):
         ShadowSettings(processes=0)
+
+
+
+#: Stops of the workers the way the CLI's stop path meets them, then the exit.
+#: "interrupted": a graceful close interrupted by a stop signal (the CLI re-sends it
+#: every 0.2 s, and Python raises it wherever the main thread is).
+#: "half-result": close(kill=True) of a worker killed halfway through sending a result.
+#: "cancelled": close(kill=True) with parts taken back (cancelled) still queued.
+STOPS = {"cancelled": """
+    futures = [workers._pool.submit(time.sleep, 60) for _ in range(4)]
+    while not futures[0].running():  # the first two parts are with the worker
+        time.sleep(0.01)
+    assert all(f.cancel() for f in futures[2:])  # the last two are taken back
+    workers.close(kill=True)
+""", "interrupted": """
+    class Stop(BaseException):
+        pass
+
+    def stop(*_):
+        raise Stop
+
+    workers._pool.submit(time.sleep, 2)  # a part that outlasts the first stop
+    signal.signal(signal.SIGALRM, stop)
+    signal.setitimer(signal.ITIMER_REAL, 0.2, 0.2)
+    try:
+        workers.close()
+    except Stop:
+        pass
+    signal.setitimer(signal.ITIMER_REAL, 0)
+""", "half-result": """
+    def half_a_result(marker):
+        # in the worker: the header of a result (above 16 KiB, the size of a real
+        # part's result) whose body never comes, as when a kill lands between them
+        frame = sys._getframe()
+        while "result_queue" not in frame.f_locals:
+            frame = frame.f_back
+        frame.f_locals["result_queue"]._writer._send(struct.pack("!i", 100_000))
+        open(marker, "w").close()
+        time.sleep(60)
+
+    marker = os.path.join(sys.argv[1], "sent")
+    workers._pool.submit(half_a_result, marker)
+    while not os.path.exists(marker):
+        time.sleep(0.01)
+    workers.close(kill=True)
+"""}
+
+
+@needs_fork
+@pytest.mark.parametrize("stop", STOPS)
+def test_stopped_workers_let_the_process_exit(stop, tmp_path):
+    """Regressions of a bake that printed "stopped by" and never exited: Thread.join
+    interrupted by a signal handler's exception marked the pool's manager thread
+    stopped (CPython 3.11), so the exit waited forever for a worker no one told to
+    stop; a half-sent result left that thread reading forever; and failing a
+    cancelled part killed that thread (CPython 3.11), leaving a traceback."""
+    script = textwrap.dedent("""
+        import os, signal, struct, sys, time
+        from shtools.runtime import ShadowSettings
+        from shtools.runtime.parallel import VertexWorkers
+
+        workers = VertexWorkers(1, ShadowSettings(processes=2), None)  # default tables
+    """) + textwrap.dedent(STOPS[stop]) + 'print("stopped", flush=True)\nsys.exit(3)\n'
+    proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        # each stop takes at most ~2 s; 60 s is far beyond any load, and the bugs
+        # never exit
+        out, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)  # the script and its worker (same session)
+        proc.communicate()
+        pytest.fail("the process did not exit after its workers were stopped")
+    assert (proc.returncode, out, err) == (3, "stopped\n", "")
