@@ -346,6 +346,8 @@ class ShadowRuntime:
         the shading order.
         """
         m = self.acc_order
+        if f is not None and not f.any():
+            f = None  # nothing else blocks these receivers: no exp of zeros
         fields = [fb for fb, _ in blocks.fields]
         log_fields = fields if blocks.rigid_space == "log" else []
         log_deformables = blocks.deformable_space == "log" and bool(blocks.deformables)
