@@ -404,6 +404,29 @@ class FluxSamples:
         s = np.einsum("ij,ij->i", d, q)
         return float(np.sum(s * np.minimum(1.0, (radius / np.maximum(rho, 1e-300)) ** 3)))
 
+    def relative(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """ρ² = |x_k - c|² and s = (x_k - c)·q_k of every sample from every centre,
+        ``(M, 3)`` -> two ``(M, K)``; by mat-muls (no ``(M, K, 3)`` temporary)."""
+        if not hasattr(self, "_pp"):
+            self._pp = np.einsum("ij,ij->i", self.points, self.points)
+            self._xq = np.einsum("ij,ij->i", self.points, self.q)
+        rho2 = self._pp - 2.0 * (centers @ self.points.T)
+        rho2 += np.einsum("ij,ij->i", centers, centers)[:, None]
+        np.maximum(rho2, 1e-300, out=rho2)
+        return rho2, self._xq - centers @ self.q.T
+
+    def intersection_volumes(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """V(S_i ∩ T) of many spheres from all samples, ``(N, 3), (N,)`` -> (N,)."""
+        centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+        radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+        out = np.empty(len(centers))
+        per = max(1, 2_000_000 // max(len(self.points), 1))
+        for s in range(0, len(centers), per):
+            rho2, sk = self.relative(centers[s:s + per])
+            w = np.minimum(radii[s:s + per, None] ** 2 / rho2, 1.0)
+            out[s:s + per] = np.sum(sk * w * np.sqrt(w), axis=1)
+        return out
+
     def outside_profiles(self, centers: np.ndarray, r_grid: np.ndarray) -> np.ndarray:
         """V(S - T) of spheres about fixed centres for every radius of a grid.
 
@@ -425,9 +448,8 @@ class FluxSamples:
         per = max(1, 2_000_000 // max(len(self.points), 1))
         for s in range(0, len(centers), per):
             c = centers[s:s + per]
-            d = self.points[None, :, :] - c[:, None, :]
-            rho = np.linalg.norm(d, axis=-1)
-            sk = np.einsum("nkj,kj->nk", d, self.q)
+            rho2, sk = self.relative(c)
+            rho = np.sqrt(rho2)
             # bin b holds samples with r_grid[b-1] <= rho < r_grid[b]
             b = np.minimum(np.floor(rho / step).astype(np.int64) + 1, nr)
             rows = np.arange(len(c))[:, None] * (nr + 1)

@@ -74,7 +74,10 @@ MIN_POINTS = 2000
 MAX_POINTS = 8000
 
 #: Mesh vertices added to the surface points (a random subset beyond this).
-MAX_VERTEX_POINTS = 20_000
+#: The whole surface is covered at the end anyway (:func:`_cover`); these only
+#: steer the clustering, and the flood fill costs points x N per round
+#: (dragon N = 64: 20 000 of them cost twice the CPU for no better E).
+MAX_VERTEX_POINTS = 5_000
 
 #: Neighbours per point in the flood-fill graph.
 NEIGHBOURS = 10
@@ -90,7 +93,7 @@ ZERO_VOLUME_FRACTION = 1e-7
 FLUX_EDGE_DIVISOR = 120
 FLUX_SAMPLES_PER_SPHERE = 500
 MIN_FLUX_SAMPLES = 4_000
-MAX_FLUX_SAMPLES = 25_000
+MAX_FLUX_SAMPLES = 16_000
 
 #: Largest centre move per update, as a fraction of the cluster radius (bounds
 #: the samples the objective must visit; the next round continues the walk).
@@ -109,12 +112,11 @@ SHRINK_TOLERANCE = 1e-5
 #: sphere during shrinking: absorbs the rounding of the mat-mul distances.
 SHRINK_SLACK = 1e-9
 
-#: Default iteration cap: rounds cost about (cover points) x N, so the cap is
-#: this work budget divided by that (a 100k-triangle mesh at N = 64 gets ~75
-#: rounds, inside two minutes), clipped to [MIN_ITERATIONS, MAX_ITERATIONS].
-ITERATION_WORK = 3.6e8
-MIN_ITERATIONS = 40
-MAX_ITERATIONS = 150
+#: Default round budget (rounds at N spheres; see ``max_iterations``).  E
+#: falls little after it, and the surface cover at the end
+#: (:func:`_settle_cover`) matters more: CesiumMan at N = 32, E 1.231 after 30
+#: rounds, 1.235 after 40; with the growth-only cover 1.282 after 100.
+ROUNDS = 30
 
 #: Teleportation candidates (split cluster, deleted sphere) tried per stall;
 #: the one with the lowest E after a Lloyd step is refined and kept if E drops.
@@ -154,6 +156,10 @@ COVER_PIECE = 2e-4
 #: Evenly spread surface points added to the points the spheres must contain.
 COVER_SURFACE_POINTS = 20_000
 
+#: Rounds of adding the surface pieces no sphere holds to the cover points and
+#: re-centring the spheres for them (see :func:`_settle_cover`).
+COVER_PASSES = 1
+
 #: Fresh, evenly spread surface points on which the reported coverage is measured.
 COVERAGE_SAMPLES = 20_000
 
@@ -180,13 +186,20 @@ class Solid:
     neighbors : ndarray, shape (P, k), int
     cover : ndarray, shape (C, 3)
         Every point the final spheres must contain (samples and vertices).
+    cover_tree : scipy.spatial.cKDTree
+        Of ``cover``.
     volume : float
     diag : float
     evaluations : int
         Outside-volume evaluations of single spheres by the inner loop so far
         (a radial profile counts once): a deterministic measure of the work.
+    sample_terms : int
+        Flux-sample terms summed by the centre searches so far (one sample
+        for one candidate centre): the deterministic measure of their cost.
     recentred : dict
         Results of :func:`_recenter` by (start, step, points) digest.
+    hulls : dict
+        Convex hulls by point-index digest (see :meth:`hull`).
     """
 
     mesh: trimesh.Trimesh
@@ -196,10 +209,22 @@ class Solid:
     points: np.ndarray
     neighbors: np.ndarray
     cover: np.ndarray
+    cover_tree: cKDTree
     volume: float
     diag: float
     evaluations: int = 0
+    sample_terms: int = 0
     recentred: dict = field(default_factory=dict)
+    hulls: dict = field(default_factory=dict)
+
+    def hull(self, points: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """Convex-hull vertices of ``points[index]``, remembered by ``index``
+        (settled clusters keep their points from round to round)."""
+        index = np.sort(index)
+        key = (id(points), hashlib.blake2b(index.tobytes(), digest_size=16).digest())
+        if key not in self.hulls:
+            self.hulls[key] = hull_vertices(points[index])
+        return self.hulls[key]
 
 
 def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | None = None,
@@ -270,9 +295,9 @@ def discretize(mesh: trimesh.Trimesh, n: int, *, seed: int = 0, samples: int | N
     # between the sparser fitting samples that the final cover must close
     even = np.asarray(trimesh.sample.sample_surface_even(mesh, COVER_SURFACE_POINTS,
                                                          seed=seed + 2)[0], dtype=np.float64)
-    cover = np.vstack([points, v, even])
+    cover = np.vstack([points, even])
     return Solid(mesh, evaluator, flux, surface, points, np.asarray(nb)[:, 1:], cover,
-                 float(volume), diag)
+                 cKDTree(cover), float(volume), diag)
 
 
 def fit_spheres(
@@ -309,9 +334,7 @@ def fit_spheres(
         Budget of clustering + centre-update rounds (variational), counted
         in rounds at ``n`` spheres: the coarse stages (ceil(n/2), ... spheres)
         spend their share of it in proportionally cheaper rounds, so the total
-        round count reported in ``info`` can exceed it.  Default
-        ``ITERATION_WORK / (cover points * n)`` clipped to
-        [MIN_ITERATIONS, MAX_ITERATIONS], a round costing about points x n.
+        round count reported in ``info`` can exceed it.  Default ``ROUNDS``.
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
     samples : int, optional
@@ -389,8 +412,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
             "use fewer spheres", path)
     if max_iterations is None:
-        max_iterations = int(np.clip(ITERATION_WORK / (len(solid.cover) * n), MIN_ITERATIONS,
-                                     MAX_ITERATIONS))
+        max_iterations = ROUNDS
     bar.total = max_iterations  # known once the solid is sampled; shown at the next update
 
     def progress(rounds: float, energy: float) -> None:
@@ -406,7 +428,9 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             max_teleport_failures=max_teleport_failures, progress=progress)
         info.update(extra)
         centers, radii, info["revived"] = _revive(solid, centers, radii)
+        centers, radii = _settle_cover(solid, centers, radii)
         info["evaluations"] = solid.evaluations
+        info["sample_terms"] = solid.sample_terms
     elif method == "octree":
         centers, radii, _ = _octree(solid, n)
     else:
@@ -461,7 +485,8 @@ def _covered_fraction(centers, radii, points) -> float:
     return float(SphereSet(centers, radii).contains(points).mean())
 
 
-def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list | None = None,
+           ) -> np.ndarray:
     """Grow radii (least growth first) until every cover point and every
     point of the mesh's surface lies in some sphere.
 
@@ -474,35 +499,48 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
     sphere grow.
     """
     radii = np.asarray(radii, dtype=np.float64).copy()
-    pts = solid.cover
-    inside = SphereSet(centers, radii).contains(pts)
-    rest = pts[~inside]
-    if len(rest):
-        d = np.linalg.norm(rest[:, None, :] - centers[None, :, :], axis=-1)
-        j = np.argmin(d - radii[None, :], axis=1)
-        np.maximum.at(radii, j, d[np.arange(len(rest)), j])
+    n = len(centers)
+
+    def grow_for(pieces_: np.ndarray) -> None:
+        """Grow, for each piece ``(T, K, 3)``, the sphere that needs least growth."""
+        per = max(1, 2_000_000 // (pieces_.shape[1] * n))
+        for a in range(0, len(pieces_), per):
+            t = pieces_[a:a + per]
+            # the radius each sphere needs to hold each piece, (T, N)
+            need = np.sqrt(np.max(np.sum((t[:, :, None, :] - centers[None, None]) ** 2,
+                                         axis=-1), axis=1))
+            j = np.argmin(need - radii[None, :], axis=1)
+            np.maximum.at(radii, j, need[np.arange(len(t)), j])
+
+    def held(pieces_: np.ndarray, tree: cKDTree) -> np.ndarray:
+        """Which pieces ``(T, K, 3)`` lie inside one sphere; ``tree`` of a point
+        of each piece (inside a sphere if the piece is): k-d tree candidates
+        instead of pieces x spheres."""
+        lists = tree.query_ball_point(centers, radii)
+        ti = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
+        sj = np.repeat(np.arange(n), [len(ix) for ix in lists])
+        d2 = np.max(np.sum((pieces_[ti] - centers[sj, None, :]) ** 2, axis=-1), axis=1)
+        out = np.zeros(len(pieces_), dtype=bool)
+        out[ti[d2 <= radii[sj] ** 2]] = True
+        return out
+
+    lost = ~held(solid.cover[:, None, :], solid.cover_tree)
+    grow_for(solid.cover[lost][:, None, :])
     # the surface: a triangle inside one sphere is covered (a ball is convex);
     # the others are split in four until inside one sphere or smaller than
     # COVER_PIECE, and those pieces grow the sphere that needs least growth
     tri = solid.mesh.vertices[solid.mesh.faces]  # (F, 3, 3)
-    per = max(1, 2_000_000 // (3 * len(centers)))
     for _ in range(COVER_LEVELS + 1):
-        small = np.max(np.linalg.norm(tri - tri.mean(axis=1, keepdims=True), axis=-1),
+        centroid = tri.mean(axis=1)
+        small = np.max(np.linalg.norm(tri - centroid[:, None], axis=-1),
                        axis=1) <= COVER_PIECE * solid.diag
-        rest = []
-        for a in range(0, len(tri), per):
-            t = tri[a:a + per]
-            # the radius each sphere needs to hold each piece, (T, N)
-            need = np.sqrt(np.max(np.sum((t[:, :, None, :] - centers[None, None]) ** 2,
-                                         axis=-1), axis=1))
-            short = need - radii[None, :]
-            out = np.all(short > 0, axis=1)
-            grow = np.flatnonzero(out & small[a:a + per])
-            if len(grow):
-                j = np.argmin(short[grow], axis=1)
-                np.maximum.at(radii, j, need[grow, j])
-            rest.append(t[out & ~small[a:a + per]])
-        tri = np.concatenate(rest)
+        out = ~held(tri, cKDTree(centroid))
+        grow = tri[out & small]
+        if len(grow):
+            grow_for(grow)
+            if pieces is not None:
+                pieces.append(grow.reshape(-1, 3))
+        tri = tri[out & ~small]
         if len(tri) == 0:
             break
         mid = 0.5 * (tri[:, [0, 1, 2]] + tri[:, [1, 2, 0]])  # edge midpoints 01, 12, 20
@@ -511,11 +549,33 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
                               np.stack([mid[:, 2], mid[:, 1], tri[:, 2]], axis=1),
                               mid])
     if len(tri):  # pieces left after COVER_LEVELS splits: grow for them
-        need = np.sqrt(np.max(np.sum((tri[:, :, None, :] - centers[None, None]) ** 2,
-                                     axis=-1), axis=1))
-        j = np.argmin(need - radii[None, :], axis=1)
-        np.maximum.at(radii, j, need[np.arange(len(tri)), j])
+        grow_for(tri)
+        if pieces is not None:
+            pieces.append(tri.reshape(-1, 3))
     return radii * (1.0 + 1e-12) + COVER_SLACK * solid.diag
+
+
+def _settle_cover(solid: Solid, centers: np.ndarray, radii: np.ndarray):
+    """Cover the whole surface, then let the spheres that grew re-centre.
+
+    The fit bounds sample points; the surface between them that no sphere
+    holds (at seams between spheres, gaps of about the sample spacing) makes
+    :func:`_cover` grow spheres, and growing alone is costly (CesiumMan at
+    N = 32: E 0.95 -> 1.28).  The corners of the pieces that made spheres
+    grow join the cover points and the shrink-and-re-centre steps run again,
+    so that the spheres move to hold them instead of only growing; then
+    :func:`_cover` closes what is left.  COVER_PASSES times at most.
+    """
+    for _ in range(COVER_PASSES):
+        pieces: list = []
+        grown = _cover(solid, centers, radii, pieces=pieces)
+        if not pieces:
+            break
+        extra = np.unique(np.concatenate(pieces), axis=0)
+        solid.cover = np.vstack([solid.cover, extra])
+        solid.cover_tree = cKDTree(solid.cover)
+        centers, radii = _shrink(solid, centers, grown, rounds=SHRINK_ROUNDS)
+    return centers, radii
 
 
 def _revive(solid: Solid, centers: np.ndarray, radii: np.ndarray):
@@ -612,6 +672,14 @@ _COMPASS = np.vstack([np.eye(3), -np.eye(3)])
 #: reach POWELL_XTOL and the rest allow moves.
 COMPASS_ITERATIONS = 18
 
+#: A compass pass keeps in its exact sum the samples within the current radius
+#: plus NEAR_REACH steps of the centre (a move of one step changes the radius
+#: and the distance by at most one step each; the rest allow a few more moves
+#: before the far field's first-order expansion is re-made); the rest join the
+#: far field once fewer than KEEP_FRACTION of the samples remain.
+NEAR_REACH = 4.0
+KEEP_FRACTION = 0.8
+
 
 def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.ndarray):
     """Move every centre within its box ``p0 ± delta`` to minimise V(S_i - T), the
@@ -663,65 +731,113 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
     near = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
     near_starts = np.concatenate([[0], np.cumsum([len(ix) for ix in lists])])
     near_owner = np.repeat(np.arange(m), np.diff(near_starts))
-    # far field about p0: all samples minus the near ones, spheres in chunks
-    g0 = np.empty(m)
-    grad = np.empty((m, 3))
+    # far field about p0: all samples minus the near ones, spheres in chunks;
+    # Σ_far s_k/ρ_k³ ≈ far_c + far_g · e for a centre p0 + e
+    far_c = np.empty(m)
+    far_g = np.empty((m, 3))
     per = max(1, 2_000_000 // max(len(flux.points), 1))
     for a in range(0, m, per):
         b = min(a + per, m)
-        d = flux.points[None, :, :] - p0[a:b, None, :]  # (m, K, 3)
-        rho2 = np.einsum("mkj,mkj->mk", d, d)
-        far = np.ones(rho2.shape, dtype=bool)
+        rho2, sk = flux.relative(p0[a:b])  # (m, K)
+        inv3 = 1.0 / (rho2 * np.sqrt(rho2))
         sel = (near_owner >= a) & (near_owner < b)
-        far[near_owner[sel] - a, near[sel]] = False
-        inv3 = np.where(far, 1.0 / np.maximum(rho2, 1e-300) ** 1.5, 0.0)
-        sk = np.einsum("mkj,kj->mk", d, flux.q)
-        g0[a:b] = np.sum(sk * inv3, axis=1)
-        grad[a:b] = (-inv3 @ flux.q
-                     + 3.0 * np.einsum("mk,mkj->mj", sk * inv3 / np.maximum(rho2, 1e-300), d))
+        inv3[near_owner[sel] - a, near[sel]] = 0.0
+        far_c[a:b] = np.sum(sk * inv3, axis=1)
+        # d/de of s/ρ³ = -q/ρ³ + 3 s (x - c)/ρ⁵, with x - c = x - p0 summed by mat-muls
+        w5 = sk * inv3 / rho2
+        far_g[a:b] = (-inv3 @ flux.q + 3.0 * (w5 @ flux.points
+                                               - np.sum(w5, axis=1)[:, None] * p0[a:b]))
     # near samples and hull points relative to p0: a compass move along axis
     # k by t changes |y|² by -2 t y_k + t² and y·q by -t q_k, so the six
     # candidates of every sphere cost a few elementwise passes
     xn = flux.points[near] - p0[near_owner]
     qn = flux.q[near]
+    own = near_owner
     hr = hull - p0[hull_owner]
-    segments = scipy.sparse.csr_matrix(
-        (np.ones(len(near)), np.arange(len(near)), near_starts), shape=(m, len(near)))
-    q6 = np.hstack([qn, -qn])
+    hown = hull_owner
 
-    def outside(e: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """V(S - T) at centres ``p0 + e`` (``e (M, 3)``), shape (M,), and at
-        their six axis moves by ``h (M,)``, shape (M, 6)."""
-        y = xn - e[near_owner]
-        yh = hr - e[hull_owner]
-        t = h[near_owner, None]
-        th = h[hull_owner, None]
-        a = np.einsum("ij,ij->i", y, y)[:, None]
-        ah = np.einsum("ij,ij->i", yh, yh)[:, None]
-        # column 0: no move; 1-6: +x, +y, +z, -x, -y, -z
-        rho2 = np.maximum(np.hstack([a, a - 2.0 * t * np.hstack([y, -y]) + t * t]), 1e-300)
-        sn = np.einsum("ij,ij->i", y, qn)[:, None] - np.hstack([np.zeros((len(y), 1)), t * q6])
-        r2 = np.maximum.reduceat(np.hstack([ah, ah - 2.0 * th * np.hstack([yh, -yh]) + th * th]),
-                                 hull_starts[:-1], axis=0)
-        r3 = np.maximum(r2, 0.0) ** 1.5
-        inter = segments @ (sn * np.minimum(1.0, r3[near_owner] / (rho2 * np.sqrt(rho2))))
-        moves = e[:, None, :] + h[:, None, None] * np.vstack([np.zeros(3), _COMPASS])
-        inter += r3 * (g0[:, None] + np.einsum("mj,mdj->md", grad, moves))
-        solid.evaluations += 7 * m
-        f = FOUR_PI / 3.0 * r3 - inter
-        return f[:, 0], f[:, 1:]
+    def segment_sums(owner: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Sums of ``values (L, C)`` per sphere, ``owner (L,)`` sorted -> (M, C)."""
+        starts = np.searchsorted(owner, np.arange(m + 1))
+        seg = scipy.sparse.csr_matrix((np.ones(len(owner)), np.arange(len(owner)), starts),
+                                      shape=(m, len(owner)))
+        return seg @ values
 
-    # compass search in units of delta, inside the box [-1, 1]^3
+    # value at p0
+    s0 = np.einsum("ij,ij->i", xn, qn)
+    w = np.minimum(r0[own] ** 2 / np.maximum(np.einsum("ij,ij->i", xn, xn), 1e-300), 1.0)
+    r3 = r0**3
+    f0 = FOUR_PI / 3.0 * r3 - (segment_sums(own, (s0 * w * np.sqrt(w))[:, None])[:, 0]
+                               + r3 * far_c)
+    solid.evaluations += m
+    solid.sample_terms += len(own)
+    best = f0.copy()
+    r2u = r0**2  # squared radius at the current centre
+
+    # compass search in units of delta, inside the box [-1, 1]^3; each pass
+    # evaluates the six moves of the spheres still searching, over the
+    # samples within their reach (the others are dropped into the far field)
     u = np.zeros((m, 3))
     step = np.full(m, 0.5)
-    f0 = None
     for _ in range(COMPASS_ITERATIONS):
         active = step >= POWELL_XTOL
         if not np.any(active):
             break
-        here, f = outside(delta[:, None] * u, delta * step)
-        if f0 is None:
-            f0 = best = here
+        e = delta[:, None] * u
+        h = delta * step
+        y = xn - e[own]
+        a = np.einsum("ij,ij->i", y, y)
+        # samples a move of this pass (or the next few) cannot bring inside
+        # the sphere, and every sample of a sphere that has converged, leave
+        # the exact sum: the first ones enter the far field through a
+        # first-order expansion about the current centre
+        reach = np.sqrt(r2u) + NEAR_REACH * h
+        keep = active[own] & (a <= (reach * reach)[own])
+        if keep.sum() < KEEP_FRACTION * len(keep):
+            drop = ~keep & active[own]
+            yd, qd, od = y[drop], qn[drop], own[drop]
+            inv2 = 1.0 / np.maximum(a[drop], 1e-300)
+            inv3 = inv2 * np.sqrt(inv2)
+            sd = np.einsum("ij,ij->i", yd, qd)
+            g = -qd * inv3[:, None] + (3.0 * sd * inv3 * inv2)[:, None] * yd
+            gsum = np.stack([np.bincount(od, weights=g[:, k], minlength=m) for k in range(3)],
+                            axis=1)
+            far_c += np.bincount(od, weights=sd * inv3, minlength=m) - np.sum(gsum * e, axis=1)
+            far_g += gsum
+            xn, qn, own, y, a = xn[keep], qn[keep], own[keep], y[keep], a[keep]
+            hkeep = active[hown]
+            hr, hown = hr[hkeep], hown[hkeep]
+        # columns: +x, +y, +z, -x, -y, -z
+        t = h[own]
+        ty = (2.0 * t)[:, None] * y
+        base = (a + t * t)[:, None]
+        rho2 = np.concatenate([base - ty, base + ty], axis=1)
+        np.maximum(rho2, 1e-300, out=rho2)
+        sq = np.einsum("ij,ij->i", y, qn)[:, None]
+        tq = t[:, None] * qn
+        sn = np.concatenate([sq - tq, sq + tq], axis=1)
+        yh = hr - e[hown]
+        th = h[hown]
+        tyh = (2.0 * th)[:, None] * yh
+        baseh = (np.einsum("ij,ij->i", yh, yh) + th * th)[:, None]
+        starts = np.searchsorted(hown, np.arange(m + 1))
+        present = starts[:-1] < starts[1:]
+        r2 = np.zeros((m, 6))
+        r2[present] = np.maximum.reduceat(np.concatenate([baseh - tyh, baseh + tyh], axis=1),
+                                          starts[:-1][present], axis=0)
+        np.maximum(r2, 0.0, out=r2)
+        # min(1, r³/ρ³) = min(1, r²/ρ²)^1.5
+        w = r2[own] / rho2
+        np.minimum(w, 1.0, out=w)
+        w *= np.sqrt(w)
+        w *= sn
+        r3 = r2 * np.sqrt(r2)
+        moves = e[:, None, :] + h[:, None, None] * _COMPASS  # (M, 6, 3)
+        inter = segment_sums(own, w) + r3 * (far_c[:, None] + np.einsum("mj,mdj->md", far_g,
+                                                                          moves))
+        solid.evaluations += 6 * int(active.sum())
+        solid.sample_terms += 6 * len(own)
+        f = FOUR_PI / 3.0 * r3 - inter
         # moves that would leave the box are not taken
         cand = u[:, None, :] + step[:, None, None] * _COMPASS  # (M, 6, 3)
         f = np.where(np.all(np.abs(cand) <= 1.0, axis=-1), f, np.inf)
@@ -730,6 +846,7 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
         better = active & (fj < best - 1e-12 * np.abs(best))
         u[better] = cand[better, j[better]]
         best = np.where(better, fj, best)
+        r2u = np.where(better, r2[np.arange(m), j], r2u)
         step[active & ~better] *= 0.5
     centers = p0 + delta[:, None] * u
     for k, c, b, f in zip(keys, centers, best, f0, strict=True):
@@ -756,9 +873,9 @@ def _update_centers(solid: Solid, centers: np.ndarray, labels: np.ndarray):
     zero = 1e-9 * solid.volume
     hulls, which = [], []
     for i in range(n):
-        members = solid.points[order[bounds_idx[i]:bounds_idx[i + 1]]]
+        members = order[bounds_idx[i]:bounds_idx[i + 1]]
         if len(members):
-            hulls.append(hull_vertices(members))
+            hulls.append(solid.hull(solid.points, members))
             which.append(i)
     if not which:
         return new_c, radii, outside
@@ -799,8 +916,7 @@ def _lloyd_step(solid: Solid, centers: np.ndarray) -> _State:
     labels, _ = _flood_fill(solid, centers, table, r_grid[1])
     c, r, _ = _update_centers(solid, centers, labels)
     c, r = _shrink(solid, c, r, rounds=1)
-    out = np.array([max(FOUR_PI / 3 * ri**3 - solid.flux.intersection_volume(ci, ri), 0.0)
-                    for ci, ri in zip(c, r, strict=True)])
+    out = np.maximum(FOUR_PI / 3 * r**3 - solid.flux.intersection_volumes(c, r), 0.0)
     return _State(c, r, labels, out, float(out.sum() / solid.volume))
 
 
@@ -867,6 +983,12 @@ def _initial_centers(points: np.ndarray, n: int, rng: np.random.Generator) -> np
     return points[chosen].copy()
 
 
+def _box_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """The sphere about the bounding box's centre that holds ``points (P, 3)``."""
+    c = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    return c, float(np.sqrt(np.max(np.sum((points - c) ** 2, axis=1))))
+
+
 def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits: int,
                     ) -> _State:
     """The state after splitting the ``splits`` spheres whose split gains most.
@@ -903,17 +1025,26 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
             return best
         mean = own.mean(axis=0)
         _, _, axes = np.linalg.svd(own - mean, full_matrices=False)
+        # the three cuts are ranked with the halves' box-centred spheres (a
+        # minimal sphere costs an SLSQP solve); only the best cut's halves get
+        # their minimal spheres
+        ranked = []
         for axis in axes:
             side = (own - mean) @ axis > 0
             if side.all() or not side.any():
                 continue
-            halves = [minimal_bounding_sphere(own[side]), minimal_bounding_sphere(own[~side])]
+            halves = [_box_sphere(own[side]), _box_sphere(own[~side])]
             if min(halves[0][1], halves[1][1]) <= MIN_CHILD_RADIUS * solid.diag:
                 continue  # a (near) point-sized child would be a vanishing sphere
-            out = [outside(c, r) for c, r in halves]
-            if parent - sum(out) > best[0]:
-                best = (parent - sum(out), halves, out)
-        return best
+            ranked.append((sum(outside(c, r) for c, r in halves), side))
+        if not ranked:
+            return best
+        side = min(ranked, key=lambda x: x[0])[1]
+        halves = [minimal_bounding_sphere(own[side]), minimal_bounding_sphere(own[~side])]
+        if min(halves[0][1], halves[1][1]) <= MIN_CHILD_RADIUS * solid.diag:
+            return best
+        out = [outside(c, r) for c, r in halves]
+        return (parent - sum(out), halves, out)
 
     inside = [covers(c, r) for c, r in zip(centers, radii, strict=True)]
     count = np.sum(inside, axis=0)
@@ -1087,68 +1218,75 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     E sums each sphere's outside volume, so a point already inside another
     sphere need not hold a radius up.  Largest spheres shrink first; each
     sphere keeps bounding the points only it covers, so the union still covers
-    every point.  With ``recenter``, Powell then moves each centre for its own
-    points.
+    every point.  With ``recenter``, the compass search then moves each centre
+    for its own points.  Each sphere visits only the cover points inside it (a
+    k-d tree query), not all of them: the cost is the points times the
+    spheres' overlap, not points x spheres.
     """
     pts = solid.cover
-    # distances through |p|² - 2 p·c + |c|² (one mat-mul instead of a (P, N, 3)
-    # temporary), about the points' mean to keep the cancellation small; the
-    # final cover step re-checks containment exactly
-    origin = pts.mean(axis=0)
-    pts = pts - origin
-    pp = np.einsum("ij,ij->i", pts, pts)
     slack = SHRINK_SLACK * solid.diag
-
-    def distances(c: np.ndarray) -> np.ndarray:
-        c = c - origin
-        return np.sqrt(np.maximum(pp[:, None] - 2.0 * (pts @ c.T) + np.sum(c * c, axis=-1), 0.0))
-
     centers = centers.copy()
     radii = radii.copy()
+    n = len(centers)
     order = np.argsort(-radii, kind="stable")
+
+    def members(idx: np.ndarray):
+        """Cover points inside spheres ``idx``: (points, owner sphere, distance),
+        grouped by sphere in the order of ``idx``."""
+        lists = solid.cover_tree.query_ball_point(centers[idx], radii[idx] + 2.0 * slack)
+        flat = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
+        owner = np.repeat(idx, [len(ix) for ix in lists])
+        dist = np.linalg.norm(pts[flat] - centers[owner], axis=1)
+        keep = dist <= radii[owner] + slack  # the same test as every later one
+        return flat[keep], owner[keep], dist[keep]
+
+    everyone = np.arange(n)
     for _ in range(rounds):
         before = (centers.copy(), radii.copy())
-        dist = distances(centers)  # (P, N)
-        inside = dist <= radii[None, :] + slack
-        count = inside.sum(axis=1)
+        flat, owner, dist = members(everyone)
+        starts = np.searchsorted(owner, np.arange(n + 1))
+        count = np.bincount(flat, minlength=len(pts))
+        alive = np.ones(len(flat), dtype=bool)
         for i in order:
-            own = inside[:, i] & (count == 1)
+            s, e = starts[i], starts[i + 1]
+            ix, d, a = flat[s:e], dist[s:e], alive[s:e]
+            own = a & (count[ix] == 1)
             if not np.any(own):
                 continue
-            radii[i] = float(dist[own, i].max())
-            lost = inside[:, i] & (dist[:, i] > radii[i] + slack)
-            count[lost] -= 1
-            inside[lost, i] = False
+            radii[i] = float(d[own].max())
+            lost = a & (d > radii[i] + slack)
+            count[ix[lost]] -= 1
+            a &= ~lost  # a view: updates alive
         if not recenter:
             break
         # all spheres at once, each for the points only it covers (disjoint sets)
-        owners = np.flatnonzero(count == 1)
-        owner_of = np.argmax(inside[owners], axis=1)
-        movers = [i for i in order if np.any(owner_of == i)]
-        if movers:
-            hulls = [hull_vertices(pts[owners[owner_of == i]]) + origin for i in movers]
-            movers = np.asarray(movers)
-            p0 = centers[movers]
-            p, fp, f0 = _recenter(solid, hulls, p0, CENTER_STEP * radii[movers] + 1e-3 * solid.diag)
+        mine = alive & (count[flat] == 1)
+        per = np.bincount(owner[mine], minlength=n)
+        movers = order[per[order] > 0]
+        if len(movers):
+            groups = np.split(flat[mine], np.cumsum(per)[:-1])
+            hulls = [solid.hull(pts, groups[i]) for i in movers]
+            p, fp, f0 = _recenter(solid, hulls, centers[movers],
+                                  CENTER_STEP * radii[movers] + 1e-3 * solid.diag)
             moved_ok = fp < f0
-            for k in np.flatnonzero(moved_ok):
-                i = movers[k]
-                centers[i] = p[k]
-                radii[i] = float(np.sqrt(np.max(np.sum((hulls[k] - p[k]) ** 2, axis=1))))
             if np.any(moved_ok):
                 changed = movers[moved_ok]
-                dist[:, changed] = distances(centers[changed])
-                covered = count > 0
-                inside[:, changed] = dist[:, changed] <= radii[changed] + slack
-                count = inside.sum(axis=1)
+                for k in np.flatnonzero(moved_ok):
+                    i = movers[k]
+                    centers[i] = p[k]
+                    radii[i] = float(np.sqrt(np.max(np.sum((hulls[k] - p[k]) ** 2, axis=1))))
                 # a point two moved spheres shared may have been left by both:
                 # the sphere that needs the least growth takes it back
-                lost = np.flatnonzero(covered & (count == 0))
+                was = np.isin(owner, changed) & alive
+                left = count.copy()
+                np.subtract.at(left, flat[was], 1)
+                new_flat, _, _ = members(changed)
+                np.add.at(left, new_flat, 1)
+                lost = np.unique(flat[was][left[flat[was]] == 0])
                 if len(lost):
-                    j = np.argmin(dist[lost] - radii, axis=1)
-                    np.maximum.at(radii, j, dist[lost, j])
-                    inside = dist <= radii + slack
-                    count = inside.sum(axis=1)
+                    d = np.linalg.norm(pts[lost, None, :] - centers[None, :, :], axis=-1)
+                    j = np.argmin(d - radii, axis=1)
+                    np.maximum.at(radii, j, d[np.arange(len(lost)), j])
         # a fixed point: no sphere moved or shrank noticeably this round
         moved = np.max(np.linalg.norm(centers - before[0], axis=1) + before[1] - radii)
         if moved <= SHRINK_TOLERANCE * solid.diag:

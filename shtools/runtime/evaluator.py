@@ -494,8 +494,8 @@ class ShadowRuntime:
         """``g`` with the self-visibilities given as visibility multiplied into their rows.
 
         The exact truncated SH product at the shading order (quadrature); on rows
-        no other blocker reaches, ``g`` is the constant 1 and the product returns
-        the given visibility.
+        where ``g`` is a constant (no other blocker reaches them: ``exp(0)``) the
+        product is the given visibility times that constant, with no quadrature.
         """
         given = [sv for sv in self_visibility or () if sv.visibility is not None]
         if not given:
@@ -514,7 +514,12 @@ class ShadowRuntime:
                                  f"rows select {rows.shape[0]}")
             vis = np.zeros((rows.shape[0], size), dtype=np.float32)
             vis[:, :min(k, size)] = values[:, :size]
-            g[rows] = self._products.product(g[rows], vis)
+            sub = g[rows]
+            flat = ~sub[:, 1:].any(axis=1)  # constant: c Y_00 = c / sqrt(4 pi) everywhere
+            out = vis * (sub[:, :1] * np.float32(1.0 / math.sqrt(4.0 * math.pi)))
+            if not flat.all():
+                out[~flat] = self._products.product(sub[~flat], vis[~flat])
+            g[rows] = out
         return g
 
     def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:

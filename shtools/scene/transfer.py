@@ -193,7 +193,7 @@ def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int) ->
     from shtools.fields.self_visibility import hemisphere_visibility
     from shtools.geometry.raycast import RayCaster
 
-    caster = RayCaster(vertices, faces)
+    caster = RayCaster(vertices, faces, robust=False)  # ~20 % faster; see RayCaster
     return hemisphere_visibility(vertices, normals, caster, order,
                                  n_dirs=n_dirs).astype(np.float32)
 

@@ -11,6 +11,7 @@ import trimesh
 from shtools.geometry.outside_volume import OutsideVolume
 from shtools.geometry.sphere_fit import (
     COMPASS_ITERATIONS,
+    COVER_PASSES,
     SHRINK_ROUNDS,
     _revive,
     discretize,
@@ -130,21 +131,31 @@ def test_open_mesh_fit_has_no_degenerate_spheres(open_mesh):
 
 def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh):
     """A guard against slowdowns that does not depend on the machine: the fit
-    counts its single-sphere outside-volume evaluations (deterministic).
+    counts its single-sphere outside-volume evaluations and the flux-sample
+    terms they sum (both deterministic).
 
-    The bound follows from the algorithm: a round re-centres every sphere
-    twice (cluster update and shrink), each a compass search of at most
-    COMPASS_ITERATIONS passes of 7 evaluations, plus 2 for the profiles and
-    the estimate; the final shrink runs SHRINK_ROUNDS such re-centrings and
-    the coarse-to-fine split a few per sphere.  A change that makes rounds
-    costlier or spends more rounds trips it.
+    Evaluations: a round re-centres every sphere twice (cluster update and
+    shrink), each a compass search of at most 1 + 6 COMPASS_ITERATIONS
+    evaluations, plus 2 for the profiles and the estimate; the final shrink
+    and each of the COVER_PASSES surface-cover passes run SHRINK_ROUNDS such
+    re-centrings.  A change that makes rounds costlier or spends more rounds
+    trips it.
+
+    Sample terms: an evaluation sums the samples within the sphere's radius
+    plus a few compass steps, about one or two spheres' share K / N of the K
+    samples (measured here: 1.5 K / N).  Summing every sample within the
+    first step's reach for the whole search, as before the per-pass near
+    sets, measured 4.2 K / N; evaluating converged spheres costs more still.
     """
     n, rounds = 12, 6
     fit = fit_spheres(capsule_union_mesh, n, seed=0, max_iterations=rounds, samples=400)
     again = fit_spheres(capsule_union_mesh, n, seed=0, max_iterations=rounds, samples=400)
     assert fit.info["evaluations"] == again.info["evaluations"]  # deterministic
-    per_recentre = 7 * COMPASS_ITERATIONS
+    assert fit.info["sample_terms"] == again.info["sample_terms"]
+    per_recentre = 1 + 6 * COMPASS_ITERATIONS
     bound = (fit.info["iterations"] * n * (2 * per_recentre + 2)
-             + SHRINK_ROUNDS * n * per_recentre)
+             + (1 + COVER_PASSES) * SHRINK_ROUNDS * n * per_recentre)
     assert fit.info["iterations"] <= rounds
     assert 0 < fit.info["evaluations"] <= bound
+    share = fit.info["flux_samples"] / n
+    assert 0 < fit.info["sample_terms"] <= 3.0 * share * fit.info["evaluations"]
