@@ -112,11 +112,15 @@ SHRINK_TOLERANCE = 1e-5
 #: sphere during shrinking: absorbs the rounding of the mat-mul distances.
 SHRINK_SLACK = 1e-9
 
-#: Default round budget (rounds at N spheres; see ``max_iterations``).  E
-#: falls little after it, and the surface cover at the end
-#: (:func:`_settle_cover`) matters more: CesiumMan at N = 32, E 1.231 after 30
-#: rounds, 1.235 after 40; with the growth-only cover 1.282 after 100.
-ROUNDS = 30
+#: Default round budget (rounds at N spheres; see ``max_iterations``), below
+#: COARSE_TO_FINE_MIN spheres and from it on (where the coarse fit gives the
+#: search a good start).  Measured: CesiumMan at N = 32, E 1.231 after 30
+#: rounds, 1.154 after 60 and 90; the torus of the tests at N = 32, 0.156 /
+#: 0.115 / 0.108 after 30 / 60 / 150 (the previous fit: 0.115 after 150);
+#: dragon N = 64 and 128 after 30: 0.917 and 0.764 (previous fit, made
+#: bounding: 1.028, 0.793).
+ROUNDS = 60
+ROUNDS_COARSE_TO_FINE = 30
 
 #: Teleportation candidates (split cluster, deleted sphere) tried per stall;
 #: the one with the lowest E after a Lloyd step is refined and kept if E drops.
@@ -334,7 +338,8 @@ def fit_spheres(
         Budget of clustering + centre-update rounds (variational), counted
         in rounds at ``n`` spheres: the coarse stages (ceil(n/2), ... spheres)
         spend their share of it in proportionally cheaper rounds, so the total
-        round count reported in ``info`` can exceed it.  Default ``ROUNDS``.
+        round count reported in ``info`` can exceed it.  Default ``ROUNDS``
+        (``ROUNDS_COARSE_TO_FINE`` from ``COARSE_TO_FINE_MIN`` spheres on).
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
     samples : int, optional
@@ -412,7 +417,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
             "use fewer spheres", path)
     if max_iterations is None:
-        max_iterations = ROUNDS
+        max_iterations = ROUNDS if n < COARSE_TO_FINE_MIN else ROUNDS_COARSE_TO_FINE
     bar.total = max_iterations  # known once the solid is sampled; shown at the next update
 
     def progress(rounds: float, energy: float) -> None:
