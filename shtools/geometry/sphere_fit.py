@@ -12,13 +12,16 @@ SHEXP (Ren et al. 2006, section 6.2):
    (radial outside-volume profiles per centre make this a table look-up).
    Fronts are processed as vectorised batches (breadth first) instead of one
    point per stack pop.
-3. Centre update: per cluster, Powell's method moves the centre to minimise
-   V(S - T) with the radius bounding the cluster's points.  Then each sphere
-   shrinks to the points no other sphere covers (E sums the spheres' outside
-   volumes, so a point inside another sphere need not hold a radius up) and
-   Powell re-centres it for those points; the union still covers every point.
-   V(S - T) in this inner loop comes from :class:`FluxSamples` (centroid rule
-   of the flux on small triangles, radial profiles for the flood fill).
+3. Centre update: every cluster's centre moves to minimise V(S - T) with the
+   radius bounding the cluster's points, all spheres in one batched compass
+   search (:func:`_recenter`; each pass sums only the flux samples a move of
+   the current step can reach, and only for the spheres still searching).
+   Then each sphere shrinks to the points no other sphere covers (E sums the
+   spheres' outside volumes, so a point inside another sphere need not hold a
+   radius up; k-d tree queries, not points x spheres) and is re-centred for
+   those points; the union still covers every point.  V(S - T) in this inner
+   loop comes from :class:`FluxSamples` (centroid rule of the flux on small
+   triangles, radial profiles for the flood fill).
 4. Cluster teleportation: when an iteration no longer lowers E, split the
    cluster of largest outside volume at its farthest-apart points and delete
    another sphere — TELEPORT_CANDIDATES choices (the most overlapped one, or
@@ -33,9 +36,11 @@ SHEXP (Ren et al. 2006, section 6.2):
    Lloyd steps and teleports then refine at N.  Each stage spends part of one
    work budget (rounds x spheres).
 
-The shrink-and-re-centre step is iterated to a fixed point at the end.
-Finally every radius grows just enough to contain its cluster, every surface
-sample, mesh vertex and quadrature point (coverage 1), and E = Σ V(S_i - T)/V(T)
+The shrink-and-re-centre step is iterated to a fixed point at the end.  The
+spheres then must hold the whole surface, not only its samples: the pieces of
+triangles no sphere holds join the points and the spheres re-centre for them
+(:func:`_settle_cover`), then every radius grows just enough to contain every
+point and every piece of the surface (coverage 1), and E = Σ V(S_i - T)/V(T)
 is computed with the accurate flux evaluator of :mod:`.outside_volume`.
 
 Baselines for comparison at equal sphere counts: ``"octree"`` (circumscribed
