@@ -22,8 +22,11 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("SHTOOLS_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
-def battle_scene(directory: Path, frames: int) -> Path:
+def battle_scene(directory: Path, frames: int, subdivisions: int = 255) -> Path:
     """A 65,536-vertex ground grid under 16 moving balls and 4 columns of 50 spheres each.
+
+    ``subdivisions`` of the ground: 255 gives the 65,536 vertices, 511 a 262,144-vertex
+    frame (``bench_scaleout``'s one large frame).
 
     216 leaf spheres in total (the columns in trees), as in the runtime's battle-scale
     benchmark; balls cross the ground on straight paths.
@@ -43,9 +46,9 @@ def battle_scene(directory: Path, frames: int) -> Path:
     objects = ["""
 [[objects]]
 name = "ground"
-primitive = { type = "plane", size = [16.0, 16.0], subdivisions = 255 }
+primitive = { type = "plane", size = [16.0, 16.0], subdivisions = SUBDIVISIONS }
 role = "receiver"
-"""]
+""".replace("SUBDIVISIONS", str(int(subdivisions)))]
     for c in range(4):
         x, z = rng.uniform(-5, 5, size=2)
         objects.append(f"""

@@ -196,7 +196,7 @@ class _Frame:
 
 
 def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables, table4,
-                   acc, err, secs):
+                   acc, err, secs, runtimes):
     """Every method and self path of one frame against ray tracing.
 
     Appends (ground, self) relative RMSEs to ``err[key]`` and (wall, CPU) seconds
@@ -236,20 +236,29 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     # vertices every frame, multiplied in after the exp, its own blocker skipped there
     own = slice(n_g, None)
 
-    def with_traced(blocker):
+    def with_traced(blocker, runtime=rt):
         traced = traced_self_visibility(fr.verts, fr.nrm[n_g:], model.faces, ORDER,
                                         HEMISPHERE_DIRECTIONS)
-        return rt.visibility(pts, fr.nrm, [blocker()], clusters=clusters["all"],
-                             self_visibility=[SelfVisibility(None, own, blocker=0,
-                                                             visibility=traced)])
+        return runtime.visibility(pts, fr.nrm, [blocker()], clusters=clusters["all"],
+                                  self_visibility=[SelfVisibility(None, own, blocker=0,
+                                                                  visibility=traced)])
 
-    g = put("default spheres", _timed2(lambda: with_traced(spheres_blocker)))
-    err.setdefault("default spheres", []).append(fr.errors(g))
     _, layout0, rays0, method0 = SAMPLINGS[0]
-    g = put("default field", _timed2(lambda: with_traced(lambda: DeformableBlocker(
-        sample_deformable_field(fr.verts, model.faces, acc, layout=layout0, rays=rays0,
-                                log_method=method0), tables[45.0]))))
-    err.setdefault("default field", []).append(fr.errors(g))
+
+    def field_blocker():
+        return DeformableBlocker(sample_deformable_field(
+            fr.verts, model.faces, acc, layout=layout0, rays=rays0, log_method=method0),
+            tables[45.0])
+
+    # the scene defaults (traced own vertices), field in log and in product space;
+    # one process (CPU) and the runtime's default processes (wall)
+    for key, blocker, space in (("default spheres", spheres_blocker, "log"),
+                                ("default field", field_blocker, "log"),
+                                ("default field product", field_blocker, "product")):
+        g = put(key, _timed2(lambda b=blocker, s=space: with_traced(b, runtimes[s, 1])))
+        err.setdefault(key, []).append(fr.errors(g))
+        put(f"{key} | default processes", _timed2(
+            lambda b=blocker, s=space: with_traced(b, runtimes[s, None])))
     # components of the combined paths
     logs = {}
     for label, layout, rays, method in SAMPLINGS:
@@ -371,6 +380,30 @@ def _character_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
     return rows
 
 
+def _defaults_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
+    """The scene defaults (own vertices traced) with spheres, field log / product space:
+    errors, CPU per frame with one process, wall per frame with the default processes."""
+    rows = []
+    base = None
+    for label, key in (("bound sphere set (48)", "default spheres"),
+                       ("deformable field, log space", "default field"),
+                       ("deformable field, product space", "default field product")):
+        e = np.mean(err[key], axis=0)
+        wall1, cpu1 = _frame_time(secs, [key])
+        wall_p, _ = _frame_time(secs, [f"{key} | default processes"])
+        base = base or (cpu1, wall_p)
+        rows.append(f"| {name} | {n_v} | {label} | {100 * e[0]:.1f} % | {100 * e[1]:.1f} % | "
+                    f"{1e3 * cpu1:.0f} ({cpu1 / base[0]:.2f}x) | {1e3 * wall1:.0f} | "
+                    f"{1e3 * wall_p:.0f} ({wall_p / base[1]:.2f}x) |")
+    return rows
+
+
+DEFAULTS_HEAD = ["| character | receivers (ground + own) | blocker (scene defaults: own vertices "
+                 "traced) | ground | own | CPU ms/frame, 1 process | wall ms, 1 process | "
+                 "wall ms/frame, default processes ({p}) |",
+                 "|---|---:|---|---:|---:|---:|---:|---:|"]
+
+
 def skinned(quick: bool) -> tuple[list[str], list[str]]:
     import types
 
@@ -397,6 +430,13 @@ def skinned(quick: bool) -> tuple[list[str], list[str]]:
     rows, alpha_rows = [], ["| character | alpha (deg) | ground rel. RMSE | self rel. RMSE |",
                             "|---|---:|---:|---:|"]
     commutation = []
+    from dataclasses import replace
+
+    from shtools.runtime.parallel import resolve_processes
+
+    runtimes = {(space, p): ShadowRuntime(replace(settings, field_space=space, processes=p))
+                for space in ("log", "product") for p in (1, None)}
+    defaults = [DEFAULTS_HEAD[0].format(p=resolve_processes(None)), DEFAULTS_HEAD[1]]
     with ShadowRuntime(settings) as rt:
         for name, (file, clip) in CHARACTERS.items():
             path = DATA / "skinned" / file
@@ -428,8 +468,9 @@ def skinned(quick: bool) -> tuple[list[str], list[str]]:
                 fr = _Frame(rt, env, model, joints, ground, gnorm)
                 commutation.append((name, *_skinned_frame(fr, model, joints, bound, local_log,
                                                           clusters, tables, table4, acc,
-                                                          err, secs)))
+                                                          err, secs, runtimes)))
             rows += _character_rows(name, f"{n_g} + {len(posed0)}", err, secs)
+            defaults += _defaults_rows(name, f"{n_g} + {len(posed0)}", err, secs)
             rows.append(f"| {name} | | (one-off: sphere fit + bind {fit_s:.0f} s if not "
                         f"cached; local g_p {local_s:.1f} s) | | | | | |")
             for a in alphas:
@@ -447,7 +488,11 @@ def skinned(quick: bool) -> tuple[list[str], list[str]]:
         vals = [c for c in commutation if c[0] == name]
         comm.append(f"| {name} | {np.mean([v[1] for v in vals]):.4f} | "
                     f"{np.max([v[2] for v in vals]):.4f} |")
-    return head + rows, [*alpha_rows, "", *comm]
+    for r in runtimes.values():
+        r.close()
+    print(f"\nScene defaults, one process (CPU) vs the default processes (wall); {_load()}:\n")
+    print("\n".join(defaults), flush=True)
+    return head + rows, [*alpha_rows, "", *comm, "", *defaults]
 
 
 # -- 3. mid-range lighting ------------------------------------------------------------------

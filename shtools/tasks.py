@@ -21,6 +21,10 @@ a Dask scheduler
     every worker; assets it names travel by path, so the workers need the
     same shared storage (``docs/scale-out.md``).
 
+A worker's one-time set-up of the shared state (building a runtime from a
+prepared scene, ...) runs before its first task (:meth:`TaskPool.share`), so
+it is start-up time (``setup_seconds``), not the first task's.
+
 Results are yielded **in submission order** while at most ``window`` tasks are
 in flight, so the caller (the one writer of an asset) never holds more than
 ``window`` results however long the run: memory is bounded by the window, not
@@ -156,7 +160,9 @@ class TaskPool:
             local worker when it starts; once in this process for ``inline``.
             Tasks must still work without it (a Dask worker that joins later
             or replaces a dead one runs its first task without the set-up), so
-            ``setup`` is the same cached initialisation the task function does.
+            ``setup`` is the same cached initialisation the task function does;
+            a set-up that fails is left to the first task, which fails with
+            the real error.
 
         Yields
         ------
@@ -374,7 +380,12 @@ def _worker_init(parent_pid: int, setup=None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent cancels and terminates us
     die_with_parent(parent_pid)
     if setup is not None:
-        setup(_SHARED)
+        try:
+            setup(_SHARED)
+        except Exception:
+            # An exception here would only break the pool ("a worker died"); the
+            # first task repeats the same cached set-up and raises the real error.
+            pass
 
 
 def die_with_parent(parent_pid: int) -> None:

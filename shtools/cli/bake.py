@@ -35,7 +35,8 @@ from shtools.scene.shadows import bake_method_names
 @click.option("--split-frames/--no-split-frames", default=None,
               help="With --scheduler: evaluate frames one after the other here and run each "
                    "large frame's parts as tasks on the cluster (for one huge frame).  "
-                   "Default: when the bake has fewer frames than workers.  Same bytes.")
+                   "Default: when the bake has fewer frames than workers and than the 8 parts of "
+                   "a frame.  Same bytes.")
 @click.option("--force", is_flag=True,
               help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option

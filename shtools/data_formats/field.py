@@ -141,7 +141,10 @@ def _check(f, ctx) -> None:
 SCHEMA = register(
     Schema(
         kind="field",
-        version=1,
+        # 2: self_visibility may have more columns than the field's order (O_v stored at
+        # the accumulation order); version-1 files (O_v at the field's order) still read.
+        version=2,
+        known_versions=(1, 2),
         datasets=(
             DatasetSpec("center", (3,), "f"),
             DatasetSpec("shell_radii", ("C",), "f"),

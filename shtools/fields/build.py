@@ -36,6 +36,7 @@ from shtools.fields.sampling import (
     sample_ocvs,
     shell_radii,
 )
+from shtools.runtime.settings import MAX_ACC_ORDER, MAX_ORDER, ShadowSettings
 from shtools.sh import LOG_EPS
 from shtools.sh import log as sh_log
 
@@ -68,8 +69,6 @@ class FieldParameters:
         """The O_v order actually stored."""
         if self.self_order is not None:
             return int(self.self_order)
-        from shtools.runtime.settings import ShadowSettings
-
         return ShadowSettings(order=self.order).resolved_acc_order()
 
     def validate(self) -> None:
@@ -86,18 +85,18 @@ class FieldParameters:
                              f"({self.resolution}), got {self.min_resolution!r}")
         if not (isinstance(self.map_size, int) and 4 <= self.map_size <= 1024):
             raise InputError(f"--map must be an integer 4..1024, got {self.map_size!r}")
-        if not (isinstance(self.order, int) and 1 <= self.order <= 8):
-            raise InputError(f"--order must be an integer 1..8, got {self.order!r}")
+        if not (isinstance(self.order, int) and 1 <= self.order <= MAX_ORDER):
+            raise InputError(f"--order must be an integer 1..{MAX_ORDER}, got {self.order!r}")
         if not (self.threshold > 0 and math.isfinite(self.threshold)):
             raise InputError(f"--threshold must be > 0, got {self.threshold!r}")
         if not (isinstance(self.bits, int) and 1 <= self.bits <= 8):
             raise InputError(f"--bits must be an integer 1..8, got {self.bits!r}")
         if not 0 < self.log_floor < 1:
             raise InputError(f"log floor must be in (0, 1), got {self.log_floor!r}")
-        if self.self_order is not None and not (
-                isinstance(self.self_order, int) and self.order <= self.self_order <= 10):
-            raise InputError(f"--self-order must be an integer {self.order}..10 (at least "
-                             f"--order), got {self.self_order!r}")
+        if self.self_order is not None and not (isinstance(self.self_order, int)
+                                                and self.order <= self.self_order <= MAX_ACC_ORDER):
+            raise InputError(f"--self-order must be an integer {self.order}..{MAX_ACC_ORDER} (at "
+                             f"least --order), got {self.self_order!r}")
 
 
 @dataclass

@@ -143,10 +143,9 @@ def self_visibility(vertices, normals, meshes, order: int, *, n_dirs: int = DEFA
 
 
 #: Directions per vertex of :func:`hemisphere_visibility` (skinned objects traced every
-#: frame): the issue's 5 % against the real mesh with about a point to spare for the
-#: rest (``benchmarks/bench_fidelity.py --skinned``, quadrature alone, radiance vs 3,200
-#: directions: 24 -> 4.5 / 4.8 %, 32 -> 3.6 / 3.7 %, 48 -> 2.7 / 2.8 % on CesiumMan / Fox);
-#: each direction costs ~0.14 us of Embree per vertex (CesiumMan's 3.3k: 0.45 ms a frame).
+#: frame): the fewest that keep the issue-16 goal (5 % against the real mesh) with about
+#: a point to spare; what each count costs and buys is measured in docs/scenes.md
+#: (``benchmarks/bench_fidelity.py --skinned``).
 HEMISPHERE_DIRECTIONS = 32
 #: Blocked (vertex, direction) pairs whose basis is evaluated at once (~16 MB at order 6).
 BLOCKED_PER_STEP = 1 << 17
@@ -198,7 +197,7 @@ def hemisphere_visibility(points, normals, caster, order: int, *,
 
     .. math::
 
-        g_v = \sqrt{4\pi}\,\delta_{i0} - rac{2\pi}{n} \sum_{q\ \mathrm{blocked}} y(s_{vq}).
+        g_v = \sqrt{4\pi}\,\delta_{i0} - \frac{2\pi}{n} \sum_{q\ \mathrm{blocked}} y(s_{vq}).
 
     Parameters
     ----------

@@ -249,7 +249,10 @@ def deformable_visibility(field: DeformableField, table: ScalingTable, points, *
 class DeformableBlocker:
     """A :class:`~shtools.runtime.LogBlocker` of one frame's deformable field.
 
-    The runtime adds its log to the other blockers' before the one exp.
+    The runtime evaluates it per part of a frame (in its worker processes too)
+    and combines it as ``settings.field_space`` says: its log added to the
+    other blockers' before the one exp (``"log"``), or its visibility
+    multiplied in after the exp (``"product"``).
 
     Parameters
     ----------
@@ -262,6 +265,11 @@ class DeformableBlocker:
     def __init__(self, field: DeformableField, table: ScalingTable):
         self.field = field
         self.table = table
+
+    def prepare(self, *, log: bool) -> None:
+        """Turn the samples into their axis frames now (before the blocker is pickled
+        to worker processes, so they do not each do it)."""
+        _local_samples(self.field, self.table, log)
 
     def log_visibility(self, points, normals, order: int) -> np.ndarray:
         """Scaled log visibility ``(V, order*order)`` (see :func:`deformable_visibility`)."""

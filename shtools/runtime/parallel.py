@@ -32,6 +32,7 @@ import signal
 import weakref
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -186,11 +187,13 @@ class PoolParts:
         self._stack.close()
 
 
+@dataclass
 class _PartJob:
     """What the part tasks of one runtime share: its settings and tables."""
 
-    def __init__(self, settings, tables: dict, token: str):
-        self.settings, self.tables, self.token = settings, tables, token
+    settings: object
+    tables: dict
+    token: str  # tells one runtime's job from another's in a long-lived worker
 
 
 #: The part runtime of a pool worker, by job token (one job at a time).

@@ -181,15 +181,54 @@ class ScalingTable:
         The frame of the axis with polar angle ``beta`` and azimuth ``alpha`` is
         ``R_z(alpha) R_y(beta)`` (the spin :meth:`apply` uses); :meth:`from_axis_frame`
         inverts it, and ``apply(f, k, a) = from_axis_frame(scale(to_axis_frame(f, a), k), a)``.
+
+        Parameters
+        ----------
+        f : array_like, shape (V, n*n)
+            SH vectors in the world frame (float32 rows stay float32).
+        axes : array_like, shape (V, 3)
+            Each row's axis (any length > 0).
+
+        Returns
+        -------
+        ndarray, shape (V, n*n)
+            ``f`` in each axis' frame, in ``f``'s precision.
         """
         return self._frame_pass(f, axes, self._to_z)
 
     def from_axis_frame(self, x, axes) -> np.ndarray:
-        """``D^T x``: SH vectors ``(V, n*n)`` given in each axis' frame, back to the world."""
+        """``D^T x``: SH vectors ``(V, n*n)`` given in each axis' frame, back to the world.
+
+        Parameters
+        ----------
+        x : array_like, shape (V, n*n)
+            SH vectors in the frames of ``axes`` (float32 rows stay float32).
+        axes : array_like, shape (V, 3)
+            Each row's axis, as given to :meth:`to_axis_frame`.
+
+        Returns
+        -------
+        ndarray, shape (V, n*n)
+            ``x`` in the world frame, in ``x``'s precision.
+        """
         return self._frame_pass(x, axes, self._from_z)
 
     def scale(self, x, k) -> np.ndarray:
-        """``M(k) x`` per row: SH vectors ``(V, n*n)`` already in their axis' frame."""
+        """``M(k) x`` per row: SH vectors ``(V, n*n)`` already in their axis' frame.
+
+        Parameters
+        ----------
+        x : array_like, shape (V, n*n)
+            SH vectors in their axis' frame (:meth:`to_axis_frame`; float32 rows stay
+            float32).
+        k : array_like, shape (V,)
+            The scaling parameter per row (interpolated between the table's samples).
+
+        Returns
+        -------
+        ndarray, shape (V, n*n)
+            The scaled vectors, in ``x``'s precision.
+        """
         dtype = _work_dtype(x)
         x = np.asarray(x, dtype=dtype).reshape(-1, self.order * self.order)
         k = np.asarray(k, dtype=np.float64).reshape(-1)

@@ -296,9 +296,10 @@ class ShadowSettings:
         sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
         process.
     field_space : {"log", "product"}
-        How shadow-field blockers combine (:mod:`~shtools.runtime.fields`):
-        ``"log"`` adds their SH logs to the other blockers' log sum before the
-        one exp; ``"product"`` multiplies their visibility vectors in with
+        How shadow-field blockers -- rigid (:mod:`~shtools.runtime.fields`) and
+        deformable (:mod:`~shtools.runtime.deformable`) -- combine: ``"log"``
+        adds their SH logs to the other blockers' log sum before the one exp;
+        ``"product"`` multiplies their visibility vectors in after the exp with
         truncated SH products at the accumulation order (the papers' way).
     """
 
@@ -336,8 +337,9 @@ class ShadowSettings:
                                     none_means="one per core",
                                     doc="processes sharing each frame")
     field_space: str = setting("log", "choice", choices=FIELD_SPACES,
-                               doc="how shadow-field blockers combine: log (one exp with "
-                               "every other blocker) or product (truncated SH products)")
+                               doc="how shadow-field blockers (rigid and deformable) combine: "
+                               "log (one exp with every other blocker) or product "
+                               "(truncated SH products)")
 
     def __post_init__(self):
         self.validate()

@@ -19,6 +19,7 @@ shadowed by its registered way (:mod:`shtools.scene.shadows`).
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -155,7 +156,7 @@ def bake_clusters(prepared: PreparedScene, method: str, t: float):
 
     if not VISIBILITY_METHODS[method].uses_runtime:
         return None
-    state = pose_frame(prepared, float(t))
+    state = pose_frame(prepared, float(t), trace=False)  # only the vertices are used
     return receiver_clusters(prepared, state.vertices)
 
 
@@ -189,23 +190,41 @@ def _worker_baker(job: _FrameJob) -> FrameBaker:
     return baker
 
 
-def _bake_frame_task(job: _FrameJob, item: tuple[int, float]) -> FrameResult:
-    """Task body: one frame on a worker (one process per frame: ``processes=1``).
+def _bake_frames_task(job: _FrameJob, items: list[tuple[int, float]]) -> list[FrameResult]:
+    """Task body: consecutive frames on a worker (one process per frame: ``processes=1``).
 
     Only what the asset stores travels back, in the dtype it stores it (float32):
     radiance, the visibility when kept, and vertices and normals only when the
     receivers move (the caller fills in the static pose).  For the 65k-vertex
     battle scene that is 0.8 MB a frame instead of 3.9 MB.
     """
-    result = _worker_baker(job).frame(*item)
-    if job.moving:
-        result.vertices = result.vertices.astype(np.float32)
-        result.normals = result.normals.astype(np.float32)
-    else:
-        result.vertices = result.normals = None
-    if result.visibility is not None:
-        result.visibility = np.asarray(result.visibility, dtype=np.float32)
-    return result
+    results = [_worker_baker(job).frame(*item) for item in items]
+    for result in results:
+        if job.moving:
+            result.vertices = result.vertices.astype(np.float32)
+            result.normals = result.normals.astype(np.float32)
+        else:
+            result.vertices = result.normals = None
+        if result.visibility is not None:
+            result.visibility = np.asarray(result.visibility, dtype=np.float32)
+    return results
+
+
+#: Most frames one Dask task bakes: a task of a few frames (about a second for a
+#: battle frame) spreads Dask's fixed cost per task (scheduling, messages, the
+#: hand-over of the result) over them, as Dask's own guidance on task sizes asks.
+MAX_FRAMES_PER_TASK = 4
+#: Tasks per worker at least, before frames are grouped: keeps the load balanced
+#: at the end of a bake and a dead worker's rerun short.
+MIN_TASKS_PER_WORKER = 8
+
+
+def frames_per_task(scheduler: str, frames: int, workers: int) -> int:
+    """Frames one task bakes: 1 on local pools, up to :data:`MAX_FRAMES_PER_TASK` on Dask
+    while every worker still gets :data:`MIN_TASKS_PER_WORKER` tasks."""
+    if scheduler != "dask":
+        return 1  # a forked pool's cost per task is a pickle through a pipe
+    return max(1, min(MAX_FRAMES_PER_TASK, frames // (MIN_TASKS_PER_WORKER * workers)))
 
 
 def bake_scene(
@@ -227,9 +246,10 @@ def bake_scene(
 
     Frames are independent tasks (:mod:`shtools.tasks`): with several frames
     and cores they are spread over forked local workers by default, or over a
-    Dask cluster (``scheduler``); results are yielded and written in frame
-    order by this process, the one writer, and the asset is the same bytes
-    whichever way it was computed.
+    Dask cluster (``scheduler``; a task bakes up to :data:`MAX_FRAMES_PER_TASK`
+    consecutive frames when there are many, :func:`frames_per_task`); results
+    are yielded and written in frame order by this process, the one writer,
+    and the asset is the same bytes whichever way it was computed.
 
     Parameters
     ----------
@@ -266,7 +286,9 @@ def bake_scene(
         run each large frame's parts (:data:`shtools.runtime.parallel.FRAME_PARTS`
         groups of receiver clusters) as tasks on the cluster, for a bake of one
         huge frame or of fewer frames than workers.  Default: when there are
-        fewer frames than workers.  The bytes are the same either way.
+        fewer frames than workers and than parts (a frame's 8 parts then keep
+        more workers busy than the frames would).  The bytes are the same
+        either way.
 
     Yields
     ------
@@ -298,7 +320,9 @@ def bake_scene(
         clusters = bake_clusters(prepared, method, 0.0)
         items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
         if split_frames is None:  # few frames for a cluster: share each frame instead
-            split_frames = len(frames) < pool.workers
+            from shtools.runtime.parallel import FRAME_PARTS
+
+            split_frames = len(frames) < min(pool.workers, FRAME_PARTS)
         parts_on_pool = bool(split_frames) and pool.scheduler == "dask"
         if pool.scheduler == "inline" or parts_on_pool:
             # Frames one after the other here; on Dask with split_frames, each
@@ -316,9 +340,12 @@ def bake_scene(
             moving = prepared.receivers_move()
             job = _FrameJob(prepared, method, clusters, raytrace_dirs, store_visibility,
                             moving, uuid.uuid4().hex)
-            results = pool.map_ordered(_bake_frame_task, items, shared=job, setup=_worker_baker)
-            if not moving:  # the workers send no static pose back (see _bake_frame_task)
-                results = _with_pose(results, pose_frame(prepared, float(times[0])))
+            k = frames_per_task(pool.scheduler, len(items), pool.workers)
+            groups = [items[i:i + k] for i in range(0, len(items), k)]
+            results = itertools.chain.from_iterable(
+                pool.map_ordered(_bake_frames_task, groups, shared=job, setup=_worker_baker))
+            if not moving:  # the workers send no static pose back (see _bake_frames_task)
+                results = _with_pose(results, pose_frame(prepared, float(times[0]), trace=False))
         for k, result in enumerate(results):
             if writer is not None:
                 writer.write_frame(k, result.radiance, vertices=result.vertices,
@@ -349,7 +376,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
     albedo = np.concatenate(albedo)
     static_v = static_n = None
     if not moving:
-        state = pose_frame(prepared, float(times[0]))
+        state = pose_frame(prepared, float(times[0]), trace=False)
         static_v, static_n = state.vertices, state.normals
     resolved = runtime_settings(scene, method)
     uses_runtime = VISIBILITY_METHODS[method].uses_runtime

@@ -66,6 +66,7 @@ class FieldKind(BlockerKind):
 
             table.self_log = self_visibility_log_at(fld.self_visibility,
                                                     ctx.settings.resolved_acc_order())
+            table.self_order = fld.self_order
         prep.blocker_data = table
         ctx.inputs[f"{prep.spec.name}.field"] = spec.path
 

@@ -37,10 +37,13 @@ class FrameState:
 MAX_COORDINATE = 1e18
 
 
-def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) -> FrameState:
+def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
+               trace: bool = True) -> FrameState:
     """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
+    ``trace=False`` leaves out the traced self-visibility of skinned objects (the
+    frame's largest cost): for callers that need only the posed geometry.
     """
     from shtools.runtime import SelfVisibility, SphereLight
     from shtools.scene.transfer import posed_local_log, rotation_of, traced_self_visibility
@@ -72,7 +75,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False) 
             # exact self-shadowing: its own spheres (appended next) are skipped on its rows
             selfs.append(SelfVisibility(o.self_log, own, rotation=rotation,
                                         blocker=len(blockers)))
-        if o.traced:  # its posed real mesh, traced this frame; its own blocker skipped
+        if o.traced and trace:  # its posed real mesh, traced this frame; its own blocker skipped
             selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
                 traced_self_visibility(world_v, world_n, o.faces, st.order,
                                        st.self_visibility_directions))))

@@ -49,7 +49,7 @@ class PreparedObject:
         Rest-pose local visibility log of a skinned object (``local_visibility``).
     traced : bool
         A skinned object whose posed mesh is ray traced every frame on its own
-        vertices (``self_visibility``; :func:`shtools.scene.transfer.traced_self_log`).
+        vertices (``self_visibility``; :func:`shtools.scene.transfer.traced_self_visibility`).
     """
 
     spec: ObjectSpec

@@ -114,7 +114,14 @@ class RuntimeVisibility(VisibilityMethod):
 
 
 class ProductVisibility(VisibilityMethod):
-    """Product-space accumulation (:func:`shtools.reference.product_space_visibility`)."""
+    """Product-space accumulation (:func:`shtools.reference.product_space_visibility`).
+
+    Sphere caps, then shadow fields and deformable fields, then the objects'
+    self-visibilities, each multiplied in with truncated SH products at the
+    accumulation order.  As in the SHEXP runtime, an object with a
+    self-visibility (its real mesh on its own rows) does not use its own
+    blocker there: its spheres / deformable field are skipped on those rows.
+    """
 
     name = "product"
 
@@ -130,30 +137,82 @@ class ProductVisibility(VisibilityMethod):
 
         st = run.settings
         acc = self.acc_order(st)
+        n_rows = len(state.vertices)
+        pts, nrm = state.vertices, state.normals
+        skip = _own_blocker_rows(state.self_visibility, n_rows, len(state.blockers))
         # shadow fields and deformable fields are multiplied in after the sphere caps
         fields = [b for b in state.blockers if isinstance(b, FieldBlocker)]
-        deformables = [b for b in state.blockers if isinstance(b, DeformableBlocker)]
-        spheres = [b for b in state.blockers
+        deformables = [(k, b) for k, b in enumerate(state.blockers)
+                       if isinstance(b, DeformableBlocker)]
+        spheres = [(k, b) for k, b in enumerate(state.blockers)
                    if not isinstance(b, FieldBlocker | DeformableBlocker)]
         vis = None
         if spheres or not (fields or deformables):
-            vis = product_space_visibility(state.vertices, state.normals, spheres,
-                                           st.order, acc_order=acc)
+            vis = np.zeros((n_rows, st.order * st.order))
+            # rows grouped by the sphere blocker they skip (-1: none; an object's own)
+            label = np.full(n_rows, -1)
+            for k, _ in spheres:
+                if k in skip:
+                    label[skip[k]] = k
+            for k in np.unique(label):
+                rows = np.flatnonzero(label == k)
+                kept = [b for j, b in spheres if j != k]
+                if kept:
+                    vis[rows] = product_space_visibility(pts[rows], nrm[rows], kept,
+                                                         st.order, acc_order=acc)
+                else:
+                    vis[rows, 0] = math.sqrt(4 * math.pi)
         if fields:
-            vis = field_product_visibility(state.vertices, state.normals, fields, st.order,
+            vis = field_product_visibility(pts, nrm, fields, st.order,
                                            acc_order=acc, base=vis)
-        if deformables:
-            # each deformable field's scaled visibility (sampled at the accumulation
-            # order), multiplied at that order and truncated to the shading order
-            g = np.zeros((len(state.vertices), acc * acc))
-            if vis is None:
-                g[:, 0] = math.sqrt(4 * math.pi)
-            else:
-                g[:, :vis.shape[1]] = vis
-            for blocker in deformables:
-                g = product(g, blocker.visibility(state.vertices, state.normals, acc), acc)
-            vis = g[:, : st.order * st.order]
-        return vis
+        # each deformable field's scaled visibility (sampled at the accumulation order),
+        # then each self-visibility, multiplied at that order and truncated at the end
+        g = np.zeros((n_rows, acc * acc))
+        if vis is None:
+            g[:, 0] = math.sqrt(4 * math.pi)
+        else:
+            g[:, :vis.shape[1]] = vis
+        for k, blocker in deformables:
+            rows = np.arange(n_rows) if k not in skip else np.flatnonzero(~skip[k])
+            g[rows] = product(g[rows], blocker.visibility(pts[rows], nrm[rows], acc), acc)
+        for sv in state.self_visibility:
+            rows = np.arange(n_rows)[sv.rows]
+            own = np.zeros((rows.size, acc * acc))
+            own_vis = _self_visibility_values(run.runtime, sv)
+            m = min(own_vis.shape[1], acc * acc)
+            own[:, :m] = own_vis[:, :m]
+            g[rows] = product(g[rows], own, acc)
+        return g[:, : st.order * st.order]
+
+
+def _own_blocker_rows(self_visibility, n_rows: int, n_blockers: int) -> dict:
+    """Blocker position -> bool mask ``(V,)`` of the rows a self-visibility covers for it."""
+    from shtools.errors import InputError
+
+    skip = {}
+    for sv in self_visibility:
+        if sv.blocker is None:
+            continue
+        k = int(sv.blocker)
+        if not 0 <= k < n_blockers:
+            raise InputError(f"self-visibility names blocker {k}, which is not one of the "
+                             f"{n_blockers} blockers given")
+        skip.setdefault(k, np.zeros(n_rows, dtype=bool))[np.arange(n_rows)[sv.rows]] = True
+    return skip
+
+
+def _self_visibility_values(runtime, sv) -> np.ndarray:
+    """A self-visibility's world-space visibility vectors ``(R, m*m)``: given, or the
+    runtime's exp of its (rotated) log, truncated to the shading order."""
+    from shtools.sh import rotation_matrix
+
+    if sv.visibility is not None:
+        return np.asarray(sv.visibility, dtype=np.float64)
+    log = np.asarray(sv.log, dtype=np.float32)
+    if sv.rotation is not None:
+        d = rotation_matrix(sv.rotation, runtime.acc_order).astype(np.float32)
+        log = log @ d.T
+    return np.asarray(runtime.exponentiate(log), dtype=np.float64)
 
 
 class RaytraceVisibility(VisibilityMethod):

@@ -29,8 +29,9 @@ def _analytic_hit(o, d, radius=1.0):
     return np.where((disc > 0) & (t > 0), t, np.inf), disc
 
 
+@pytest.mark.parametrize("robust", [True, False])  # Embree's watertight traversal or not
 @pytest.mark.parametrize("scale", [1e-6, 1.0, 1e6])
-def test_occluded_and_first_hit_match_ray_sphere(sphere, scale):
+def test_occluded_and_first_hit_match_ray_sphere(sphere, scale, robust):
     rng = np.random.default_rng(0)
     o, d = _random_rays(rng, 20000)
     outside = np.linalg.norm(o, axis=1) > 1.05
@@ -38,7 +39,7 @@ def test_occluded_and_first_hit_match_ray_sphere(sphere, scale):
     t_exact, disc = _analytic_hit(o, d)
     # Stay away from grazing rays, where the faceted sphere and the true one differ.
     clear = np.abs(disc) > 1e-2
-    rc = RayCaster(sphere.vertices * scale, sphere.faces)
+    rc = RayCaster(sphere.vertices * scale, sphere.faces, robust=robust)
     hit = rc.occluded(o * scale, d)
     assert np.array_equal(hit[clear], np.isfinite(t_exact)[clear])
     t, face = rc.first_hit(o * scale, d)

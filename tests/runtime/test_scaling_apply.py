@@ -85,6 +85,42 @@ def test_apply_about_arbitrary_axes_against_brute_force(cone_table, mid_table, f
         np.testing.assert_allclose(ours[i], ref, atol=1e-7 * np.abs(f[i]).sum())
 
 
+def test_axis_frame_passes_and_scale_against_closed_forms(cone_table):
+    """The three passes the deformable lookup composes (to_axis_frame, scale,
+    from_axis_frame), each against an independent result, in float64 and float32."""
+    rng = np.random.default_rng(5)
+    axes = rng.normal(size=(4, 3))
+    axes[3] = [0, 0, -1]  # the half-turn branch
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    ls = np.floor(np.sqrt(np.arange(16))).astype(int)
+    # a function zonal about each axis, 1 in every band: by the addition theorem its
+    # coefficients are sqrt(4 pi / (2l + 1)) Y_lm(axis); in the axis' frame it is 1 on
+    # every m = 0 coefficient (index l*l + l) and 0 elsewhere, whatever the frame's azimuth
+    zonal = basis(axes, 4) * np.sqrt(4.0 * math.pi / (2 * ls + 1))
+    want = np.zeros((4, 16))
+    want[:, ls * ls + ls] = 1.0
+    np.testing.assert_allclose(cone_table.to_axis_frame(zonal, axes), want, atol=1e-12)
+    # from_axis_frame is its inverse (SH rotations are orthogonal) for any vectors
+    f = rng.normal(size=(4, 16))
+    back = cone_table.from_axis_frame(cone_table.to_axis_frame(f, axes), axes)
+    np.testing.assert_allclose(back, f, atol=1e-12)
+    # scale is the warp about +z (brute force, no rotation); sampled k: exact M(k)
+    k = cone_table.k[[0, 13, 26, 39]]
+    got = cone_table.scale(f, k)
+    for i in range(4):
+        ref = warped_projection(f[i], k[i], [0, 0, 1], "cone", 4)
+        # degree-300 quadrature, as in the arbitrary-axes test above
+        np.testing.assert_allclose(got[i], ref, atol=1e-7 * np.abs(f[i]).sum())
+    # float32 rows stay float32 (the runtime's log sum); float32 rounding of order-4
+    # rotations and of M(k): ~1e-6 relative
+    f32 = f.astype(np.float32)
+    for out, ref in ((cone_table.to_axis_frame(f32, axes), cone_table.to_axis_frame(f, axes)),
+                     (cone_table.from_axis_frame(f32, axes), cone_table.from_axis_frame(f, axes)),
+                     (cone_table.scale(f32, k), got)):
+        assert out.dtype == np.float32
+        np.testing.assert_allclose(out, ref, atol=1e-5 * np.abs(f).max())
+
+
 def test_apply_shared_rgb_matches_per_channel(mid_table):
     rng = np.random.default_rng(4)
     env = rng.normal(size=(16, 3))

@@ -102,3 +102,43 @@ def write_bending_tube(path, bend_degrees: float = 90.0, *, with_skin=True,
     )
     gltf.set_binary_blob(bytes(blob))
     gltf.save_binary(str(path))
+
+
+#: A sky of order 3 for the tube scenes: a constant plus some of bands 1 and 2.
+SKY = """
+[environment]
+coeffs = [[1.0, 1.0, 1.0], [0, 0.6, 0], [0, 0.5, 0], [0, 0, 0],
+          [0, 0, 0], [0, 0, 0], [0, 0.2, 0], [0, 0, 0], [0, 0, 0]]
+"""
+#: Vertices of the tube scenes' ground plane (listed first among the receivers).
+GROUND_VERTICES = 21 * 21
+
+
+def tube_scene_text(blocker: str, *, settings: str = "frames = 2", environment: str = SKY,
+                    tube_keys: str = "") -> str:
+    """A scene (TOML) of the rig ``rig.glb`` standing on a 4 x 4 ground plane
+    (:data:`GROUND_VERTICES` vertices), order 3 at 1 fps, playing its "bend" clip.
+
+    ``blocker`` is the tube's blocker table, ``settings`` more ``[settings]`` lines,
+    ``tube_keys`` more keys of the tube object.
+    """
+    return f"""
+[settings]
+order = 3
+fps = 1
+{settings}
+{environment}
+[[objects]]
+name = "ground"
+primitive = {{ type = "plane", size = [4.0, 4.0], subdivisions = 20 }}
+role = "receiver"
+
+[[objects]]
+name = "tube"
+mesh = "rig.glb"
+role = "both"
+translate = [0.0, 0.05, 0.0]
+blocker = {blocker}
+skin = {{ animation = "bend" }}
+{tube_keys}
+"""

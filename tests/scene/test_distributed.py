@@ -99,6 +99,23 @@ def test_setup_runs_once_per_worker_before_its_tasks(scheduler, workers):
     assert len({pid for pid, _ in first}) <= workers
 
 
+def _failing_setup(shared):
+    raise ValueError(f"cannot set up {shared}")
+
+
+def _task_with_failing_setup(shared, item):
+    _failing_setup(shared)  # a task repeats its (cached) set-up, as the bake's do
+
+
+@pytest.mark.parametrize("scheduler, workers", [("inline", 1), (None, 2)])
+def test_failing_setup_reports_its_own_error(scheduler, workers):
+    """Not "a worker died": the set-up's own error, from the set-up or the first task."""
+    with pytest.raises(ValueError, match="cannot set up state"), \
+            task_pool(scheduler, workers) as pool:
+        list(pool.map_ordered(_task_with_failing_setup, range(4), shared="state",
+                              setup=_failing_setup))
+
+
 def test_bad_scheduler_values():
     with pytest.raises(InputError, match="neither 'local'"), task_pool("no-such-file.json"):
         pass
@@ -230,13 +247,19 @@ def test_cli_split_frames_runs_parts_on_the_cluster(scene_file, split_every_fram
 @pytest.mark.slow
 @DASK_LEAKS[0]
 @DASK_LEAKS[1]
-def test_dask_moving_receivers_identical_bytes(tmp_path):
+def test_dask_frames_grouped_in_tasks_moving_receivers_identical_bytes(tmp_path):
+    """17 frames on 1 worker: tasks of 2 frames (the last of 1), float32 poses back."""
     pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    from shtools.scene.bake import frames_per_task
+
     scene = tmp_path / "moving.toml"
-    scene.write_text(scene_text(order=3, frames=4, moving_ground=True))
+    scene.write_text(scene_text(order=2, frames=17, moving_ground=True))
     inline, dask = tmp_path / "inline.h5", tmp_path / "dask.h5"
     bake_to_file(load_scene(scene), inline, scheduler="inline", processes=1)
-    bake_to_file(load_scene(scene), dask, scheduler="local", workers=2)
+    summary = bake_to_file(load_scene(scene), dask, scheduler="local", workers=1)
+    assert frames_per_task("dask", 17, 1) == 2
+    assert sum(w["tasks"] for w in summary["pool"]["per_worker"].values()) == 9
+    assert summary["frames"] == 17
     assert filecmp.cmp(dask, inline, shallow=False)
 
 

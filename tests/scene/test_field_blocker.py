@@ -214,3 +214,38 @@ def test_one_field_asset_shadows_the_object_and_the_ground_like_ray_tracing(
     assert err_torus < 0.02, err_torus
     # the torus's inner side is shadowed by its real mesh: without O_v it is far off
     assert err_no_ov > 3 * err_torus, (err_no_ov, err_torus)
+
+
+def test_an_o_v_below_the_accumulation_order_is_traced_at_bake_time(torus_dir, monkeypatch):
+    """A field whose O_v is at the shading order (sampled before O_v was stored at the
+    accumulation order) would cost the object's own vertices accuracy: the bake traces
+    them as it did, and uses the stored O_v only when told self_visibility = false."""
+    from shtools.cli.main import main
+    from shtools.scene.bake import prepare_scene
+    from shtools.scene.scene import load_scene
+
+    assert main(["field", "sample", str(torus_dir / "torus.obj"), "-o",
+                 str(torus_dir / "t4.field.h5"), "--self-order", "4", *map(str, FIELD_ARGS)]) == 0
+    import shtools.fields.self_visibility as sv
+
+    calls = []
+    real = sv.mesh_transfer
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sv, "mesh_transfer", counting)
+    for obj_extra, traced in (("", True), ("self_visibility = false", False)):
+        path = torus_dir / "t4.toml"
+        path.write_text(TORUS_SCENE.format(extra="", env=ENV, field="t4.field.h5",
+                                           obj_extra=obj_extra))
+        calls.clear()
+        prepared = prepare_scene(load_scene(path))
+        torus = prepared.objects[1]
+        assert bool(calls) == traced
+        if traced:  # at the accumulation order 6, not the stored order-4 O_v
+            assert torus.self_log.shape == (len(torus.vertices), 36)
+            assert np.abs(torus.self_log[:, 16:]).max() > 0
+        else:
+            assert torus.self_log is None and torus.blocker_data.self_order == 4

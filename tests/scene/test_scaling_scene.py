@@ -15,36 +15,12 @@ from shtools.scene.bake import bake_scene
 from shtools.scene.scene import parse_scene
 
 sys.path.insert(0, str(Path(__file__).parent))
-from rig import write_bending_tube
-
-SKY = """
-[environment]
-coeffs = [[1.0, 1.0, 1.0], [0, 0.6, 0], [0, 0.5, 0], [0, 0, 0],
-          [0, 0, 0], [0, 0, 0], [0, 0.2, 0], [0, 0, 0], [0, 0, 0]]
-"""
+from rig import GROUND_VERTICES, SKY, tube_scene_text, write_bending_tube
 
 
 def scene_text(blocker: str, frames: int = 2, environment: str = SKY) -> str:
-    return f"""
-[settings]
-order = 3
-frames = {frames}
-fps = 1
-hierarchy = false
-{environment}
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [4.0, 4.0], subdivisions = 20 }}
-role = "receiver"
-
-[[objects]]
-name = "tube"
-mesh = "rig.glb"
-role = "both"
-translate = [0.0, 0.05, 0.0]
-blocker = {blocker}
-skin = {{ animation = "bend" }}
-"""
+    return tube_scene_text(blocker, settings=f"frames = {frames}\nhierarchy = false",
+                           environment=environment)
 
 
 @pytest.fixture
@@ -61,7 +37,7 @@ def test_deformable_field_bake_is_closer_to_ray_tracing_than_no_shadow(rig, log)
     truth = list(bake_scene(scene, method="raytrace", raytrace_dirs=800))
     assert len(ours) == len(truth) == 2
     for a, b in zip(ours, truth, strict=True):
-        ground = slice(0, 21 * 21)  # the plane's vertices come first
+        ground = slice(0, GROUND_VERTICES)  # the plane's vertices come first
         unshadowed = np.broadcast_to(a.radiance[ground].max(axis=0), a.radiance[ground].shape)
         err = relative_rmse(a.radiance[ground], b.radiance[ground])
         # the field is an approximation of the posed tube's shadow (cone model, 96
@@ -78,7 +54,7 @@ def test_deformable_field_in_product_space_bake(rig):
     scene = parse_scene(text, rig / "scene.toml")
     product = list(bake_scene(scene, method="product"))
     truth = list(bake_scene(scene, method="raytrace", raytrace_dirs=800))
-    ground = slice(0, 21 * 21)
+    ground = slice(0, GROUND_VERTICES)
     for a, b in zip(product, truth, strict=True):
         unshadowed = np.broadcast_to(a.radiance[ground].max(axis=0), a.radiance[ground].shape)
         err = relative_rmse(a.radiance[ground], b.radiance[ground])
