@@ -112,7 +112,7 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
         "scene": data.name, "vertices": len(data.vertices),
         "spheres": int(sum(b.n_spheres for b in data.blockers if hasattr(b, "n_spheres"))),
         "fields": int(sum(not hasattr(b, "n_spheres") for b in data.blockers)),
-        "field_space": settings.field_space,
+        "field_space": settings.resolved_field_space("rigid"),
         "order": settings.order, "acc_order_default": settings.resolved_acc_order(),
         "window": settings.resolved_window(), "hierarchy": settings.hierarchy,
         "n_dirs": n_dirs,

@@ -12,13 +12,16 @@ SHEXP (Ren et al. 2006, section 6.2):
    (radial outside-volume profiles per centre make this a table look-up).
    Fronts are processed as vectorised batches (breadth first) instead of one
    point per stack pop.
-3. Centre update: per cluster, Powell's method moves the centre to minimise
-   V(S - T) with the radius bounding the cluster's points.  Then each sphere
-   shrinks to the points no other sphere covers (E sums the spheres' outside
-   volumes, so a point inside another sphere need not hold a radius up) and
-   Powell re-centres it for those points; the union still covers every point.
-   V(S - T) in this inner loop comes from :class:`FluxSamples` (centroid rule
-   of the flux on small triangles, radial profiles for the flood fill).
+3. Centre update: every cluster's centre moves to minimise V(S - T) with the
+   radius bounding the cluster's points, all spheres in one batched compass
+   search (:func:`_recenter`; each pass sums only the flux samples a move of
+   the current step can reach, and only for the spheres still searching).
+   Then each sphere shrinks to the points no other sphere covers (E sums the
+   spheres' outside volumes, so a point inside another sphere need not hold a
+   radius up; k-d tree queries, not points x spheres) and is re-centred for
+   those points; the union still covers every point.  V(S - T) in this inner
+   loop comes from :class:`FluxSamples` (centroid rule of the flux on small
+   triangles, radial profiles for the flood fill).
 4. Cluster teleportation: when an iteration no longer lowers E, split the
    cluster of largest outside volume at its farthest-apart points and delete
    another sphere — TELEPORT_CANDIDATES choices (the most overlapped one, or
@@ -33,9 +36,11 @@ SHEXP (Ren et al. 2006, section 6.2):
    Lloyd steps and teleports then refine at N.  Each stage spends part of one
    work budget (rounds x spheres).
 
-The shrink-and-re-centre step is iterated to a fixed point at the end.
-Finally every radius grows just enough to contain its cluster, every surface
-sample, mesh vertex and quadrature point (coverage 1), and E = Σ V(S_i - T)/V(T)
+The shrink-and-re-centre step is iterated to a fixed point at the end.  The
+spheres then must hold the whole surface, not only its samples: the pieces of
+triangles no sphere holds join the points and the spheres re-centre for them
+(:func:`_settle_cover`), then every radius grows just enough to contain every
+point and every piece of the surface (coverage 1), and E = Σ V(S_i - T)/V(T)
 is computed with the accurate flux evaluator of :mod:`.outside_volume`.
 
 Baselines for comparison at equal sphere counts: ``"octree"`` (circumscribed
@@ -112,11 +117,15 @@ SHRINK_TOLERANCE = 1e-5
 #: sphere during shrinking: absorbs the rounding of the mat-mul distances.
 SHRINK_SLACK = 1e-9
 
-#: Default round budget (rounds at N spheres; see ``max_iterations``).  E
-#: falls little after it, and the surface cover at the end
-#: (:func:`_settle_cover`) matters more: CesiumMan at N = 32, E 1.231 after 30
-#: rounds, 1.235 after 40; with the growth-only cover 1.282 after 100.
-ROUNDS = 30
+#: Default round budget (rounds at N spheres; see ``max_iterations``), below
+#: COARSE_TO_FINE_MIN spheres and from it on (where the coarse fit gives the
+#: search a good start).  Measured: CesiumMan at N = 32, E 1.231 after 30
+#: rounds, 1.154 after 60 and 90; the torus of the tests at N = 32, 0.156 /
+#: 0.115 / 0.108 after 30 / 60 / 150 (the previous fit: 0.115 after 150);
+#: dragon N = 64 and 128 after 30: 0.917 and 0.764 (previous fit, made
+#: bounding: 1.028, 0.793).
+ROUNDS = 60
+ROUNDS_COARSE_TO_FINE = 30
 
 #: Teleportation candidates (split cluster, deleted sphere) tried per stall;
 #: the one with the lowest E after a Lloyd step is refined and kept if E drops.
@@ -334,7 +343,8 @@ def fit_spheres(
         Budget of clustering + centre-update rounds (variational), counted
         in rounds at ``n`` spheres: the coarse stages (ceil(n/2), ... spheres)
         spend their share of it in proportionally cheaper rounds, so the total
-        round count reported in ``info`` can exceed it.  Default ``ROUNDS``.
+        round count reported in ``info`` can exceed it.  Default ``ROUNDS``
+        (``ROUNDS_COARSE_TO_FINE`` from ``COARSE_TO_FINE_MIN`` spheres on).
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
     samples : int, optional
@@ -412,7 +422,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
             "use fewer spheres", path)
     if max_iterations is None:
-        max_iterations = ROUNDS
+        max_iterations = ROUNDS if n < COARSE_TO_FINE_MIN else ROUNDS_COARSE_TO_FINE
     bar.total = max_iterations  # known once the solid is sampled; shown at the next update
 
     def progress(rounds: float, energy: float) -> None:

@@ -101,7 +101,7 @@ def eval_settings(inputs: EvalInputs, *, order: int | None = None,
             kwargs[key] = base[key]
     kwargs["window"] = base.get("window", "cosine") if window else None
     kwargs["hierarchy"] = base.get("hierarchy", True) if hierarchy else False
-    kwargs["field_space"] = field_space or base.get("field_space", "log")
+    kwargs["field_space"] = field_space or base.get("field_space")
     if acc_order is not None:
         kwargs["acc_order"] = acc_order
     elif base.get("acc_order") is not None:

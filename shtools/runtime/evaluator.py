@@ -318,7 +318,8 @@ class ShadowRuntime:
         deformable samples are turned into their axis frames here, once, before
         the parts go to the workers.
         """
-        space = self.settings.field_space
+        s = self.settings
+        space = s.resolved_field_space("deformable")
         fields, deformables = [], []
         for k, b in enumerate(blockers):
             if isinstance(b, FieldBlocker):
@@ -332,30 +333,34 @@ class ShadowRuntime:
                 deformables.append((b, None if not skip else skip.get(k)))
         if not (fields or deformables):
             return None
-        return _PartBlockers(space, fields, deformables)
+        return _PartBlockers(s.resolved_field_space("rigid"), space, fields, deformables)
 
     def _combine_parts(self, blocks: _PartBlockers, pts, nrm, f) -> np.ndarray:
         """Visibility ``(V', n*n)`` float32 of receivers with the other blockers' log sum
         ``f (V', n_acc^2)`` (or None) and the shadow fields ``blocks``.
 
-        ``field_space = "log"``: the fields' logs are added to ``f`` and one exp
-        follows.  ``"product"``: ``f`` is exponentiated (to the shading order) and
-        the fields' visibilities are multiplied in with truncated SH products at
-        the accumulation order -- deformable fields first, then rigid ones
-        (nearest first) -- and truncated to the shading order.
+        Fields combined in ``"log"`` space add their logs to ``f`` and one exp
+        follows; those in ``"product"`` space are then multiplied in with
+        truncated SH products at the accumulation order -- deformable fields
+        first, then rigid ones (nearest first) -- and the result is truncated to
+        the shading order.
         """
         m = self.acc_order
+        if f is not None and not f.any():
+            f = None  # nothing else blocks these receivers: no exp of zeros
         fields = [fb for fb, _ in blocks.fields]
-        if blocks.space == "log":
+        log_fields = fields if blocks.rigid_space == "log" else []
+        log_deformables = blocks.deformable_space == "log" and bool(blocks.deformables)
+        if log_fields or log_deformables:
             f = (np.zeros((pts.shape[0], m * m), dtype=np.float32) if f is None
                  else np.array(f, dtype=np.float32))
-            if fields:
-                field_log_visibility(pts, nrm, fields, self.order, m, out=f)
-            for d, rows in _deformable_rows(blocks, pts.shape[0]):
-                f[rows] += d.log_visibility(pts[rows], nrm[rows], m)
-            return self.exponentiate(f)
+            if log_fields:
+                field_log_visibility(pts, nrm, log_fields, self.order, m, out=f)
+            if log_deformables:
+                for d, rows in _deformable_rows(blocks, pts.shape[0]):
+                    f[rows] += d.log_visibility(pts[rows], nrm[rows], m)
         base = None if f is None else self.exponentiate(f)
-        if blocks.deformables:
+        if blocks.deformables and not log_deformables:
             g = np.zeros((pts.shape[0], m * m))
             if base is None:
                 g[:, 0] = math.sqrt(4.0 * math.pi)
@@ -364,11 +369,13 @@ class ShadowRuntime:
             for d, rows in _deformable_rows(blocks, pts.shape[0]):
                 g[rows] = sh_product(g[rows], d.visibility(pts[rows], nrm[rows], m), m)
             base = g
-        if fields:
-            g = field_product_visibility(pts, nrm, fields, self.order, m, base=base)
-        else:
-            g = base[:, :self.order * self.order]
-        return np.ascontiguousarray(g, dtype=np.float32)
+        if fields and not log_fields:
+            return field_product_visibility(pts, nrm, fields, self.order, m,
+                                            base=base).astype(np.float32)
+        if base is None:  # nothing blocks these receivers
+            base = np.zeros((pts.shape[0], self.order * self.order), dtype=np.float32)
+            base[:, 0] = math.sqrt(4.0 * math.pi)
+        return np.ascontiguousarray(base[:, :self.order * self.order], dtype=np.float32)
 
     def _other_logs(self, pts, nrm, blockers: list, skip: dict | None = None, *,
                     in_parts: bool = False) -> np.ndarray | None:
@@ -581,6 +588,8 @@ class ShadowRuntime:
             stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
             return f
         _, pts, nrm, order, offsets, centers, radii, weights, sizes = task
+        if not np.any(sizes):  # no sphere reaches these receivers (e.g. fields only)
+            return np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
         return accumulate_clusters(pts, nrm, order, offsets, centers, radii, weights, sizes,
                                    self.table, self_shadow=s.self_shadow,
                                    chunk_pairs=s.chunk_pairs, threads=s.threads,
@@ -893,8 +902,8 @@ class _PartBlockers:
 
     Attributes
     ----------
-    space : {"log", "product"}
-        ``settings.field_space``.
+    rigid_space, deformable_space : {"log", "product"}
+        How each kind combines (``settings.resolved_field_space``).
     fields : list of (FieldBlocker, ndarray of bool (V,) or None)
         Rigid fields and the rows each skips (its own object's).
     deformables : list of (DeformableBlocker, ndarray of bool (V,) or None)
@@ -902,7 +911,8 @@ class _PartBlockers:
         a self-visibility covers).
     """
 
-    space: str
+    rigid_space: str
+    deformable_space: str
     fields: list
     deformables: list
 
@@ -913,7 +923,7 @@ class _PartBlockers:
                    None if mask is None else mask[rows]) for fb, mask in self.fields]
         deformables = [(d, None if mask is None else mask[rows])
                        for d, mask in self.deformables]
-        return _PartBlockers(self.space, fields, deformables)
+        return _PartBlockers(self.rigid_space, self.deformable_space, fields, deformables)
 
 
 def _deformable_rows(blocks: _PartBlockers, n_rows: int):

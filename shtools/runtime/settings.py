@@ -295,12 +295,15 @@ class ShadowSettings:
         forked on the first frame with at least ``MIN_PARALLEL_PAIRS``
         sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
         process.
-    field_space : {"log", "product"}
+    field_space : {"log", "product"} or None
         How shadow-field blockers -- rigid (:mod:`~shtools.runtime.fields`) and
         deformable (:mod:`~shtools.runtime.deformable`) -- combine: ``"log"``
         adds their SH logs to the other blockers' log sum before the one exp;
         ``"product"`` multiplies their visibility vectors in after the exp with
         truncated SH products at the accumulation order (the papers' way).
+        None (default): ``"log"`` for rigid fields, ``"product"`` for
+        deformable ones (:meth:`resolved_field_space`; the measured-best of each,
+        ``docs/scenes.md``).
     """
 
     order: int = setting(4, "int", lo=1, hi=MAX_ORDER, doc="shading SH order n")
@@ -336,10 +339,11 @@ class ShadowSettings:
     processes: int | None = setting(1, "int", lo=1, hi=64, scene=False,
                                     none_means="one per core",
                                     doc="processes sharing each frame")
-    field_space: str = setting("log", "choice", choices=FIELD_SPACES,
-                               doc="how shadow-field blockers (rigid and deformable) combine: "
-                               "log (one exp with every other blocker) or product "
-                               "(truncated SH products)")
+    field_space: str | None = setting(
+        None, "choice", choices=FIELD_SPACES,
+        none_means="log for rigid fields, product for deformable ones",
+        doc="how shadow-field blockers (rigid and deformable) combine: log (one exp with "
+        "every other blocker) or product (truncated SH products)")
 
     def __post_init__(self):
         self.validate()
@@ -363,6 +367,16 @@ class ShadowSettings:
     def resolved_window(self) -> str | None:
         """Window kind for :func:`shtools.sh.window` (``"none"`` becomes None)."""
         return None if self.window in (None, "none") else self.window
+
+    def resolved_field_space(self, kind: str) -> str:
+        """How shadow fields of ``kind`` ("rigid" or "deformable") combine: ``field_space``,
+        or by default ``"log"`` for rigid fields and ``"product"`` for deformable ones
+        (measured: the deformable field's ground 0.4-0.7 points closer to ray tracing in
+        product space at about the same frame time; ``benchmarks/bench_fidelity.py
+        --deformable``, ``benchmarks/bench_scaling.py``)."""
+        if self.field_space is not None:
+            return self.field_space
+        return "product" if kind == "deformable" else "log"
 
     def resolved_theta_min(self) -> float:
         """The eq. 37 cut-off actually used (radians)."""

@@ -52,7 +52,8 @@ def scene():
 def test_self_visibility_replaces_the_field_on_its_own_rows(scene):
     torus, blocker, log, pts, nrm, n_g = scene
     env = sky_light(4)
-    rt = ShadowRuntime(ShadowSettings(order=4, acc_order=ACC, processes=1))
+    # log space, as the counting wrapper (a plain log blocker) is combined
+    rt = ShadowRuntime(ShadowSettings(order=4, acc_order=ACC, processes=1, field_space="log"))
     counting = _Counting(blocker)
     sv = SelfVisibility(log, slice(n_g, None), blocker=0)
     skipped = rt.visibility(pts, nrm, [counting], self_visibility=[sv])

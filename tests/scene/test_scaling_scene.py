@@ -18,8 +18,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 from rig import GROUND_VERTICES, SKY, tube_scene_text, write_bending_tube
 
 
-def scene_text(blocker: str, frames: int = 2, environment: str = SKY) -> str:
-    return tube_scene_text(blocker, settings=f"frames = {frames}\nhierarchy = false",
+def scene_text(blocker: str, frames: int = 2, environment: str = SKY,
+               settings: str = "") -> str:
+    return tube_scene_text(blocker, settings=f"frames = {frames}\nhierarchy = false\n{settings}",
                            environment=environment)
 
 
@@ -31,7 +32,9 @@ def rig(tmp_path):
 
 @pytest.mark.parametrize("log", ["naive", "eigen"])
 def test_deformable_field_bake_is_closer_to_ray_tracing_than_no_shadow(rig, log):
-    text = scene_text(f'{{ deformable = true, samples = [8, 12], rays = [8, 16], log = "{log}" }}')
+    # log space (the deformable default is product space, which takes no log)
+    text = scene_text(f'{{ deformable = true, samples = [8, 12], rays = [8, 16], log = "{log}" }}',
+                      settings='field_space = "log"')
     scene = parse_scene(text, rig / "scene.toml")
     ours = list(bake_scene(scene))
     truth = list(bake_scene(scene, method="raytrace", raytrace_dirs=800))
@@ -49,7 +52,7 @@ def test_deformable_field_bake_is_closer_to_ray_tracing_than_no_shadow(rig, log)
 
 def test_deformable_field_in_product_space_bake(rig):
     # bake --method product multiplies the scaled field (no log, no exp): it must
-    # match ray tracing of the posed tube as well as the log-space default does.
+    # match ray tracing of the posed tube as well as log space does.
     text = scene_text("{ deformable = true, samples = [8, 12], rays = [8, 16] }")
     scene = parse_scene(text, rig / "scene.toml")
     product = list(bake_scene(scene, method="product"))

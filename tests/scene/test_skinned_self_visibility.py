@@ -169,8 +169,8 @@ def test_product_method_uses_the_traced_visibility_and_skips_the_own_blocker(rig
 
 
 def test_deformable_field_in_product_space_shades_the_ground(rig):
-    """``field_space = "product"`` applies to deformable fields: the ground under the
-    folded tube against ray tracing of its posed mesh, log and product space."""
+    """``field_space`` applies to deformable fields (product space by default): the
+    ground under the folded tube against ray tracing of its posed mesh, both spaces."""
     field = "{ deformable = true, samples = [8, 12], rays = [8, 16] }"
 
     def ground(scene, **kwargs):
@@ -179,9 +179,10 @@ def test_deformable_field_in_product_space_shades_the_ground(rig):
                                bake_scene(scene, prepared=prepared, processes=1, **kwargs)])
 
     ref = ground(_scene(rig, field), method="raytrace", raytrace_dirs=3200)
-    log = ground(_scene(rig, field))
+    log = ground(_scene(rig, field, 'field_space = "log"'))
     prod = ground(_scene(rig, field, 'field_space = "product"'))
     assert not np.allclose(log, prod, atol=1e-4)  # the setting reaches the field
+    np.testing.assert_array_equal(ground(_scene(rig, field)), prod)  # the default
     # measured 4.3 % (log) and 3.0 % (product): the cone model between 96 samples
     # (8 x 12, coarser than the default 16 x 24), plus the log round trip in log space
     assert relative_rmse(log, ref) < 0.065
