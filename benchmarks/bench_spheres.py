@@ -31,6 +31,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -173,9 +174,13 @@ def run(meshes: dict, counts, methods=METHODS, log=print, baseline: Path | None 
     rows = []
     for name, (path, mesh) in meshes.items():
         evaluator = OutsideVolume(mesh)
+        if baseline is not None and path is None:  # a procedural mesh: give it a file
+            path = Path(tempfile.mkdtemp(prefix="bench_spheres_")) / f"{name}.ply"
+            # binary PLY: float32 vertices (~1e-7 of the size, far below the fit's tolerances)
+            mesh.export(path)
         for n in (counts if cases is None else [k for m, k in cases if m == name]):
             runs = [(m, lambda m=m, mesh=mesh, n=n: fit_here(mesh, n, m)) for m in methods]
-            if baseline is not None and path is not None:
+            if baseline is not None:
                 runs.insert(0, ("baseline",
                                 lambda path=path, n=n: fit_baseline(baseline, path, n)))
             for method, fit in runs:

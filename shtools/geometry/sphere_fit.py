@@ -227,12 +227,16 @@ class Solid:
     hulls: dict = field(default_factory=dict)
 
     def hull(self, points: np.ndarray, index: np.ndarray) -> np.ndarray:
-        """Convex-hull vertices of ``points[index]``, remembered by ``index``
-        (settled clusters keep their points from round to round)."""
-        index = np.sort(index)
-        key = (id(points), hashlib.blake2b(index.tobytes(), digest_size=16).digest())
+        """Convex-hull vertices of ``points[index]``, remembered by the points
+        themselves (settled clusters keep their points from round to round).
+
+        The key is a digest of the coordinates, not of ``index`` and the array's
+        ``id``: a freed array's ``id`` is reused by the next one, which made the
+        fit depend on memory layout (two results for one seed, seen across runs)."""
+        chosen = points[np.sort(index)]
+        key = hashlib.blake2b(np.ascontiguousarray(chosen).tobytes(), digest_size=16).digest()
         if key not in self.hulls:
-            self.hulls[key] = hull_vertices(points[index])
+            self.hulls[key] = hull_vertices(chosen)
         return self.hulls[key]
 
 

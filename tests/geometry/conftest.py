@@ -29,7 +29,22 @@ def boolean_union(parts: list[trimesh.Trimesh]) -> trimesh.Trimesh:
         ms.add_mesh(pymeshlab.Mesh(part.vertices, part.faces))
         ms.generate_boolean_union(first_mesh=0, second_mesh=1)
         vertices, faces = ms.current_mesh().vertex_matrix(), ms.current_mesh().face_matrix()
-    return validate_mesh(trimesh.Trimesh(vertices, faces, process=False))
+    return _canonical(validate_mesh(trimesh.Trimesh(vertices, faces, process=False)))
+
+
+def _canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The same triangles in a fixed order: pymeshlab's boolean (multi-threaded)
+    returns them in a different vertex and face order from run to run, and a fit's
+    result depends on that order (sample indices, tie-breaks)."""
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    order = np.lexsort(v.T[::-1])  # vertices sorted by (x, y, z)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    f = rank[f]
+    first = np.argmin(f, axis=1)  # rotate each face (keeping its winding) to its least index
+    f = np.take_along_axis(f, (first[:, None] + np.arange(3)) % 3, axis=1)
+    f = f[np.lexsort(f.T[::-1])]
+    return trimesh.Trimesh(v[order], f, process=False)
 
 
 def capsule(a, b, radius: float, sections: int = 16) -> trimesh.Trimesh:
