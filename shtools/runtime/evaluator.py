@@ -51,6 +51,16 @@ PART_BLOCKERS = (FieldBlocker, DeformableBlocker)
 DEFORMABLE_RECEIVER_PAIRS = 64
 
 
+def _self_rows(sv: SelfVisibility, n_vertices: int, covered: int) -> np.ndarray:
+    """Indices ``(R,)`` of the rows ``sv.rows`` selects among ``n_vertices``; they must
+    number ``covered``, the vertices its log or visibility holds."""
+    rows = np.arange(n_vertices)[sv.rows]
+    if rows.shape[0] != covered:
+        raise InputError(f"self-visibility covers {covered} vertices but its rows select "
+                         f"{rows.shape[0]}")
+    return rows
+
+
 class ShadowRuntime:
     """SHEXP soft shadows per receiver vertex from sphere blockers.
 
@@ -103,7 +113,7 @@ class ShadowRuntime:
         self._kernels = [BlockKernel(self.table) for _ in range(self.settings.threads)]
         self._auto_clusters: ReceiverClusters | None = None
         self._auto_groups: np.ndarray | None = None
-        self._rotated_logs: dict = {}  # id(log) -> (rotation, rotated log), last frame
+        self._rotated_logs: dict = {}  # id(log) -> (log, rotation, rotated log), last frame
         self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._products: QuadratureProducts | None = None  # self-visibility products
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -459,23 +469,10 @@ class ShadowRuntime:
                     f"self-visibility log has {sv.log.shape[1]} coefficients but the runtime "
                     f"accumulates at order {self.acc_order} ({size}); rebuild the transfer "
                     f"with --order {self.acc_order}")
-            rows = np.arange(n_vertices)[sv.rows]
-            log = sv.log
-            if log is None:  # a visibility: multiplied in after the exp (_multiply_self)
-                pass
-            elif rows.shape[0] != log.shape[0]:
-                raise InputError(f"self-visibility covers {log.shape[0]} vertices but its "
-                                 f"rows select {rows.shape[0]}")
-            elif sv.rotation is not None and not np.allclose(sv.rotation, np.eye(3), atol=1e-12):
-                cached = self._rotated_logs.get(id(sv.log))
-                if cached is not None and np.array_equal(cached[0], sv.rotation):
-                    log = cached[1]
-                else:
-                    d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
-                    log = sv.log @ d.T
-                kept[id(sv.log)] = (sv.rotation.copy(), log)
-            if log is not None:
-                extra[rows] += log
+            given = sv.log if sv.log is not None else sv.visibility
+            rows = _self_rows(sv, n_vertices, given.shape[0])
+            if sv.log is not None:  # a visibility is multiplied in after the exp
+                extra[rows] += self._rotated_log(sv, kept)
             if sv.blocker is not None:
                 k = int(sv.blocker)
                 if k in sphere_index:
@@ -489,6 +486,22 @@ class ShadowRuntime:
         if all(sv.log is None for sv in self_visibility):
             extra = None  # visibilities only: nothing to add before the exp
         return extra, (exclude if (exclude >= 0).any() else None), (skip or None)
+
+    def _rotated_log(self, sv: SelfVisibility, kept: dict) -> np.ndarray:
+        """``sv.log (R, n_acc*n_acc)`` turned with its object; remembered in ``kept``
+        while the rotation holds (static objects pay the rotation once)."""
+        if sv.rotation is None or np.allclose(sv.rotation, np.eye(3), atol=1e-12):
+            return sv.log
+        cached = self._rotated_logs.get(id(sv.log))
+        # the entry holds the source array itself: an id alone can be reused by a
+        # new array once the old one is freed
+        if cached is not None and cached[0] is sv.log and np.array_equal(cached[1], sv.rotation):
+            log = cached[2]
+        else:
+            d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
+            log = sv.log @ d.T
+        kept[id(sv.log)] = (sv.log, sv.rotation.copy(), log)
+        return log
 
     def _multiply_self(self, g: np.ndarray, self_visibility) -> np.ndarray:
         """``g`` with the self-visibilities given as visibility multiplied into their rows.
@@ -504,14 +517,11 @@ class ShadowRuntime:
         if self._products is None:
             self._products = QuadratureProducts(self.order, np.float32)
         for sv in given:
-            rows = np.arange(g.shape[0])[sv.rows]
             values = sv.visibility
+            rows = _self_rows(sv, g.shape[0], values.shape[0])
             k = values.shape[1]
             if math.isqrt(k) ** 2 != k:
                 raise InputError(f"self-visibility has {k} coefficients, not an SH order's n*n")
-            if values.shape[0] != rows.shape[0]:
-                raise InputError(f"self-visibility covers {values.shape[0]} vertices but its "
-                                 f"rows select {rows.shape[0]}")
             vis = np.zeros((rows.shape[0], size), dtype=np.float32)
             vis[:, :min(k, size)] = values[:, :size]
             sub = g[rows]

@@ -151,12 +151,17 @@ LOCAL_DISTANCE = 0.02
 LOCAL_ORDER = 4
 
 
+def _skinned_both(obj) -> bool:
+    """Whether ``obj`` is skinned and both receives and blocks (it shadows itself)."""
+    return obj.spec.receives and obj.spec.blocks and obj.motion is not None
+
+
 def uses_traced_visibility(obj, default: bool = True) -> bool:
     """Whether a skinned role-"both" object ray traces its posed mesh every frame."""
     choice = getattr(obj.spec, "self_visibility", None)
     if choice is None:
         choice = default
-    return bool(choice) and obj.spec.receives and obj.spec.blocks and obj.motion is not None
+    return bool(choice) and _skinned_both(obj)
 
 
 def uses_local_visibility(obj, default: bool) -> bool:
@@ -167,7 +172,7 @@ def uses_local_visibility(obj, default: bool) -> bool:
     """
     if getattr(obj.spec, "self_visibility", None) is False:
         return False
-    return bool(default) and obj.spec.receives and obj.spec.blocks and obj.motion is not None
+    return bool(default) and _skinned_both(obj)
 
 
 def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int) -> np.ndarray:

@@ -22,12 +22,9 @@ ACC = 6
 
 
 @pytest.fixture(scope="module")
-def scene():
+def scene(standing_torus):
     """A torus standing on its rim over a 16 x 16 ground, a sphere beside it, its field."""
-    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.4, major_sections=32,
-                                   minor_sections=16)
-    torus.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
-    torus.apply_translation([0.0, 1.45, 0.0])
+    torus = standing_torus
     ground, gnorm = ground_grid(16, [0.0, 0.0], 4.0, y=0.0)
     field = sample_deformable_field(torus.vertices, torus.faces, ACC)
     blocker = DeformableBlocker(field, ScalingTable(build_scaling_table(ACC, "cone")))

@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
-import trimesh
 
 from shtools.fields.deformable import sample_deformable_field
 from shtools.fields.self_visibility import self_visibility, self_visibility_log
@@ -33,12 +30,9 @@ class _Counting:
 
 
 @pytest.fixture(scope="module")
-def scene():
+def scene(standing_torus):
     """A torus standing on its rim over a 12 x 12 ground, its field and its self-visibility."""
-    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.4, major_sections=32,
-                                   minor_sections=16)
-    torus.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
-    torus.apply_translation([0.0, 1.45, 0.0])
+    torus = standing_torus
     ground, gnorm = ground_grid(12, [0.0, 0.0], 4.0, y=0.0)
     field = sample_deformable_field(torus.vertices, torus.faces, ACC)
     table = ScalingTable(build_scaling_table(ACC, "cone"))
