@@ -359,10 +359,14 @@ def _markdown(rows: list[dict]) -> str:
 # -- the characters as deformable shadow fields (issue 12; the scaling engineer's) ---------
 
 
-#: field variants of :func:`deformable_variants`: label -> (blocker table, settings lines)
+#: field variants of :func:`deformable_variants`: label -> (blocker table, settings lines).
+#: The field and the bound spheres shade the ground only with ``traced_shadows = false``
+#: (by default a traced character's posed mesh is traced on the ground instead).
 DEFORMABLE_FIELDS = {
-    "deformable field, log space": ("{ deformable = true }", 'field_space = "log"\n'),
-    "deformable field (default: product space)": ("{ deformable = true }", ""),
+    "deformable field, log space": ("{ deformable = true }",
+                                    'field_space = "log"\ntraced_shadows = false\n'),
+    "deformable field (default: product space)": ("{ deformable = true }",
+                                                  "traced_shadows = false\n"),
 }
 
 
@@ -393,7 +397,8 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     from shtools.scene.scene import load_scene
 
     fields = fields or DEFORMABLE_FIELDS
-    texts = {"bound spheres": (spec["text"], "")}
+    texts = {"bound spheres": (spec["text"], "traced_shadows = false\n"),
+             "bound spheres, ground traced (the default)": (spec["text"], "")}
     for label, table in fields.items():  # label -> blocker table of the field variant
         table, lines = (table, "") if isinstance(table, str) else table
         texts[label] = (re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
@@ -401,7 +406,7 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     preps = {}
     for label, (text, lines) in texts.items():
         for method in methods:
-            if method == "product" and "field_space" in lines:
+            if method == "product" and ("field_space" in lines or "traced" in label):
                 continue
             variant = f"{label}, {method}"
             tag = re.sub(r"\W+", "_", label)
