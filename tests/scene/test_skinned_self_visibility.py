@@ -224,3 +224,31 @@ def test_traced_shadow_on_the_ground_matches_ray_tracing(rig):
     field = _ground_rows(_scene(rig, "{ deformable = true, samples = [8, 12], "
                                      "rays = [8, 16] }"))
     np.testing.assert_allclose(field, traced, rtol=0, atol=1e-6)  # float32 products
+
+
+def test_only_the_first_traced_object_traces_the_ground(rig):
+    """Two traced tubes over the ground: the first (scene order) traces its shadow on the
+    ground and skips its spheres there; the second still shadows the ground with its
+    spheres (a row skips one object's blocker), so nothing is counted twice."""
+    from shtools.scene.pose import pose_frame
+
+    second = ('\n[[objects]]\nname = "tube2"\nmesh = "rig.glb"\nrole = "both"\n'
+              'translate = [1.2, 0.05, 0.4]\nblocker = { spheres = "tube.h5" }\n'
+              'skin = { animation = "bend" }\n')
+
+    def scene(settings=""):
+        return parse_scene(tube_scene_text('{ spheres = "tube.h5" }',
+                                           settings="frames = 2\n" + settings) + second,
+                           rig / "scene.toml")
+
+    prepared = prepare_scene(scene())
+    state = pose_frame(prepared, 1.0)
+    ground = [sv for sv in state.self_visibility
+              if np.arange(len(state.vertices))[sv.rows][0] == 0]
+    assert len(ground) == 1 and ground[0].blocker == 0  # the first tube's spheres
+    assert len(state.self_visibility) == 3  # each tube's own rows, the ground once
+    ref = _ground_rows(scene(), method="raytrace", raytrace_dirs=3200)
+    both = _ground_rows(scene())
+    spheres = _ground_rows(scene("traced_shadows = false"))
+    # measured 2.7 % (first tube traced, second by its spheres) vs 5.6 % (both by spheres)
+    assert relative_rmse(both, ref) < 0.7 * relative_rmse(spheres, ref)
