@@ -198,11 +198,15 @@ def scenes(quick: bool, only=None) -> dict[str, dict]:
 #: self-shadowing, sphere shadows on the other receivers), "new" the current default.
 VARIANTS = {
     "old": {"blocker": "tree", "settings": 'self_visibility = false\nlocal_visibility = false\n'
-                                           'deringing = "none"\n'},
+                                           'deringing = "none"\ntraced_shadows = false\n'},
     "wave2": {"blocker": "tree", "settings": 'self_visibility = true\n'
                                                'local_visibility = true\n'
                                                'deringing = "desaturate"\n'},
     "new": {"blocker": "field", "settings": ""},  # the current defaults
+    # wave 4: the default with sphere trees (no precomputed field), before and after the
+    # rigid objects' real meshes trace their shadow on the ground (``traced_shadows``)
+    "tree": {"blocker": "tree", "settings": "traced_shadows = false\n"},
+    "traced": {"blocker": "tree", "settings": ""},
 }
 
 
@@ -268,7 +272,7 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants: dict,
     from shtools.scene.scene import load_scene
 
     names = list(variants)
-    baked, times, preps = {}, {}, {}
+    baked, times, cpu, preps = {}, {}, {}, {}
     for variant in names:
         scene = load_scene(_scene_file(name, spec, variant, variants[variant]))
         preps[variant] = (scene, prepare_scene(scene))
@@ -281,6 +285,12 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants: dict,
             baked[variant] = [f.radiance.astype(np.float64) for f in frames]
             ms = 1e3 * float(np.mean([f.seconds for f in frames][1:] or frames[0].seconds))
             times[variant] = min(times.get(variant, ms), ms)
+            # CPU with one runtime process (robust to the other jobs on a shared box)
+            t0 = time.process_time()
+            for _ in bake_scene(scene, prepared=prepared, scheduler="inline", processes=1):
+                pass
+            ms = 1e3 * (time.process_time() - t0) / len(frames)
+            cpu[variant] = min(cpu.get(variant, ms), ms)
     # the references pose the scene with sphere trees (for the sphere-union split) and
     # the probe as given, whatever the variants do
     ref_scene = _scene_file(name, spec, "reference", VARIANTS["old"])
@@ -335,9 +345,12 @@ def evaluate(name: str, spec: dict, *, n_dirs: int, subset: int, variants: dict,
     summary = {"scene": name}
     for variant in names:
         rad = np.stack(baked[variant])
-        summary[f"{variant} ms/frame"] = times[variant]
+        summary[f"{variant} ms/frame"] = round(times[variant], 1)
+        summary[f"{variant} CPU ms/frame (1 process)"] = round(cpu[variant], 1)
+        summary[f"{variant} CPU ratio"] = round(cpu[variant] / cpu[names[0]], 2)
         summary[f"{variant} negative vertices"] = int((rad.min(axis=2) < 0).sum())
     summary[f"ratio {names[-1]}/{names[0]}"] = times[names[-1]] / times[names[0]]
+    summary["load"] = round(os.getloadavg()[0], 1)
     summary["vertex-frames"] = int(np.stack(baked[names[0]]).shape[0] *
                                    np.stack(baked[names[0]]).shape[1])
     # what an experiment needs to score other references: baked radiance per variant
@@ -476,7 +489,7 @@ SKINNED_VARIANTS = {
                        'deringing = "desaturate"\n') for q in (16, 24, 32, 48)},
     "wave 3 default": 'traced_shadows = false\n',
     **{f"ground {q}": f"traced_shadow_directions = {q}\n"
-       for q in (32, 48, 64, 128)},
+       for q in (32, 48, 64, 96, 128)},
 }
 #: The default traced variant as the first shift built it, for the before/after figures
 #: (:func:`_previous_tracing`); same settings as the wave-3 default.

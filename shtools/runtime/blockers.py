@@ -162,10 +162,11 @@ class SelfVisibility:
         The receiver rows of the frame it belongs to.
     rotation : array_like, shape (3, 3), optional
         The object's rotation this frame (own frame -> world); None: identity.
-    blocker : int, optional
+    blocker : int or tuple of int, optional
         Index, in the ``blockers`` list of the same call, of the object's own
         blocker, skipped on ``rows``: a sphere set, or a log blocker (a
-        deformable field), which is then not evaluated on those rows.
+        deformable field), which is then not evaluated on those rows.  Several
+        for a visibility traced jointly against several objects' meshes.
     visibility : array_like, shape (R, m*m), optional
         Instead of ``log``: world-space visibility vectors (any order ``m``;
         truncated or zero-padded to the shading order), multiplied in by the
@@ -175,8 +176,17 @@ class SelfVisibility:
     log: Any
     rows: Any
     rotation: Any = None
-    blocker: int | None = None
+    blocker: int | tuple[int, ...] | None = None
     visibility: Any = None
+
+    @property
+    def skipped(self) -> tuple[int, ...]:
+        """The blockers skipped on ``rows`` (``blocker`` as a tuple)."""
+        if self.blocker is None:
+            return ()
+        if isinstance(self.blocker, tuple | list | np.ndarray):
+            return tuple(int(k) for k in self.blocker)
+        return (int(self.blocker),)
 
     def __post_init__(self):
         if (self.log is None) == (self.visibility is None):

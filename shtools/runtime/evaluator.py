@@ -443,8 +443,9 @@ class ShadowRuntime:
     def _self_terms(self, self_visibility, n_vertices: int, blockers: list):
         """Rotated self-visibility logs ``(V, n_acc^2)`` and the own blocker each row skips.
 
-        Returns ``(None, None, None)`` without self-visibility; ``exclude (V,)``
-        indexes the *sphere* blockers (-1: none); ``skip`` maps the position of a
+        Returns ``(None, None, None)`` without self-visibility; ``exclude``
+        (:class:`_Skipped`) says which *sphere* blockers each row skips (several on a
+        row that several traced objects shadow, e.g. the ground); ``skip`` maps the position of a
         log blocker (e.g. a deformable field) named by a self-visibility to the
         bool mask ``(V,)`` of the rows it skips.  A rotated log is kept while its
         object's rotation does not change (static objects).
@@ -458,7 +459,7 @@ class ShadowRuntime:
             if isinstance(b, SphereBlocker):
                 sphere_index[k] = len(sphere_index)
         extra = np.zeros((n_vertices, size), dtype=np.float32)
-        exclude = np.full(n_vertices, -1, dtype=np.int64)
+        skipped = np.zeros((n_vertices, len(sphere_index)), dtype=bool)
         skip = {}
         kept = {}
         for sv in self_visibility:
@@ -474,19 +475,18 @@ class ShadowRuntime:
             rows = _self_rows(sv, n_vertices, given.shape[0])
             if sv.log is not None:  # a visibility is multiplied in after the exp
                 extra[rows] += self._rotated_log(sv, kept)
-            if sv.blocker is not None:
-                k = int(sv.blocker)
+            for k in sv.skipped:
                 if k in sphere_index:
-                    exclude[rows] = sphere_index[k]
+                    skipped[rows, sphere_index[k]] = True
                 elif 0 <= k < len(blockers) and isinstance(blockers[k], LogBlocker):
                     skip.setdefault(k, np.zeros(n_vertices, dtype=bool))[rows] = True
                 else:
-                    raise InputError(f"self-visibility names blocker {sv.blocker}, which is not "
+                    raise InputError(f"self-visibility names blocker {k}, which is not "
                                      f"one of the {len(blockers)} blockers given")
         self._rotated_logs = kept
         if all(sv.log is None for sv in self_visibility):
             extra = None  # visibilities only: nothing to add before the exp
-        return extra, (exclude if (exclude >= 0).any() else None), (skip or None)
+        return extra, (_Skipped.of(skipped) if skipped.any() else None), (skip or None)
 
     def _rotated_log(self, sv: SelfVisibility, kept: dict) -> np.ndarray:
         """``sv.log (R, n_acc*n_acc)`` turned with its object; remembered in ``kept``
@@ -536,16 +536,17 @@ class ShadowRuntime:
     def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:
         """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
 
-        ``exclude (V,)``: sphere blocker each receiver skips (-1: none).
+        ``exclude`` (:class:`_Skipped`): the sphere blockers each receiver skips.
         """
         s = self.settings
         stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {},
                  "processes": 1}
         self.last_stats = stats
         t0 = time.process_time()
-        if exclude is not None and len(blockers) == 1 and (exclude == 0).all():
-            # every receiver skips the only sphere set (its object's real mesh was traced
-            # on all of them): nothing to accumulate, no cuts to make
+        if exclude is not None and exclude.masks.shape == (1, len(blockers)) and \
+                exclude.masks.all():
+            # every receiver skips every sphere set (their objects' real meshes were
+            # traced on all of them): nothing to accumulate, no cuts to make
             stats["seconds"]["cuts"] = time.process_time() - t0
             stats["spheres_per_vertex"] = 0.0
             return FrameWork(centers=np.zeros((0, 3)), radii=np.zeros(0))
@@ -558,12 +559,13 @@ class ShadowRuntime:
         forest = build_forest(blockers)
         if not s.hierarchy:
             # every leaf everywhere, but per exclusion group: one "cluster" per group
-            clusters = ReceiverClusters.from_labels(exclude)
+            clusters = ReceiverClusters.from_labels(exclude.labels)
             in_cut = np.broadcast_to(forest.is_leaf, (clusters.n_clusters, forest.n_nodes))
             weights = np.ones((clusters.n_clusters, forest.n_nodes, self.acc_order))
         else:
             if clusters is None:
-                clusters = self._clusters_for(pts, exclude)
+                clusters = self._clusters_for(
+                    pts, None if exclude is None else exclude.labels)
             if clusters.n_vertices != pts.shape[0]:
                 raise InputError(
                     f"clusters were built for {clusters.n_vertices} vertices but "
@@ -909,18 +911,43 @@ def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
     return a + b
 
 
-def _excluded_nodes(clusters: ReceiverClusters, exclude: np.ndarray,
+@dataclass
+class _Skipped:
+    """The sphere blockers each receiver row skips, as a label per row and one mask per label.
+
+    Attributes
+    ----------
+    labels : ndarray of int, shape (V,)
+        ``0..L-1``; rows with the same label skip the same blockers.  Ordered as the
+        sets' bitmasks would be (nothing skipped first, then by highest blocker), so a
+        scene whose rows skip at most one blocker each keeps its clusters.
+    masks : ndarray of bool, shape (L, S)
+        Sphere blockers (positions among the sphere blockers) each label skips.
+    """
+
+    labels: np.ndarray
+    masks: np.ndarray
+
+    @classmethod
+    def of(cls, skipped: np.ndarray) -> _Skipped:
+        """From a ``(V, S)`` bool matrix of skipped sphere blockers."""
+        masks, labels = np.unique(skipped[:, ::-1], axis=0, return_inverse=True)
+        return cls(labels.reshape(-1).astype(np.int64), masks[:, ::-1])
+
+
+def _excluded_nodes(clusters: ReceiverClusters, exclude: _Skipped,
                     node_blocker: np.ndarray) -> np.ndarray:
-    """``(C, M)`` bool: forest nodes of the blocker each cluster's receivers skip.
+    """``(C, M)`` bool: forest nodes of the blockers each cluster's receivers skip.
 
     Raises InputError when a cluster mixes receivers that skip different blockers.
     """
+    labels = exclude.labels
     counts = np.diff(clusters.offsets)
-    first = exclude[clusters.order[clusters.offsets[:-1]]]
-    if not np.array_equal(exclude[clusters.order], np.repeat(first, counts)):
+    first = labels[clusters.order[clusters.offsets[:-1]]]
+    if not np.array_equal(labels[clusters.order], np.repeat(first, counts)):
         raise InputError("receiver clusters mix vertices of different self-visibility "
                          "objects; build the clusters with groups = object id per vertex")
-    return (node_blocker[None, :] == first[:, None]) & (first[:, None] >= 0)
+    return exclude.masks[first][:, node_blocker]
 
 
 class _NoField:
@@ -974,8 +1001,8 @@ def _own_rows(self_visibility, n_vertices: int, blockers: list) -> dict | None:
     of its object's rows (the field skips them)."""
     skip = {}
     for sv in self_visibility or ():
-        if (sv.blocker is not None and 0 <= int(sv.blocker) < len(blockers)
-                and isinstance(blockers[int(sv.blocker)], DeformableBlocker)):
-            mask = skip.setdefault(int(sv.blocker), np.zeros(n_vertices, dtype=bool))
-            mask[np.arange(n_vertices)[sv.rows]] = True
+        for k in sv.skipped:
+            if 0 <= k < len(blockers) and isinstance(blockers[k], DeformableBlocker):
+                mask = skip.setdefault(k, np.zeros(n_vertices, dtype=bool))
+                mask[np.arange(n_vertices)[sv.rows]] = True
     return skip or None

@@ -100,6 +100,9 @@ class BlockerKind(ABC):
     hint: ClassVar[str] = ""
     #: further table keys: name -> (pydantic annotation, default)
     options: ClassVar[dict[str, tuple[Any, Any]]] = {}
+    #: the blocker *is* the object's shape (a sphere primitive): a rigid object's real
+    #: mesh is then not traced in its place on the ground (``traced_shadows``)
+    exact: ClassVar[bool] = False
 
     def check(self, spec: BlockerSpec, obj) -> tuple[str, str] | None:
         """A rule the object breaks, as ``(key, message)``, or None.
@@ -261,6 +264,7 @@ class FitSpheres(SphereSetKind):
 
 class ExactSphere(SphereSetKind):
     name, value, hint = "exact", "flag", "'exact = true' (a sphere primitive)"
+    exact = True
 
     def check(self, spec, obj):
         if obj.primitive is None or obj.primitive[0] != "sphere":

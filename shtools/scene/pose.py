@@ -46,7 +46,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     traced shadow on the receiver-only objects (the frame's largest cost): for callers
     that need only the posed geometry.
     """
-    from shtools.runtime import SelfVisibility, SphereLight
+    from shtools.runtime import SelfVisibility, SphereBlocker, SphereLight
     from shtools.scene.transfer import (
         posed_caster,
         posed_local_log,
@@ -60,7 +60,9 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     verts, norms, blockers, meshes, selfs = [], [], [], [], []
     n_rows = 0
     ground = []  # (rows, vertices, normals) of receiver-only objects
-    caster_of = None  # (caster, posed vertices, blocker index) of the first traced object
+    casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
+    rigid = []  # (object, transform, posed vertices, blocker index) of rigid traced objects
+    has_ground = any(o.spec.receives and not o.spec.blocks for o in prepared.objects)
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -88,8 +90,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
                 traced_self_visibility(world_v, world_n, o.faces, st.order,
                                        st.self_visibility_directions, caster=caster))))
-            if caster_of is None:
-                caster_of = (caster, world_v, len(blockers))
+            casters.append((caster, world_v, len(blockers)))
         if o.spec.receives and not o.spec.blocks:
             ground.append((np.arange(n_rows, n_rows + len(world_v)), world_v, world_n))
         if o.local_log is not None and joints is not None:
@@ -101,13 +102,23 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
+            if (o.motion is None and trace and st.traced_shadows and has_ground and len(o.faces)
+                    and isinstance(blockers[-1], SphereBlocker)
+                    and not kinds[o.spec.blocker.kind].exact):
+                # a rigid sphere-set blocker: its real mesh shadows the ground instead
+                rigid.append((o, m, world_v, len(blockers) - 1))
             if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
                 _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
                                 selfs, len(blockers) - 1)
             if with_meshes:
                 meshes.append((world_v, o.faces))
-    if caster_of is not None and ground and st.traced_shadows:
-        selfs.append(_traced_shadow(caster_of, ground, st))
+    # each rigid object traced in its own cone, the visibilities multiplied: measured
+    # closer to the real meshes than one joint trace in the cone of their common bounding
+    # sphere at the same ray density (dragon + armadillo ground 3.2 vs 3.7 %; the joint
+    # cone spends its rays on the gap between the objects)
+    casters.extend(_rigid_caster([r]) for r in rigid)
+    if casters and ground and st.traced_shadows:
+        selfs.extend(_traced_shadow(c, ground, st) for c in casters)
     lights = []
     for spec in prepared.scene.lights:
         key = light_at(spec, t)
@@ -118,10 +129,11 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
 
 
 def _traced_shadow(caster_of, ground: list, st):
-    """The first traced skinned object's shadow on the receiver-only objects (the ground),
-    traced against its posed mesh in the same Embree scene as its own vertices; its own
-    blocker is skipped on those rows (only one object can skip there: a second traced
-    object still shadows them with its blocker)."""
+    """A traced object's shadow on the receiver-only objects (the ground), traced against
+    its real mesh (a skinned object's posed mesh: the same Embree scene as its own
+    vertices); its blocker is skipped on those rows.  Each traced object gives one such
+    visibility; the runtime multiplies them (the product of separately traced
+    visibilities, not a joint trace: ``bench_fidelity --rigid``)."""
     from shtools.runtime import SelfVisibility
     from shtools.scene.transfer import traced_shadow_visibility
 
@@ -131,6 +143,39 @@ def _traced_shadow(caster_of, ground: list, st):
                                  np.concatenate([n for _, _, n in ground]), mesh_v, caster,
                                  st.order, st.traced_shadow_directions)
     return SelfVisibility(None, rows, blocker=index, visibility=g)
+
+
+#: Embree scenes of rigid objects in world space, per process (a forked worker builds its
+#: own): ids of the objects -> (pid, their faces, their matrices, caster).  Rebuilt only
+#: when a transform changes, so a static object's scene is built once per bake.
+_RIGID_CASTERS: dict = {}
+
+
+def _rigid_caster(rigid: list):
+    """``(caster, vertices, blocker indices)``: one Embree scene of rigid objects' real
+    meshes at their transforms (cached while the transforms hold); ``rigid`` holds
+    ``(object, transform, posed vertices, blocker index)``."""
+    import os
+
+    from shtools.scene.transfer import posed_caster
+
+    key = tuple(id(o) for o, _, _, _ in rigid)
+    hit = _RIGID_CASTERS.get(key)
+    vertices = np.concatenate([v for _, _, v, _ in rigid])
+    index = tuple(k for _, _, _, k in rigid)
+    # the entry holds the faces arrays themselves: an id alone can be reused once freed
+    if (hit is not None and hit[0] == os.getpid()
+            and all(a is o.faces for a, (o, _, _, _) in zip(hit[1], rigid, strict=True))
+            and all(np.array_equal(a, m) for a, (_, m, _, _) in zip(hit[2], rigid, strict=True))):
+        return hit[3], vertices, index
+    if len(_RIGID_CASTERS) >= 64:
+        _RIGID_CASTERS.clear()
+    offsets = np.cumsum([0] + [len(v) for _, _, v, _ in rigid])
+    faces = np.concatenate([o.faces + offsets[i] for i, (o, _, _, _) in enumerate(rigid)])
+    caster = posed_caster(vertices, faces)
+    _RIGID_CASTERS[key] = (os.getpid(), [o.faces for o, _, _, _ in rigid],
+                           [np.array(m, copy=True) for _, m, _, _ in rigid], caster)
+    return caster, vertices, index
 
 
 def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:

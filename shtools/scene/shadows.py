@@ -191,13 +191,11 @@ def _own_blocker_rows(self_visibility, n_rows: int, n_blockers: int) -> dict:
 
     skip = {}
     for sv in self_visibility:
-        if sv.blocker is None:
-            continue
-        k = int(sv.blocker)
-        if not 0 <= k < n_blockers:
-            raise InputError(f"self-visibility names blocker {k}, which is not one of the "
-                             f"{n_blockers} blockers given")
-        skip.setdefault(k, np.zeros(n_rows, dtype=bool))[np.arange(n_rows)[sv.rows]] = True
+        for k in sv.skipped:
+            if not 0 <= k < n_blockers:
+                raise InputError(f"self-visibility names blocker {k}, which is not one of "
+                                 f"the {n_blockers} blockers given")
+            skip.setdefault(k, np.zeros(n_rows, dtype=bool))[np.arange(n_rows)[sv.rows]] = True
     return skip
 
 
