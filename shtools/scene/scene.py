@@ -71,11 +71,12 @@ class Settings(ShadowSettings):
         HEMISPHERE_DIRECTIONS, "int", lo=4, hi=4096,
         doc="rays per vertex and frame tracing skinned objects' posed mesh")
     traced_shadows: bool = setting(True, "bool",
-                                   doc="skinned objects that trace their posed mesh also trace "
-                                       "the shadow it casts on receiver-only objects")
+                                   doc="the shadow of skinned objects that trace their posed "
+                                       "mesh and of rigid sphere-set blockers is ray traced "
+                                       "against their real mesh on receiver-only objects")
     traced_shadow_directions: int = setting(
         CONE_DIRECTIONS, "int", lo=4, hi=4096,
-        doc="rays per receiver-only vertex and frame whose hemisphere a traced skinned "
+        doc="rays per receiver-only vertex, traced object and frame whose hemisphere the "
             "object fills (fewer for smaller cones)")
     local_visibility: bool = setting(False, "bool",
                                      doc="rest-pose local visibility g_p of skinned "
