@@ -37,9 +37,12 @@ Assets (sphere fits, trees, bound sets, transfers, fields) are cached in
 
 ``python benchmarks/bench_fidelity.py [--quick]`` (quick: the small ``spot``
 mesh on a coarse ground only, fewer directions).  ``--skinned [--scene fox]``:
-the skinned objects' per-frame tracing of their posed mesh — quadrature error of
-direction sets and counts, then old default / rest-pose ``g_p`` / traced at
-several direction counts, accuracy and frame time (wall and CPU) side by side.
+skinned characters tracing their posed mesh every frame (own vertices, and since wave 4
+the ground in the cone of their bounding sphere): the old default, the wave-3 default
+(spheres on the ground) and the ground's ray counts, accuracy and frame time (wall and
+CPU) side by side, negatives (``--skinned-variants``; ``--skinned-sections
+quadrature,interpolation`` adds the own vertices' direction sets and every-k-th-frame
+tracing).
 """
 
 from __future__ import annotations
@@ -356,10 +359,14 @@ def _markdown(rows: list[dict]) -> str:
 # -- the characters as deformable shadow fields (issue 12; the scaling engineer's) ---------
 
 
-#: field variants of :func:`deformable_variants`: label -> (blocker table, settings lines)
+#: field variants of :func:`deformable_variants`: label -> (blocker table, settings lines).
+#: The field and the bound spheres shade the ground only with ``traced_shadows = false``
+#: (by default a traced character's posed mesh is traced on the ground instead).
 DEFORMABLE_FIELDS = {
-    "deformable field, log space": ("{ deformable = true }", 'field_space = "log"\n'),
-    "deformable field (default: product space)": ("{ deformable = true }", ""),
+    "deformable field, log space": ("{ deformable = true }",
+                                    'field_space = "log"\ntraced_shadows = false\n'),
+    "deformable field (default: product space)": ("{ deformable = true }",
+                                                  "traced_shadows = false\n"),
 }
 
 
@@ -390,7 +397,8 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     from shtools.scene.scene import load_scene
 
     fields = fields or DEFORMABLE_FIELDS
-    texts = {"bound spheres": (spec["text"], "")}
+    texts = {"bound spheres": (spec["text"], "traced_shadows = false\n"),
+             "bound spheres, ground traced (the default)": (spec["text"], "")}
     for label, table in fields.items():  # label -> blocker table of the field variant
         table, lines = (table, "") if isinstance(table, str) else table
         texts[label] = (re.sub(r"blocker = \{ bound = \"[^\"]*\" \}",
@@ -398,7 +406,7 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
     preps = {}
     for label, (text, lines) in texts.items():
         for method in methods:
-            if method == "product" and "field_space" in lines:
+            if method == "product" and ("field_space" in lines or "traced" in label):
                 continue
             variant = f"{label}, {method}"
             tag = re.sub(r"\W+", "_", label)
@@ -456,16 +464,29 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
 
 # --------------------------------------------------------------------------- skinned
 #: Variants of the skinned comparison (``--skinned``): [settings] lines of each.
+#: "traced N": the character's own vertices traced with N rays (the ground traced too,
+#: the default since wave 4); "wave 3 default": own vertices traced with 32 rays, the
+#: ground shaded by the character's bound spheres; "ground N": the defaults with N rays
+#: for a ground vertex whose hemisphere the character's bounding sphere fills (64: the
+#: default).
 SKINNED_VARIANTS = {
     "old": 'self_visibility = false\nlocal_visibility = false\nderinging = "none"\n',
     "g_p": 'self_visibility = false\nlocal_visibility = true\nderinging = "desaturate"\n',
     **{f"traced {q}": (f'self_visibility = true\nself_visibility_directions = {q}\n'
                        'deringing = "desaturate"\n') for q in (16, 24, 32, 48)},
+    "wave 3 default": 'traced_shadows = false\n',
+    **{f"ground {q}": f"traced_shadow_directions = {q}\n"
+       for q in (32, 48, 64, 128)},
 }
 #: The default traced variant as the first shift built it, for the before/after figures
-#: (:func:`_previous_tracing`); same settings as ``traced 32``.
+#: (:func:`_previous_tracing`); same settings as the wave-3 default.
 PREVIOUS = "traced 32, previous"
-SKINNED_VARIANTS[PREVIOUS] = SKINNED_VARIANTS["traced 32"]
+SKINNED_VARIANTS[PREVIOUS] = SKINNED_VARIANTS["wave 3 default"]
+#: The variants ``--skinned`` runs unless ``--skinned-variants`` names others: the old
+#: default (the baseline), the wave-3 default and the ground's ray counts (64: the
+#: current default).
+SKINNED_RUN = ("old", "wave 3 default",
+               "ground 32", "ground 48", "ground 64", "ground 128")
 
 
 @contextlib.contextmanager
@@ -654,8 +675,9 @@ def _skinned_scene_file(name: str, spec: dict, variant: str, settings: str) -> P
 
 
 def evaluate_skinned(name: str, spec: dict, *, n_dirs: int = 3200, subset: int = 2500,
-                     repeats: int = 3) -> tuple[list[dict], list[dict]]:
-    """Every :data:`SKINNED_VARIANTS` bake of a skinned scene against the real posed mesh.
+                     repeats: int = 3, variants=SKINNED_RUN) -> tuple[list[dict], list[dict]]:
+    """The ``variants`` (of :data:`SKINNED_VARIANTS`) of a skinned scene against the real
+    posed mesh.
 
     Accuracy as in :func:`evaluate` (reference: the ray tracer of the posed meshes on
     a vertex subset, shaded raw).  Frame time, the variants alternated ``repeats``
@@ -664,7 +686,8 @@ def evaluate_skinned(name: str, spec: dict, *, n_dirs: int = 3200, subset: int =
     frame with one process (``time.process_time``: robust to the other jobs): the
     whole bake over its frames, and the frames after the first alone (the bake's
     set-up left out, as in a long animation).  :data:`PREVIOUS` is the default
-    traced variant as the first shift built it (:func:`_previous_tracing`).
+    traced variant as the first shift built it (:func:`_previous_tracing`).  Negative
+    vertices: vertex-frames with a channel < 0 over the whole bake (every vertex).
     """
     import trimesh
 
@@ -674,7 +697,8 @@ def evaluate_skinned(name: str, spec: dict, *, n_dirs: int = 3200, subset: int =
     from shtools.scene.scene import load_scene
 
     preps, baked, wall, cpu, steady = {}, {}, {}, {}, {}
-    for variant, settings in SKINNED_VARIANTS.items():
+    for variant in variants:
+        settings = SKINNED_VARIANTS[variant]
         scene = load_scene(_skinned_scene_file(name, spec, variant, settings))
         t0 = time.process_time()
         preps[variant] = (scene, prepare_scene(scene))
@@ -729,24 +753,28 @@ def evaluate_skinned(name: str, spec: dict, *, n_dirs: int = 3200, subset: int =
                        "CPU ratio": round(cpu[variant] / cpu["old"], 2),
                        "CPU ratio, frames 2..": round(steady[variant] / steady["old"], 2),
                        "set-up CPU s": round(cpu[variant + " set-up"], 2),
+                       "negative vertex-frames": int(sum((f.min(axis=1) < 0).sum()
+                                                         for f in baked[variant])),
                        "load": round(load, 1)})
     return accuracy, timing
 
 
-def skinned_main(names) -> int:
-    """``--skinned``: quadrature of the per-frame tracing, then the variants' table."""
+def skinned_main(names, variants=SKINNED_RUN, sections=("variants",)) -> int:
+    """``--skinned``: the variants' table (and, asked for, the quadrature of the per-frame
+    tracing of the own vertices and frame-to-frame interpolation)."""
     specs = scenes(False, names or ["cesiumman", "fox"])
-    quad, acc, tim = [], [], []
+    print(f"load at the start: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     for name, spec in specs.items():
-        quad += skinned_quadrature(name, spec)
-        print(f"\n### Per-frame tracing quadrature, {name} (load {os.getloadavg()[0]:.2f} on "
-              f"{os.cpu_count()} cores)\n\n" + _markdown(quad[-18:]), flush=True)
-        print("\n" + _markdown(skinned_interpolation(name, spec)), flush=True)
-        a, t = evaluate_skinned(name, spec)
-        acc += a
-        tim += t
-        print(f"\n### {name}: radiance vs the real posed mesh (order 4, 3,200 directions)\n\n"
-              + _markdown(a) + "\n\n" + _markdown(t), flush=True)
+        if "quadrature" in sections:
+            quad = skinned_quadrature(name, spec)
+            print(f"\n### Per-frame tracing quadrature, {name} (load {os.getloadavg()[0]:.2f} "
+                  f"on {os.cpu_count()} cores)\n\n" + _markdown(quad), flush=True)
+        if "interpolation" in sections:
+            print("\n" + _markdown(skinned_interpolation(name, spec)), flush=True)
+        if "variants" in sections:
+            a, t = evaluate_skinned(name, spec, variants=variants)
+            print(f"\n### {name}: radiance vs the real posed mesh (order 4, 3,200 "
+                  "directions)\n\n" + _markdown(a) + "\n\n" + _markdown(t), flush=True)
     return 0
 
 
@@ -765,7 +793,12 @@ def main(argv=None) -> int:
                         help="the skinned scenes with a deformable shadow field instead of "
                              "their bound spheres (issue 12)")
     parser.add_argument("--skinned", action="store_true",
-                        help="skinned objects' per-frame tracing: quadrature and variants")
+                        help="skinned objects' per-frame tracing: the variants' table")
+    parser.add_argument("--skinned-variants", default=",".join(SKINNED_RUN),
+                        help=f"with --skinned: comma-separated, of {', '.join(SKINNED_VARIANTS)}")
+    parser.add_argument("--skinned-sections", default="variants",
+                        help="with --skinned: comma-separated, of variants, quadrature, "
+                             "interpolation")
     args = parser.parse_args(argv)
     known = dict(VARIANTS)
     known.update(parse_variant(v) for v in args.variant)
@@ -774,7 +807,8 @@ def main(argv=None) -> int:
         print(f"bench_fidelity: {DATA} not present; nothing to measure")
         return 0
     if args.skinned:
-        return skinned_main(args.scene)
+        return skinned_main(args.scene, tuple(args.skinned_variants.split(",")),
+                            tuple(args.skinned_sections.split(",")))
     n_dirs, subset = (1600, 600) if args.quick else (3200, 2500)
     if args.deformable:
         from shtools.runtime.parallel import resolve_processes

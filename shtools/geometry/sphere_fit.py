@@ -501,7 +501,7 @@ def _covered_fraction(centers, radii, points) -> float:
 
 def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list | None = None,
            ) -> np.ndarray:
-    """Grow radii (least growth first) until every cover point and every
+    """Grow radii (least volume growth first) until every cover point and every
     point of the mesh's surface lies in some sphere.
 
     A ball is convex, so a triangle (or piece of one) whose three corners are
@@ -516,14 +516,21 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list
     n = len(centers)
 
     def grow_for(pieces_: np.ndarray) -> None:
-        """Grow, for each piece ``(T, K, 3)``, the sphere that needs least growth."""
+        """Grow, for each piece ``(T, K, 3)``, the sphere whose volume grows least.
+
+        E sums sphere volumes, so the cost of holding a piece is the volume a
+        sphere gains (need³ - r³), not the radius it gains: ranking by radius
+        grew large spheres as readily as small ones (measured, E after the
+        cover: the tests' character at N = 32 0.207 -> 0.187, spot N = 64
+        0.249 -> 0.239, teapot N = 128 0.197 -> 0.168, CesiumMan N = 32
+        1.154 -> 1.155)."""
         per = max(1, 2_000_000 // (pieces_.shape[1] * n))
         for a in range(0, len(pieces_), per):
             t = pieces_[a:a + per]
             # the radius each sphere needs to hold each piece, (T, N)
             need = np.sqrt(np.max(np.sum((t[:, :, None, :] - centers[None, None]) ** 2,
                                          axis=-1), axis=1))
-            j = np.argmin(need - radii[None, :], axis=1)
+            j = np.argmin(need**3 - radii[None, :] ** 3, axis=1)
             np.maximum.at(radii, j, need[np.arange(len(t)), j])
 
     def held(pieces_: np.ndarray, tree: cKDTree) -> np.ndarray:
@@ -542,7 +549,7 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list
     grow_for(solid.cover[lost][:, None, :])
     # the surface: a triangle inside one sphere is covered (a ball is convex);
     # the others are split in four until inside one sphere or smaller than
-    # COVER_PIECE, and those pieces grow the sphere that needs least growth
+    # COVER_PIECE, and those pieces grow the sphere whose volume grows least
     tri = solid.mesh.vertices[solid.mesh.faces]  # (F, 3, 3)
     for _ in range(COVER_LEVELS + 1):
         centroid = tri.mean(axis=1)

@@ -141,7 +141,8 @@ class SphereLight:
 
 @dataclass
 class SelfVisibility:
-    """An object's self-visibility on its own receiver vertices, from its real mesh.
+    """An object's self-visibility on its own receiver vertices, from its real mesh
+    (or, given as a visibility, its real mesh's shadow traced on other receivers' rows).
 
     Given as a **log** (``log``), the runtime adds it (rotated by ``rotation``)
     to the accumulated log of the receiver rows ``rows`` before the exp (a rigid

@@ -118,6 +118,7 @@ class ShadowRuntime:
         self._products: QuadratureProducts | None = None  # self-visibility products
         self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
+        self._exp_zero: np.ndarray | None = None  # exp(0) at the shading order
         #: processes sharing the per-vertex stages (worker processes start on the
         #: first frame of at least MIN_PARALLEL_PAIRS pairs)
         self.processes = resolve_processes(self.settings.processes)
@@ -542,6 +543,12 @@ class ShadowRuntime:
                  "processes": 1}
         self.last_stats = stats
         t0 = time.process_time()
+        if exclude is not None and len(blockers) == 1 and (exclude == 0).all():
+            # every receiver skips the only sphere set (its object's real mesh was traced
+            # on all of them): nothing to accumulate, no cuts to make
+            stats["seconds"]["cuts"] = time.process_time() - t0
+            stats["spheres_per_vertex"] = 0.0
+            return FrameWork(centers=np.zeros((0, 3)), radii=np.zeros(0))
         if not s.hierarchy and exclude is None:
             centers, radii = leaf_spheres(blockers)
             stats["seconds"]["cuts"] = time.process_time() - t0
@@ -593,6 +600,9 @@ class ShadowRuntime:
         if task[0] == "spheres":
             _, pts, nrm, centers, radii = task
             f = np.zeros((pts.shape[0], self.acc_order ** 2), dtype=np.float32)
+            if centers.shape[0] == 0:  # every sphere skipped (FrameWork of _frame_work)
+                stats["pairs_evaluated"] = 0
+                return f
             accumulate_log(pts, nrm, centers, radii, self.table, self_shadow=s.self_shadow,
                            chunk_pairs=s.chunk_pairs, out=f, kernel=self._kernels[0])
             stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
@@ -666,7 +676,22 @@ class ShadowRuntime:
         return g
 
     def exponentiate(self, log_vis) -> np.ndarray:
-        """exp at the accumulation order, truncated to the shading order, shape ``(V, n*n)``."""
+        """exp at the accumulation order, truncated to the shading order, shape ``(V, n*n)``.
+
+        A log that is zero everywhere (no blocker reaches these receivers, e.g. every
+        row's own blocker skipped) gives ``exp(0)`` of the same method without an exp.
+        Only then: the fast exp's bytes depend on a row's place in its batch (BLAS
+        blocking), so dropping some rows would change the others' last bits.
+        """
+        log_vis = np.asarray(log_vis)
+        if log_vis.shape[0] == 0 or log_vis.any():
+            return self._exp(log_vis)
+        if self._exp_zero is None:
+            self._exp_zero = self._exp(np.zeros((1, log_vis.shape[1]), dtype=log_vis.dtype))[0]
+        return np.repeat(self._exp_zero[None], log_vis.shape[0], axis=0)
+
+    def _exp(self, log_vis) -> np.ndarray:
+        """:meth:`exponentiate` of every row."""
         kwargs = {}
         if self.exp_method in ("ol", "hyb"):
             kwargs["tables"] = self.tables

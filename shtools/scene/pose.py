@@ -42,17 +42,25 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
-    ``trace=False`` leaves out the traced self-visibility of skinned objects (the
-    frame's largest cost): for callers that need only the posed geometry.
+    ``trace=False`` leaves out the traced self-visibility of skinned objects and their
+    traced shadow on the receiver-only objects (the frame's largest cost): for callers
+    that need only the posed geometry.
     """
     from shtools.runtime import SelfVisibility, SphereLight
-    from shtools.scene.transfer import posed_local_log, rotation_of, traced_self_visibility
+    from shtools.scene.transfer import (
+        posed_caster,
+        posed_local_log,
+        rotation_of,
+        traced_self_visibility,
+    )
 
     st = prepared.scene.settings
     kinds = blocker_kinds()
     worlds = world_matrices(prepared.scene.objects, t)
     verts, norms, blockers, meshes, selfs = [], [], [], [], []
     n_rows = 0
+    ground = []  # (rows, vertices, normals) of receiver-only objects
+    caster_of = None  # (caster, posed vertices, blocker index) of the first traced object
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -76,9 +84,14 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             selfs.append(SelfVisibility(o.self_log, own, rotation=rotation,
                                         blocker=len(blockers)))
         if o.traced and trace:  # its posed real mesh, traced this frame; its own blocker skipped
+            caster = posed_caster(world_v, o.faces)
             selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
                 traced_self_visibility(world_v, world_n, o.faces, st.order,
-                                       st.self_visibility_directions))))
+                                       st.self_visibility_directions, caster=caster))))
+            if caster_of is None:
+                caster_of = (caster, world_v, len(blockers))
+        if o.spec.receives and not o.spec.blocks:
+            ground.append((np.arange(n_rows, n_rows + len(world_v)), world_v, world_n))
         if o.local_log is not None and joints is not None:
             selfs.append(SelfVisibility(
                 posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m), own))
@@ -93,6 +106,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                                 selfs, len(blockers) - 1)
             if with_meshes:
                 meshes.append((world_v, o.faces))
+    if caster_of is not None and ground and st.traced_shadows:
+        selfs.append(_traced_shadow(caster_of, ground, st))
     lights = []
     for spec in prepared.scene.lights:
         key = light_at(spec, t)
@@ -100,6 +115,22 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                                   color=key.color))
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
+
+
+def _traced_shadow(caster_of, ground: list, st):
+    """The first traced skinned object's shadow on the receiver-only objects (the ground),
+    traced against its posed mesh in the same Embree scene as its own vertices; its own
+    blocker is skipped on those rows (only one object can skip there: a second traced
+    object still shadows them with its blocker)."""
+    from shtools.runtime import SelfVisibility
+    from shtools.scene.transfer import traced_shadow_visibility
+
+    caster, mesh_v, index = caster_of
+    rows = np.concatenate([r for r, _, _ in ground])
+    g = traced_shadow_visibility(np.concatenate([v for _, v, _ in ground]),
+                                 np.concatenate([n for _, _, n in ground]), mesh_v, caster,
+                                 st.order, st.traced_shadow_directions)
+    return SelfVisibility(None, rows, blocker=index, visibility=g)
 
 
 def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:

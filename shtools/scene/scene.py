@@ -28,7 +28,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from shtools.errors import InputError
-from shtools.fields.self_visibility import HEMISPHERE_DIRECTIONS
+from shtools.fields.self_visibility import CONE_DIRECTIONS, HEMISPHERE_DIRECTIONS
 from shtools.geometry.fit_methods import FIT_METHODS
 from shtools.runtime.settings import EXP_CHOICES, WINDOW_CHOICES, ShadowSettings, Unit, setting
 from shtools.runtime.settings import scene_fields as _scene_fields
@@ -70,6 +70,13 @@ class Settings(ShadowSettings):
     self_visibility_directions: int = setting(
         HEMISPHERE_DIRECTIONS, "int", lo=4, hi=4096,
         doc="rays per vertex and frame tracing skinned objects' posed mesh")
+    traced_shadows: bool = setting(True, "bool",
+                                   doc="skinned objects that trace their posed mesh also trace "
+                                       "the shadow it casts on receiver-only objects")
+    traced_shadow_directions: int = setting(
+        CONE_DIRECTIONS, "int", lo=4, hi=4096,
+        doc="rays per receiver-only vertex and frame whose hemisphere a traced skinned "
+            "object fills (fewer for smaller cones)")
     local_visibility: bool = setting(False, "bool",
                                      doc="rest-pose local visibility g_p of skinned "
                                          "role-\"both\" objects that do not trace their mesh")

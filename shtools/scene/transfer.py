@@ -19,7 +19,10 @@ Skinned objects deform, so nothing can be precomputed: every frame their
 :data:`~shtools.fields.self_visibility.HEMISPHERE_DIRECTIONS` directions per
 vertex over its hemisphere); the runtime multiplies that visibility into the
 vertices' visibility from every other blocker, the object's own blocker skipped
-on its rows.  The older
+on its rows.  The same per-frame Embree scene traces the object's shadow on the
+receiver-only objects (the ground, ``traced_shadows``;
+:func:`traced_shadow_visibility`: rays only inside the cone of its bounding
+sphere), whose rows then skip its blocker too.  The older
 alternative, kept behind ``local_visibility`` for objects that do not trace: the
 paper's *local* visibility ``g_p`` (Ren et al. 2006 Sec. 7), the rest-pose
 self-visibility of fine detail, rays limited to :data:`LOCAL_DISTANCE` times the
@@ -175,7 +178,15 @@ def uses_local_visibility(obj, default: bool) -> bool:
     return bool(default) and _skinned_both(obj)
 
 
-def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int) -> np.ndarray:
+def posed_caster(vertices, faces):
+    """The per-frame Embree scene of a posed mesh (:class:`~shtools.geometry.raycast.RayCaster`)."""
+    from shtools.geometry.raycast import RayCaster
+
+    return RayCaster(vertices, faces, robust=False)  # ~20 % faster; see RayCaster
+
+
+def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int, *,
+                           caster=None) -> np.ndarray:
     """Self-visibility ``(V, order^2)`` float32 of a posed mesh on its own vertices.
 
     Binary visibility of the mesh over each vertex's hemisphere
@@ -194,13 +205,45 @@ def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int) ->
         Shading order.
     n_dirs : int
         Rays per vertex.
+    caster : RayCaster, optional
+        The posed mesh's Embree scene (:func:`posed_caster`), when already built.
     """
     from shtools.fields.self_visibility import hemisphere_visibility
-    from shtools.geometry.raycast import RayCaster
 
-    caster = RayCaster(vertices, faces, robust=False)  # ~20 % faster; see RayCaster
+    caster = caster if caster is not None else posed_caster(vertices, faces)
     return hemisphere_visibility(vertices, normals, caster, order,
                                  n_dirs=n_dirs).astype(np.float32)
+
+
+def traced_shadow_visibility(points, normals, vertices, caster, order: int,
+                             n_dirs: int) -> np.ndarray:
+    """Visibility ``(R, order^2)`` float32 of a posed mesh at other receivers (the ground).
+
+    Rays only inside the cone each receiver sees the mesh's bounding sphere in
+    (:func:`~shtools.fields.self_visibility.cone_visibility`; everything outside it
+    is exactly unblocked), ``n_dirs`` for a cone that fills the hemisphere and fewer
+    in proportion to its solid angle.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (R, 3)
+        The receivers (world space) and their unit normals.
+    vertices : array_like, shape (V, 3)
+        The posed mesh (its bounding sphere: the box centre and the farthest vertex).
+    caster : RayCaster
+        Its Embree scene (:func:`posed_caster`).
+    order : int
+        Shading order.
+    n_dirs : int
+        Rays of a receiver whose cone is its whole hemisphere.
+    """
+    from shtools.fields.self_visibility import cone_visibility
+
+    v = np.asarray(vertices, dtype=np.float64)
+    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
+    return cone_visibility(points, normals, caster, center, radius, order,
+                           n_dirs=n_dirs).astype(np.float32)
 
 
 def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE) -> np.ndarray:

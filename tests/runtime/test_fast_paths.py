@@ -91,3 +91,22 @@ def test_tile_culling_matches_rules_applied_pair_by_pair():
     # float32 accumulation of ~30 terms and table interpolation in 1-cos vs theta
     # (the same 2e-4 budget as test_accumulate.ACC_RTOL)
     np.testing.assert_allclose(got, want, atol=2e-4 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("method", ["ps*", "hyb", "ps"])
+def test_an_all_zero_log_skips_the_exp(method):
+    """A frame no blocker reaches (all-zero logs) is not exponentiated: exp(0) of the
+    same method, the same bytes; a log with any non-zero row goes through the exp."""
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+
+    rt = ShadowRuntime(ShadowSettings(order=4, exp_method=method, processes=1))
+    zeros = np.zeros((30, rt.acc_order ** 2), dtype=np.float32)
+    got = rt.exponentiate(zeros)
+    np.testing.assert_array_equal(got, rt._exp(zeros))
+    want = np.zeros(16)
+    want[0] = np.sqrt(4 * np.pi)
+    np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), atol=1e-6)
+    rng = np.random.default_rng(5)
+    f = zeros.copy()
+    f[7] = 0.3 * rng.normal(size=f.shape[1])
+    np.testing.assert_array_equal(rt.exponentiate(f), rt._exp(f))

@@ -275,7 +275,8 @@ def test_more_mistakes_give_one_pinned_line(tmp_path, addition, message):
                       "exp_method, exp_degree, window, window_h, theta_max_deg, theta_min_deg, "
                       "hierarchy, vertices_per_cluster, self_shadow, deringing, field_space, "
                       "frames, fps, tables, method, self_visibility, "
-                      "self_visibility_directions, local_visibility"),
+                      "self_visibility_directions, traced_shadows, traced_shadow_directions, "
+                      "local_visibility"),
     ("vertices_per_clustr = 2", "settings: unknown key 'vertices_per_clustr'; did you mean "
                                 "'vertices_per_cluster'?"),
     ('tables = "t.h5"', "settings.tables: file 't.h5' not found (paths are relative to the "
