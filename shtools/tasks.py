@@ -101,9 +101,18 @@ def default_workers() -> int:
 
 #: Modules the fork server imports once, before it forks any worker: a worker
 #: starts with them imported (the tasks of bakes, fits and field shells, and the
-#: runtime's frame parts).  One that cannot be imported (a core install) is skipped.
-WORKER_PRELOAD = ("shtools.tasks", "shtools.runtime.evaluator", "shtools.scene.bake",
-                  "shtools.geometry.assets", "shtools.fields.build")
+#: runtime's frame parts, with the libraries they import lazily: a worker that
+#: imported trimesh, SciPy and Embree itself took ~1.5 s more per bake).  One that
+#: cannot be imported (a core install) is skipped.
+WORKER_PRELOAD = (
+    "shtools.tasks", "shtools.runtime.evaluator", "shtools.scene.bake", "shtools.scene.transfer",
+    "shtools.scene.midrange", "shtools.scene.primitives", "shtools.fields.build",
+    "shtools.fields.deformable", "shtools.geometry.assets", "shtools.geometry.raycast",
+    "shtools.sh.scaling", "shtools.progress",
+    "trimesh", "scipy.linalg", "scipy.optimize", "scipy.sparse", "scipy.spatial",
+    "scipy.special", "embreex.rtcore_scene", "embreex.mesh_construction", "threadpoolctl",
+    "tqdm",
+)
 
 
 def worker_context():
