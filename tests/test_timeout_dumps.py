@@ -4,7 +4,8 @@ pytest-timeout prints the stacks of the test process's threads only; a bake that
 in a worker showed nothing but the caller waiting for a result.  The conftest's timeout
 hook sends SIGABRT to every process below the test's, whose faulthandler prints all
 their threads' stacks.  Checked on a throw-away suite run with this conftest and a
-3 s timeout: each test leaves a worker stuck in ``stuck_in_worker``.
+6 s timeout (two xdist workers: the two tests at once): each test leaves a worker stuck
+in ``stuck_in_worker``.
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ SUITE = textwrap.dedent("""
     import time
     from concurrent.futures import ProcessPoolExecutor
 
-    from shtools.tasks import task_pool
+    from shtools.tasks import task_pool, worker_context
+
+    worker_context()  # the fork server starts now, not inside a test's few seconds
 
 
     def stuck_in_worker(*_):
@@ -50,8 +53,8 @@ def test_a_timed_out_test_prints_its_workers_stacks(tmp_path):
     shutil.copy(HERE / "conftest.py", tmp_path / "conftest.py")
     (tmp_path / "test_hangs.py").write_text(SUITE)
     done = subprocess.run(
-        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-p", "no:xdist",
-         "--rootdir", str(tmp_path), "-o", "timeout_method=signal", "--timeout", "3",
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-n", "2",
+         "--rootdir", str(tmp_path), "-o", "timeout_method=signal", "--timeout", "6",
          str(tmp_path / "test_hangs.py")],
         capture_output=True, text=True, timeout=300, cwd=tmp_path)
     log = done.stdout + done.stderr
