@@ -10,8 +10,13 @@ time of the fit in this one process (``OPENBLAS_NUM_THREADS=1``), with the
 ``--baseline DIR`` also fits with another checkout (e.g. the previous
 release) in a fresh single-threaded process, one fit at a time, and scores its
 spheres with the same evaluators: speed-ups are measured side by side.
-A second table compares with the spheretree figures quoted in issue 3
-(medial-axis method, Bradshaw & O'Sullivan).
+``--external NAME=COMMAND`` runs another sphere fitter (any program, in its
+own environment) on the same triangles, case by case beside this one, and
+scores its spheres the same way, also after growing them until they hold the
+whole surface ("made bounding"); see docs/sphere-fits.md, "Anchors".
+``--iterations K ...`` adds variational fits with a round budget of K (for
+comparisons at equal time).  A second table compares with the spheretree
+figures quoted in issue 3 (medial-axis method, Bradshaw & O'Sullivan).
 
 Usage::
 
@@ -21,6 +26,17 @@ Usage::
         --methods variational --baseline ../fit-base --no-spheretree
     python benchmarks/bench_spheres.py --cases CesiumMan:32 dragon:64 dragon:128 \
         --methods variational --baseline ../fit-base --no-spheretree
+    python benchmarks/bench_spheres.py --cases spot:40 --methods variational \
+        --iterations 10 --no-spheretree \
+        --external "other=/path/venv/bin/python fit_other.py {mesh} {n} {out}"
+
+An external COMMAND is split like a shell line (no shell runs it); ``{mesh}`` is
+replaced by a binary PLY of the mesh as shtools loaded it (the same triangles
+for every fitter), ``{n}`` by N and ``{out}`` by the file the program must write:
+``.json`` ``{"centers": [[x, y, z], ...], "radii": [...]}`` with optional
+``"wall"`` and ``"cpu"`` seconds of the fit alone (else the whole process is
+timed: its wall clock and its children's CPU time), or a spheretree ``.sph`` if
+the template names ``{out}.sph``.
 """
 
 from __future__ import annotations
@@ -29,6 +45,8 @@ import argparse
 import importlib.util
 import json
 import os
+import resource
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -127,12 +145,12 @@ def distinct(centers, radii) -> int:
     return distinct_spheres(np.asarray(centers), np.asarray(radii))
 
 
-def fit_here(mesh, n: int, method: str):
+def fit_here(mesh, n: int, method: str, max_iterations: int | None = None):
     """(centers, radii, wall, cpu) of a fit in this process."""
     from shtools.geometry.sphere_fit import fit_spheres
 
     wall, cpu = time.perf_counter(), time.process_time()
-    result = fit_spheres(mesh, n, method=method, seed=0)
+    result = fit_spheres(mesh, n, method=method, seed=0, max_iterations=max_iterations)
     return (result.centers, result.radii, time.perf_counter() - wall,
             time.process_time() - cpu)
 
@@ -145,6 +163,59 @@ def fit_baseline(code: Path, path: Path, n: int):
         env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
     r = json.loads(out.stdout)
     return np.array(r["centers"]), np.array(r["radii"]), r["wall"], r["cpu"]
+
+
+def parse_external(spec: str) -> tuple[str, list[str]]:
+    """``"NAME=COMMAND"`` -> (NAME, COMMAND split like a shell line)."""
+    name, sep, command = spec.partition("=")
+    argv = shlex.split(command)
+    if not sep or not name.strip() or not argv or not any("{out}" in a for a in argv):
+        raise SystemExit(f"error: --external {spec!r}: expected NAME=COMMAND with {{out}} "
+                         "in COMMAND (and usually {mesh} and {n})")
+    return name.strip(), argv
+
+
+def read_external(path: Path):
+    """(centers (N, 3), radii (N,), timings dict) from an external fitter's output file:
+    ``.sph`` (spheretree; no timings) or JSON with ``centers``, ``radii`` and optional
+    ``wall`` / ``cpu`` seconds."""
+    from shtools.geometry.sph_format import read_sph
+
+    if path.suffix == ".sph":
+        spheres = read_sph(path)
+        return np.asarray(spheres.centers), np.asarray(spheres.radii), {}
+    data = json.loads(path.read_text())
+    centers = np.asarray(data["centers"], dtype=np.float64).reshape(-1, 3)
+    radii = np.asarray(data["radii"], dtype=np.float64).reshape(-1)
+    if len(centers) != len(radii) or not len(radii):
+        raise SystemExit(f"error: {path}: {len(centers)} centres and {len(radii)} radii; "
+                         "the external fitter must write one radius per centre")
+    return centers, radii, {k: float(data[k]) for k in ("wall", "cpu") if k in data}
+
+
+def fit_external(argv: list[str], path: Path, n: int):
+    """(centers, radii, wall, cpu) of an external fitter run as a command on ``path``.
+    Times are the program's own (fit alone) when it reports them, else the process's."""
+    with tempfile.TemporaryDirectory(prefix="bench_spheres_ext_") as tmp:
+        out = Path(tmp) / "spheres.json"
+        args = [a.format(mesh=path, n=n, out=out) for a in argv]
+        # the template may name {out}.sph (or embed {out} in an option): find that file
+        out = Path(next((a[a.index(str(out)):] for a in args if str(out) in a), out))
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        wall = time.perf_counter()
+        done = subprocess.run(args, capture_output=True, text=True,
+                              env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                   "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+        wall = time.perf_counter() - wall
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if done.returncode != 0 or not out.exists():
+            tail = (done.stderr.strip().splitlines() or ["no output"])[-1]
+            state = "written" if out.exists() else "missing"
+            raise SystemExit(f"error: {args[0]}: external fitter failed (exit "
+                             f"{done.returncode}, {out.name} {state}): {tail}")
+        centers, radii, times = read_external(out)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return centers, radii, times.get("wall", wall), times.get("cpu", cpu)
 
 
 def made_bounding(mesh, centers, radii) -> float:
@@ -166,23 +237,35 @@ def made_bounding(mesh, centers, radii) -> float:
 
 
 def run(meshes: dict, counts, methods=METHODS, log=print, baseline: Path | None = None,
-        cases=None):
+        cases=None, externals=None, iterations=()):
     """Fit every mesh x N x method (and the baseline's variational fit); rows of dicts.
-    ``cases``, a list of (mesh name, N), replaces meshes x counts."""
+    ``cases``, a list of (mesh name, N), replaces meshes x counts; ``externals``
+    ``{name: argv template}`` (see :func:`fit_external`) run first at every case;
+    ``iterations`` adds a variational fit ``variational@K`` per round budget K."""
     from shtools.geometry.outside_volume import OutsideVolume
 
     rows = []
+    externals = externals or {}
     for name, (path, mesh) in meshes.items():
         evaluator = OutsideVolume(mesh)
-        if baseline is not None and path is None:  # a procedural mesh: give it a file
-            path = Path(tempfile.mkdtemp(prefix="bench_spheres_")) / f"{name}.ply"
-            # binary PLY: float32 vertices (~1e-7 of the size, far below the fit's tolerances)
-            mesh.export(path)
+        ply = None
+        if externals or (baseline is not None and path is None):
+            # binary PLY of the mesh as loaded here: float32 vertices (~1e-7 of the size,
+            # far below the fits' tolerances); the external fitters all see these triangles
+            ply = Path(tempfile.mkdtemp(prefix="bench_spheres_")) / f"{name}.ply"
+            mesh.export(ply)
+        if path is None:  # a procedural mesh: the baseline reads the PLY
+            path = ply
         for n in (counts if cases is None else [k for m, k in cases if m == name]):
             runs = [(m, lambda m=m, mesh=mesh, n=n: fit_here(mesh, n, m)) for m in methods]
+            runs += [(f"variational@{k}",
+                      lambda k=k, mesh=mesh, n=n: fit_here(mesh, n, "variational", k))
+                     for k in iterations]
             if baseline is not None:
                 runs.insert(0, ("baseline",
                                 lambda path=path, n=n: fit_baseline(baseline, path, n)))
+            for ext, argv in reversed(externals.items()):
+                runs.insert(0, (ext, lambda argv=argv, n=n, ply=ply: fit_external(argv, ply, n)))
             for method, fit in runs:
                 before = load()
                 centers, radii, wall, cpu = fit()
@@ -193,7 +276,7 @@ def run(meshes: dict, counts, methods=METHODS, log=print, baseline: Path | None 
                        "E_mc": monte_carlo_ratio(mesh, spheres),
                        "coverage": surface_coverage(mesh, centers, radii),
                        "wall": wall, "cpu": cpu, "load": f"{before} -> {load()}"}
-                if method == "baseline":
+                if method == "baseline" or method in externals:
                     row["E_bounding"] = made_bounding(mesh, centers, radii)
                 rows.append(row)
                 log(f"  {name} N={n} {method}: E={row['E']:.3f} (MC {row['E_mc']:.3f}) "
@@ -232,6 +315,21 @@ def speedup_table(rows) -> str:
     return "\n".join(lines)
 
 
+def external_table(rows, externals) -> str:
+    """Each external fitter beside this checkout's variational fits at the same case."""
+    lines = ["| mesh | N | fitter | CPU s | wall s | spheres (distinct) | E (flux) "
+             "| E made bounding | E (MC) | surface coverage | load (1 min / cores) |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        if not (r["method"] in externals or r["method"].startswith("variational")):
+            continue
+        bounding = f"{r['E_bounding']:.3f}" if "E_bounding" in r else "(bounding)"
+        lines.append(f"| {r['mesh']} | {r['N']} | {r['method']} | {r['cpu']:.1f} | "
+                     f"{r['wall']:.1f} | {r['spheres']} ({r['distinct']}) | {r['E']:.3f} | "
+                     f"{bounding} | {r['E_mc']:.3f} | {r['coverage']:.5f} | {r['load']} |")
+    return "\n".join(lines)
+
+
 def ratio_table(rows) -> str:
     """Variational E divided by each baseline's E at the same mesh and N."""
     lines = ["| mesh | N | E variational | / octree | / k-means |", "|---|---:|---:|---:|---:|"]
@@ -259,11 +357,16 @@ def main(argv=None) -> None:
     parser.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
     parser.add_argument("--baseline", type=Path, default=None,
                         help="another checkout whose variational fit runs beside this one")
+    parser.add_argument("--external", action="append", default=[], metavar="NAME=COMMAND",
+                        help="another fitter run as COMMAND ({mesh} {n} {out}) at every case")
+    parser.add_argument("--iterations", type=int, nargs="*", default=[], metavar="K",
+                        help="also fit variationally with a round budget of K")
     parser.add_argument("--spheretree-only", action="store_true",
                         help="only the comparison with the spheretree figures")
     parser.add_argument("--no-spheretree", action="store_true",
                         help="skip the comparison with the spheretree figures")
     args = parser.parse_args(argv)
+    externals = dict(parse_external(spec) for spec in args.external)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     print(f"CPU: {_cpu_model()}, {os.cpu_count()} cores; one process, one BLAS thread; "
           f"load average at start {load()}\n")
@@ -281,9 +384,14 @@ def main(argv=None) -> None:
         meshes.update(_real([m for m in (args.meshes or REAL_MESHES) if m in REAL_MESHES]))
     if args.meshes:
         meshes = {k: v for k, v in meshes.items() if k in args.meshes}
-    rows = run(meshes, counts, methods=args.methods, baseline=args.baseline, cases=cases)
+    rows = run(meshes, counts, methods=args.methods, baseline=args.baseline, cases=cases,
+               externals=externals, iterations=args.iterations)
     print("## Outside volume E, coverage and time\n")
     print(table(rows))
+    if externals:
+        print(f"\n## Against {', '.join(externals)} (same triangles, same run; E made "
+              "bounding: grown until they hold the whole surface)\n")
+        print(external_table(rows, externals))
     if args.baseline is not None:
         print(f"\n## Against {args.baseline} (same machine, same run)\n")
         print(speedup_table(rows))
