@@ -112,12 +112,12 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                                 selfs, len(blockers) - 1)
             if with_meshes:
                 meshes.append((world_v, o.faces))
-    # rigid objects whose bounding spheres overlap (a body and its limbs) are traced
-    # jointly, the others each in its own cone with the visibilities multiplied: apart,
-    # separate cones measured closer to the real meshes at the same ray density (dragon +
-    # armadillo ground 3.2 vs 3.7 %: a common cone spends its rays on the gap); together,
-    # one trace saves a cone set-up and an SH product per object (demo: 5 limbs)
-    casters.extend(_rigid_caster(group) for group in _overlapping(rigid))
+    # each rigid object traced in its own cone, the visibilities multiplied: measured
+    # closer to the real meshes than one joint trace in the cone of their common bounding
+    # sphere at the same ray density (dragon + armadillo ground 3.2 vs 3.7 %: the common
+    # cone spends its rays on the gap), and joint traces of the demo's overlapping limbs
+    # left visible ray noise on its ground (the common cone's sparser rays)
+    casters.extend(_rigid_caster([r]) for r in rigid)
     if casters and ground and st.traced_shadows:
         selfs.extend(_traced_shadow(c, ground, st) for c in casters)
     lights = []
@@ -150,24 +150,6 @@ def _traced_shadow(caster_of, ground: list, st):
 #: own): ids of the objects -> (pid, their faces, their matrices, caster).  Rebuilt only
 #: when a transform changes, so a static object's scene is built once per bake.
 _RIGID_CASTERS: dict = {}
-
-
-def _overlapping(rigid: list) -> list[list]:
-    """``rigid`` entries grouped by overlapping bounding spheres (connected components)."""
-    from scipy.sparse.csgraph import connected_components
-
-    if not rigid:
-        return []
-    spheres = []
-    for _, _, v, _ in rigid:
-        center = 0.5 * (v.min(axis=0) + v.max(axis=0))
-        spheres.append((center, float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))))
-    centers = np.array([c for c, _ in spheres])
-    radii = np.array([r for _, r in spheres])
-    touch = (np.linalg.norm(centers[:, None] - centers[None], axis=2)
-             < radii[:, None] + radii[None])
-    _, label = connected_components(touch, directed=False)
-    return [[rigid[i] for i in np.flatnonzero(label == g)] for g in range(label.max() + 1)]
 
 
 def _rigid_caster(rigid: list):

@@ -103,13 +103,13 @@ def test_rigid_object_traces_its_shadow_on_the_ground(tmp_path):
 
 
 @pytest.mark.parametrize("role,x,skipped", [
-    ("both", 0.9, [(0, 1)]), ("blocker", 0.9, [(0, 1)]), ("both", 1.7, [(0,), (1,)])])
+    ("both", 0.9, [(0,), (1,)]), ("blocker", 0.9, [(0,), (1,)]), ("both", 1.7, [(0,), (1,)])])
 def test_two_traced_rigid_objects_both_skip_their_spheres_on_the_ground(tmp_path, role, x,
                                                                         skipped):
-    """Two tori over the ground (the second "both" or "blocker"): overlapping bounding
-    spheres are traced jointly (one Embree scene, their common cone), apart each in its
-    own cone with the two visibilities multiplied; either way every traced object's
-    spheres are skipped on the ground (a row skips several blockers)."""
+    """Two tori over the ground (the second "both" or "blocker", overlapping bounding
+    spheres or apart): each is traced in its own cone, the two visibilities multiplied,
+    and every traced object's spheres are skipped on the ground (a row skips several
+    blockers)."""
     from shtools.scene.pose import pose_frame
 
     _write_torus(tmp_path)
@@ -123,9 +123,9 @@ def test_two_traced_rigid_objects_both_skip_their_spheres_on_the_ground(tmp_path
     spheres = _bake(_scene(tmp_path, "traced_shadows = false", second=role, second_x=x))
     err = relative_rmse(traced[:, :GROUND], ref[:, :GROUND])
     err_spheres = relative_rmse(spheres[:, :GROUND], ref[:, :GROUND])
-    # measured 1.4 % joint (x = 0.9; 1.8 % when they were traced apart and multiplied)
-    # against 6.4 % by the spheres; apart (x = 1.7) 1.5 % against 7.5 %; a sphere set
-    # left on the ground would be counted twice with the traced shadow
+    # measured 1.8 % (x = 0.9; one joint trace in their common cone: 1.4 %) against 6.4 %
+    # by the spheres; apart (x = 1.7) 1.5 % against 7.5 %; a sphere set left on the
+    # ground would be counted twice with the traced shadow
     assert err < 0.03, err
     assert err_spheres > 3 * err, (err_spheres, err)
 
