@@ -51,7 +51,7 @@ CORE_VENV := .venv-core
 test-core: ## `pip install .` (numpy + h5py only) in a fresh venv; the runtime's tests there
 	rm -rf $(CORE_VENV) && $(PYTHON) -m venv $(CORE_VENV)
 	$(CORE_VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(CORE_VENV)/bin/python -m pip install --quiet . pytest pytest-timeout
+	$(CORE_VENV)/bin/python -m pip install --quiet . 'pytest>=9' pytest-timeout
 	@echo "core install: $$(du -sh $(CORE_VENV)/lib/python*/site-packages | cut -f1) of site-packages"
 	@# -P: import the installed package, not the source tree
 	OPENBLAS_NUM_THREADS=1 $(CORE_VENV)/bin/python -P -m pytest -q -p no:cacheprovider $(CORE_TESTS)

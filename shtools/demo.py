@@ -256,10 +256,15 @@ def run_demo(outdir: str | Path, *, frames: int = FRAMES, quiet: bool = False,
         # one fit -> tree chain per part, two at a time (like `make -j2`)
         from concurrent.futures import ProcessPoolExecutor
 
+        from shtools.tasks import blas_threads, use_blas_threads, worker_context
+
         jobs = [(out, name, n, fit_method or FIT_METHOD) for name, n in SPHERES.items()]
         # biggest fits first so the two workers finish together
         jobs.sort(key=lambda job: -job[2])
-        with ProcessPoolExecutor(max_workers=2) as pool:
+        # workers from the fork server, as the library's pools (shtools.tasks.worker_context)
+        with ProcessPoolExecutor(max_workers=2, mp_context=worker_context(),
+                                 initializer=use_blas_threads,
+                                 initargs=(blas_threads(),)) as pool:
             list(pool.map(_fit_part, jobs))  # a failure re-raises here
 
     def tables():

@@ -6,12 +6,14 @@ one interface, :class:`TaskPool`:
 
 ``"inline"``
     In the calling process, one task after the other (one worker; nothing to
-    set up).  Used for a single task, one worker, or where ``fork`` is missing.
+    set up).  Used for a single task, one worker, or where worker processes
+    cannot be started (:func:`worker_context`).
 ``None`` / ``"processes"`` (the default)
-    Forked worker processes on this machine
-    (:class:`concurrent.futures.ProcessPoolExecutor`, ``fork`` start method):
-    the state the tasks share reaches the workers through ``fork``, without
-    pickling; results come back pickled.
+    Worker processes on this machine
+    (:class:`concurrent.futures.ProcessPoolExecutor`), forked by
+    multiprocessing's fork server (:func:`worker_context`): the state the tasks
+    share is pickled once to each worker when it starts; results come back
+    pickled.
 a Dask scheduler
     ``"local"`` starts a :class:`distributed.LocalCluster` of ``workers``
     single-threaded worker processes here (and stops it afterwards);
@@ -48,6 +50,8 @@ import collections
 import contextlib
 import multiprocessing
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -95,9 +99,109 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def can_fork() -> bool:
-    """Whether forked worker processes are available (not on Windows)."""
-    return "fork" in multiprocessing.get_all_start_methods()
+#: Modules the fork server imports once, before it forks any worker: a worker
+#: starts with them imported (the tasks of bakes, fits and field shells, and the
+#: runtime's frame parts, with the libraries they import lazily: a worker that
+#: imported trimesh, SciPy and Embree itself took ~1.5 s more per bake).  One that
+#: cannot be imported (a core install) is skipped.
+WORKER_PRELOAD = (
+    "shtools.tasks", "shtools.runtime.evaluator", "shtools.scene.bake", "shtools.scene.transfer",
+    "shtools.scene.midrange", "shtools.scene.primitives", "shtools.fields.build",
+    "shtools.fields.deformable", "shtools.geometry.assets", "shtools.geometry.raycast",
+    "shtools.sh.scaling", "shtools.progress",
+    "trimesh", "scipy.linalg", "scipy.optimize", "scipy.sparse", "scipy.spatial",
+    "scipy.special", "embreex.rtcore_scene", "embreex.mesh_construction", "threadpoolctl",
+    "tqdm",
+)
+
+
+def worker_context():
+    """The multiprocessing context of local worker processes: ``forkserver``; None without one.
+
+    Not ``fork``: the calling process has threads of its own -- oneTBB's workers
+    once Embree has built a scene, tqdm's monitor -- and a fork copies a lock one
+    of them holds at that instant, locked for ever, into a child that has no
+    thread to release it.  A frame worker forked just after this process had ray
+    traced hung in oneTBB's ``private_server::wake_some`` at its first Embree
+    build (a test that stalled until its timeout; docs/scale-out.md).  The fork
+    server is a fresh single-threaded process, started once (by exec) on first
+    use with :data:`WORKER_PRELOAD` imported; every worker is forked from it,
+    so no worker inherits this process's threads or locks.  Used by the frame
+    pool here and by the runtime's in-frame workers
+    (:class:`shtools.runtime.parallel.VertexWorkers`).
+    """
+    if "forkserver" not in multiprocessing.get_all_start_methods():  # Windows
+        return None
+    from multiprocessing import forkserver
+
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(list(WORKER_PRELOAD))  # no effect once the server runs
+    # start the server now (once): outside start_worker's held signals, so that Ctrl-C
+    # during its imports stops the caller at once
+    forkserver.ensure_running()
+    return context
+
+
+#: Signals :func:`start_worker` holds back (the CLI's stop signals and Ctrl-C).
+HELD_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP")
+                     if hasattr(signal, name))
+
+
+def start_worker(submit: Callable, *args):
+    """``submit(*args)`` of a process pool with stop signals held until it returns.
+
+    A submit may start a worker, which then reads its pickled start-up data from
+    this process through the fork server: a signal handler's exception
+    (Ctrl-C, the CLI's SIGTERM) halfway through that write would leave the new
+    worker a truncated pickle, and it would print a traceback as it dies, after
+    the CLI's one-line message.  Held, a signal is raised again as soon as the
+    submit returns (milliseconds later).  Only the main thread can set signal
+    handlers; from any other thread nothing is held.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return submit(*args)
+    held: list[int] = []
+    previous = {}
+    try:
+        for sig in HELD_SIGNALS:
+            if signal.getsignal(sig) is not None:  # None: set outside Python, left alone
+                previous[sig] = signal.signal(sig, lambda signum, _frame: held.append(signum))
+        return submit(*args)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(held):
+            signal.raise_signal(sig)
+
+
+def can_start_workers() -> bool:
+    """Whether local worker processes are available (not on Windows)."""
+    return "forkserver" in multiprocessing.get_all_start_methods()
+
+
+def blas_threads() -> int | None:
+    """BLAS threads of this process (threadpoolctl), for its workers; None if unknown.
+
+    A worker does not inherit this process's BLAS limit (the CLI sets one thread,
+    ``shtools.cli._common.one_blas_thread``), so it is handed over explicitly.
+    """
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return None
+    counts = [lib["num_threads"] for lib in threadpool_info() if lib.get("user_api") == "blas"]
+    return min(counts) if counts else None
+
+
+def use_blas_threads(count: int | None) -> None:
+    """Set this (worker) process's BLAS threads to ``count`` (None: leave them)."""
+    if count is None:
+        return
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    threadpool_limits(limits=int(count), user_api="blas")
 
 
 @dataclass
@@ -157,8 +261,8 @@ class TaskPool:
             ``setup(shared)``, the one-time work of a worker before its first
             task (building a runtime from the shared state, ...): run on every
             Dask worker here, before any task, and timed into
-            :attr:`setup_seconds` (start-up, not task time); in each forked
-            local worker when it starts; once in this process for ``inline``.
+            :attr:`setup_seconds` (start-up, not task time); in each local
+            worker when it starts; once in this process for ``inline``.
             Tasks must still work without it (a Dask worker that joins later
             or replaces a dead one runs its first task without the set-up), so
             ``setup`` is the same cached initialisation the task function does;
@@ -206,8 +310,8 @@ class TaskPool:
         items : iterable
             Task inputs (small, picklable).
         shared : object or Shared, optional
-            State every task needs (a prepared scene, options): forked into
-            local workers, scattered once to Dask workers; a :class:`Shared`
+            State every task needs (a prepared scene, options; picklable):
+            pickled once to each local worker, scattered once to Dask workers; a :class:`Shared`
             from :meth:`share` is reused as it is (no second shipping).
         window : int, optional
             Tasks in flight at most (default ``WINDOW_PER_WORKER * workers``).
@@ -248,9 +352,8 @@ class TaskPool:
         from concurrent.futures import ProcessPoolExecutor
         from concurrent.futures.process import BrokenProcessPool
 
-        global _SHARED
-        _SHARED = shared  # reaches the workers through fork, not pickling
-        context = multiprocessing.get_context("fork")
+        context = worker_context()
+        blas = blas_threads()
         items = iter(items)
         pending: collections.OrderedDict = collections.OrderedDict()  # index -> item
         futures: dict[int, Any] = {}  # index -> Future, None when the pool was broken
@@ -259,12 +362,12 @@ class TaskPool:
         exhausted = False
 
         def new_pool():
-            return ProcessPoolExecutor(self.workers, mp_context=context,
-                                       initializer=_worker_init, initargs=(os.getpid(), setup))
+            return ProcessPoolExecutor(self.workers, mp_context=context, initializer=_worker_init,
+                                       initargs=(os.getpid(), shared, setup, blas))
 
         def submit(index):
             try:
-                futures[index] = pool.submit(_run_local, fn, pending[index])
+                futures[index] = start_worker(pool.submit, _run_local, fn, pending[index])
             except BrokenProcessPool:  # a worker died since the last check
                 futures[index] = None
 
@@ -308,7 +411,6 @@ class TaskPool:
                 yield result
         finally:
             _terminate(pool)
-            _SHARED = None
 
     def _dask(self, fn, items, shared_ref, window):
         client = self.client
@@ -358,7 +460,7 @@ class Shared:
     Attributes
     ----------
     value : object
-        The state itself (what local workers get through ``fork``).
+        The state itself (what each local worker gets pickled when it starts).
     ref : distributed.Future or None
         The state scattered to the Dask workers.
     setup : callable or None
@@ -371,15 +473,17 @@ class Shared:
 
 
 # ---------------------------------------------------------------------- worker side
+#: The state the tasks of this worker share (set by :func:`_worker_init`).
 _SHARED: Any = None
 
 
-def _worker_init(parent_pid: int, setup=None) -> None:
+def _worker_init(parent_pid: int, shared, setup=None, blas: int | None = None) -> None:
     """Local workers die with their parent, leave Ctrl-C to it, and run the set-up."""
-    import signal
-
+    global _SHARED
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent cancels and terminates us
     die_with_parent(parent_pid)
+    use_blas_threads(blas)
+    _SHARED = shared
     if setup is not None:
         try:
             setup(_SHARED)
@@ -390,34 +494,49 @@ def _worker_init(parent_pid: int, setup=None) -> None:
 
 
 def die_with_parent(parent_pid: int) -> None:
-    """Make this (forked) process exit when ``parent_pid`` dies (no orphaned workers).
+    """Make this worker exit when ``parent_pid``, the process of its pool, dies (no orphans).
 
-    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, then a check that the parent did
-    not die before the call.  Elsewhere: a daemon thread polling ``getppid``.
-    Used by the frame pool here and by the runtime's in-frame workers.
+    A worker is a child of the fork server (:func:`worker_context`), not of
+    ``parent_pid``, and it holds the pipe whose end-of-file would stop the server,
+    so neither a parent-death signal nor the server ends it: a daemon thread
+    here waits for ``parent_pid`` to end (Linux: ``pidfd_open`` + ``poll``, woken
+    at once, even after ``kill -9``; elsewhere a check every 0.5 s) and exits the
+    worker.  The server and multiprocessing's resource tracker then see their
+    pipes close and exit too.  Used by the frame pool here and by the runtime's
+    in-frame workers.
     """
-    import signal
-    import threading
+    import select
 
     try:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        PR_SET_PDEATHSIG = 1  # <sys/prctl.h>
-        armed = libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
-    except (OSError, AttributeError):  # no libc prctl: not Linux
-        armed = False
-    if os.getppid() != parent_pid:
+        pidfd = os.pidfd_open(parent_pid)
+    except ProcessLookupError:  # gone already
         os._exit(1)
-    if armed:
-        return
+    except (AttributeError, OSError):  # not Linux (>= 5.3)
+        pidfd = None
 
     def watch():
-        while os.getppid() == parent_pid:
-            time.sleep(0.5)
+        if pidfd is not None:
+            poller = select.poll()
+            poller.register(pidfd, select.POLLIN)  # readable once the process has ended
+            while not poller.poll():
+                pass
+        else:
+            while _exists(parent_pid):
+                time.sleep(0.5)
         os._exit(1)
 
     threading.Thread(target=watch, name="shtools-parent-watch", daemon=True).start()
+
+
+def _exists(pid: int) -> bool:
+    """Whether process ``pid`` is still there (signal 0 checks without sending)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # there, owned by someone else
+        return True
+    return True
 
 
 def _timed(fn, shared, item, worker: str):
@@ -520,7 +639,7 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
     Parameters
     ----------
     scheduler : str, optional
-        None or ``"processes"`` (forked local workers), ``"inline"``,
+        None or ``"processes"`` (local worker processes), ``"inline"``,
         ``"local"`` (a Dask LocalCluster), ``"tcp://HOST:PORT"`` or a
         scheduler file.
     workers : int, optional
@@ -542,7 +661,7 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
         if n_tasks is not None:
             n = max(1, min(n, n_tasks))
         kind = scheduler or "processes"
-        if kind == "processes" and (n == 1 or not can_fork()):
+        if kind == "processes" and (n == 1 or not can_start_workers()):
             kind = "inline"
         yield TaskPool("inline" if kind == "inline" else "processes",
                        1 if kind == "inline" else n)

@@ -39,7 +39,7 @@ def scheduler_options(unit: str):
             "--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
             help=f"Run {unit} on Dask: 'local' starts a LocalCluster here, an address or a "
                  "scheduler file joins an existing cluster (pip install "
-                 "'shtools[distributed]'; docs/scale-out.md).  Default: forked workers on "
+                 "'shtools[distributed]'; docs/scale-out.md).  Default: worker processes on "
                  "this machine's cores.")(f)
     return decorate
 

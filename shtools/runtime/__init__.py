@@ -44,7 +44,7 @@ setting.  Tables passed in must have exactly the accumulation order (the cap
 log depends on the order it is computed at).
 
 Performance notes: a frame's receiver clusters are split into parts of equal
-work, one evaluated in the calling process and the others in forked worker
+work, one evaluated in the calling process and the others in worker
 processes (accumulation and exp per part; :mod:`~shtools.runtime.parallel`,
 ``processes=None`` = one per core; the default is 1, the CLI opts in) -- threads do not
 scale here, the GIL

@@ -77,7 +77,7 @@ class ShadowRuntime:
     part_pool : shtools.tasks.TaskPool, optional
         Run the parts of a large frame as tasks of this pool (e.g. a Dask
         cluster; :class:`~shtools.runtime.parallel.PoolParts`) instead of on
-        forked worker processes; the bytes are the same.
+        local worker processes; the bytes are the same.
 
     Attributes
     ----------
@@ -200,8 +200,8 @@ class ShadowRuntime:
         -----
         Frames of at least ``MIN_PARALLEL_PAIRS`` sphere-receiver pairs are
         split by receiver cluster into ``FRAME_PARTS`` parts; with
-        ``settings.processes > 1`` (the default on a multi-core machine) forked
-        workers share them with this process (:mod:`shtools.runtime.parallel`;
+        ``settings.processes > 1`` (the default on a multi-core machine) worker
+        processes share them with this process (:mod:`shtools.runtime.parallel`;
         :meth:`close` stops them).  The split does not depend on the process
         count, so the result is the same bytes with any number of processes.
         """

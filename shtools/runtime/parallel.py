@@ -5,18 +5,20 @@ Threads do not speed it up: every pass releases and re-takes the GIL, and two
 threads contending for it spend most of the frame handing it over (on the
 2-core reference machine two threads gave 1.0-1.3x).  Processes do: the frame's
 receiver clusters are split into parts of about equal work (pairs), the calling
-process evaluates one part while forked workers evaluate the others, and each
+process evaluates one part while worker processes evaluate the others, and each
 part goes through accumulation *and* exponentiation before it comes back, so
 only receivers, cuts and the ``(V, n*n)`` result cross process boundaries.
 
-Workers are forked (``fork`` start method: no re-import of the caller's main
-module, the log table is inherited), started on the first frame large enough
+Workers are forked by multiprocessing's fork server, never from the caller,
+whose threads (oneTBB's, after Embree) may hold a lock at the instant of a fork
+(:func:`shtools.tasks.worker_context`); the settings and log tables are pickled
+to each worker once.  They are started on the first frame large enough
 to gain from them (:data:`MIN_PARALLEL_PAIRS`), and stopped by
 :meth:`VertexWorkers.close`, when the runtime is garbage-collected, or at exit.
-They never outlive the caller: on Linux the kernel kills a worker when its
-parent dies (``prctl(PR_SET_PDEATHSIG)``, even after ``kill -9``); elsewhere a
-thread in the worker exits it when the parent is gone.  SIGTERM kills a worker
-(the default action, restored after fork), and an interrupted frame kills the
+They never outlive the caller (:func:`shtools.tasks.die_with_parent`: on Linux
+the kernel kills a worker when the fork server goes, which it does when the
+caller dies, even by ``kill -9``).  SIGTERM kills a worker
+(the default action), and an interrupted frame kills the
 workers instead of waiting for their parts (:meth:`VertexWorkers.close`);
 a stop waits for killed workers a bounded time, and one interrupted by the next
 stop signal is finished by the next call or at exit (see ``_shutdown``).
@@ -28,7 +30,6 @@ the other), so the visibility is byte-identical for any process count.
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import os
 import signal
 import time
@@ -40,7 +41,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from shtools.errors import ShtoolsError
-from shtools.tasks import die_with_parent
+from shtools.tasks import (
+    blas_threads,
+    can_start_workers,
+    die_with_parent,
+    start_worker,
+    use_blas_threads,
+    worker_context,
+)
 
 #: Frames with fewer sphere-receiver pairs run in one process: a worker round
 #: trip (pickling receivers, cuts and the result) costs about a millisecond.
@@ -64,14 +72,14 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
-def fork_supported() -> bool:
-    """True where worker processes can be forked (Linux, other Unixes)."""
-    return "fork" in multiprocessing.get_all_start_methods()
+def workers_supported() -> bool:
+    """True where worker processes can be started (Linux, other Unixes)."""
+    return can_start_workers()
 
 
 def resolve_processes(processes: int | None) -> int:
     """The number of processes a runtime uses (``None``: the available cores)."""
-    if not fork_supported():
+    if not workers_supported():
         return 1
     if processes is None:
         return max(1, min(available_cores(), MAX_AUTO_PROCESSES))
@@ -106,7 +114,7 @@ def split_clusters(costs: np.ndarray, parts: int) -> list[np.ndarray]:
 
 
 class VertexWorkers:
-    """Forked workers evaluating parts of a frame; see the module docstring.
+    """Worker processes evaluating parts of a frame; see the module docstring.
 
     Parameters
     ----------
@@ -119,17 +127,17 @@ class VertexWorkers:
     """
 
     def __init__(self, count: int, settings, tables: dict):
-        ctx = multiprocessing.get_context("fork")
-        self._pool = ProcessPoolExecutor(max_workers=int(count), mp_context=ctx,
+        self._pool = ProcessPoolExecutor(max_workers=int(count), mp_context=worker_context(),
                                          initializer=_init_worker,
-                                         initargs=(settings, tables, os.getpid()))
+                                         initargs=(settings, tables, os.getpid(),
+                                                   blas_threads()))
         self._stop = _PoolStop(self._pool)
         self._close = weakref.finalize(self, _shutdown, self._stop)
 
     def submit(self, task):
         """Start one part on a worker; returns a future of ``(g, pairs_evaluated)``."""
         try:
-            return self._pool.submit(_run_task, task)
+            return start_worker(self._pool.submit, _run_task, task)
         except BrokenProcessPool as exc:
             raise _worker_died() from exc
 
@@ -288,17 +296,15 @@ def _shutdown(stop: _PoolStop, kill: bool = False) -> None:
         time.sleep(0.005)
 
 
-#: Linux ``prctl`` option: signal sent to this process when its parent dies.
-PR_SET_PDEATHSIG = 1
-
-
-def _init_worker(settings, tables, parent_pid) -> None:
+def _init_worker(settings, tables, parent_pid, blas) -> None:
     from dataclasses import replace
 
     die_with_parent(parent_pid)
+    use_blas_threads(blas)
     # Ctrl-C reaches the whole process group: the caller handles it and stops
     # the workers, which must not print tracebacks of their own.  SIGTERM/SIGHUP
-    # get their default action back (the CLI's handlers are inherited by fork).
+    # keep their default action (set again: a worker must never turn them into
+    # an exception, whatever the process it came from had installed).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGHUP, signal.SIG_DFL)

@@ -292,9 +292,9 @@ class ShadowSettings:
         processes it did not ask for; None uses the available cores (at most
         8) -- what ``shtools bake`` and :func:`shtools.scene.bake.bake_scene`
         choose unless told otherwise.  Workers are
-        forked on the first frame with at least ``MIN_PARALLEL_PAIRS``
-        sphere-receiver pairs; without ``fork`` (Windows) the runtime uses one
-        process.
+        started on the first frame with at least ``MIN_PARALLEL_PAIRS``
+        sphere-receiver pairs (by multiprocessing's fork server; without one,
+        on Windows, the runtime uses one process).
     field_space : {"log", "product"} or None
         How shadow-field blockers -- rigid (:mod:`~shtools.runtime.fields`) and
         deformable (:mod:`~shtools.runtime.deformable`) -- combine: ``"log"``

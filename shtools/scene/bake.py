@@ -108,7 +108,7 @@ class FrameBaker:
     store_visibility : bool
     part_pool : shtools.tasks.TaskPool, optional
         Run each large frame's parts as tasks of this pool (a Dask cluster)
-        instead of on forked processes (:class:`~shtools.runtime.ShadowRuntime`).
+        instead of on local worker processes (:class:`~shtools.runtime.ShadowRuntime`).
     """
 
     def __init__(self, prepared: PreparedScene, method: str, clusters=None, *,
@@ -223,7 +223,7 @@ def frames_per_task(scheduler: str, frames: int, workers: int) -> int:
     """Frames one task bakes: 1 on local pools, up to :data:`MAX_FRAMES_PER_TASK` on Dask
     while every worker still gets :data:`MIN_TASKS_PER_WORKER` tasks."""
     if scheduler != "dask":
-        return 1  # a forked pool's cost per task is a pickle through a pipe
+        return 1  # a local pool's cost per task is a pickle through a pipe
     return max(1, min(MAX_FRAMES_PER_TASK, frames // (MIN_TASKS_PER_WORKER * workers)))
 
 
@@ -245,7 +245,7 @@ def bake_scene(
     """Bake ``scene`` frame by frame, yielding a :class:`FrameResult` per frame.
 
     Frames are independent tasks (:mod:`shtools.tasks`): with several frames
-    and cores they are spread over forked local workers by default, or over a
+    and cores they are spread over local worker processes by default, or over a
     Dask cluster (``scheduler``; a task bakes up to :data:`MAX_FRAMES_PER_TASK`
     consecutive frames when there are many, :func:`frames_per_task`); results
     are yielded and written in frame order by this process, the one writer,

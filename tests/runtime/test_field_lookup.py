@@ -211,8 +211,8 @@ def test_exp_of_interpolated_logs_is_as_accurate_as_interpolated_visibility(box,
     assert e_log.mean() < 1.5 * e_vis.mean() + 0.005
 
 
-@pytest.mark.skipif(not __import__("shtools.runtime.parallel", fromlist=["x"]).fork_supported(),
-                    reason="this platform cannot fork, so the runtime runs in one process "
+@pytest.mark.skipif(not __import__("shtools.runtime.parallel", fromlist=["x"]).workers_supported(),
+                    reason="this platform cannot start workers, so the runtime runs in one process "
                     "(nothing to compare)")
 @pytest.mark.parametrize("space", ["log", "product"])
 def test_two_processes_give_the_one_process_result(box_field, space):

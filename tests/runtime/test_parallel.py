@@ -15,16 +15,16 @@ import pytest
 from shtools.errors import InputError, ShtoolsError
 from shtools.reference.scenes import capsule_scene
 from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker
-from shtools.runtime.parallel import fork_supported, resolve_processes, split_clusters
+from shtools.runtime.parallel import resolve_processes, split_clusters, workers_supported
 
 evaluator = importlib.import_module("shtools.runtime.evaluator")
 parallel = importlib.import_module("shtools.runtime.parallel")
 
-#: Tests that start workers; where fork is missing the runtime never starts any
-#: (test_without_fork_the_runtime_stays_in_one_process checks that fallback).
-needs_fork = pytest.mark.skipif(
-    not fork_supported(), reason="this platform cannot fork, so the runtime runs in one "
-    "process and has no workers to test")
+#: Tests that start workers; where none can start the runtime never starts any
+#: (test_without_workers_the_runtime_stays_in_one_process checks that fallback).
+needs_workers = pytest.mark.skipif(
+    not workers_supported(), reason="this platform cannot start worker processes, so the "
+    "runtime runs in one process and has no workers to test")
 
 
 @pytest.fixture
@@ -33,7 +33,7 @@ def always_parallel(monkeypatch):
     monkeypatch.setattr(evaluator, "MIN_PARALLEL_PAIRS", 0)
 
 
-@needs_fork
+@needs_workers
 @pytest.mark.parametrize("hierarchy", [True, False])
 def test_processes_reproduce_the_single_process_visibility_bytes(always_parallel, hierarchy):
     """The frame is cut into the same FRAME_PARTS parts whatever the process count,
@@ -61,19 +61,19 @@ def test_small_frames_stay_in_process():
     assert rt.last_stats["processes"] == 1 and rt._workers is None
 
 
-@needs_fork
+@needs_workers
 def test_close_stops_the_workers_and_the_runtime_stays_usable(always_parallel):
     sc = capsule_scene(grid=12)
     rt = ShadowRuntime(ShadowSettings(processes=2, vertices_per_cluster=20))
     blockers = [SphereBlocker(sc.centers, sc.radii)]
-    first = rt.visibility(sc.vertices, sc.normals, blockers)  # forks the worker
+    first = rt.visibility(sc.vertices, sc.normals, blockers)  # starts the worker
     rt.close()
     assert rt._workers is None
     np.testing.assert_array_equal(rt.visibility(sc.vertices, sc.normals, blockers), first)
     rt.close()
 
 
-@needs_fork
+@needs_workers
 def test_worker_failures_reach_the_caller(always_parallel):
     import os
     import signal
@@ -90,8 +90,8 @@ def test_worker_failures_reach_the_caller(always_parallel):
             workers.result(workers.submit(("clusters",)))
 
 
-def test_without_fork_the_runtime_stays_in_one_process(always_parallel, monkeypatch):
-    monkeypatch.setattr(parallel, "fork_supported", lambda: False)
+def test_without_workers_the_runtime_stays_in_one_process(always_parallel, monkeypatch):
+    monkeypatch.setattr(parallel, "workers_supported", lambda: False)
     assert resolve_processes(None) == 1 and resolve_processes(4) == 1
     sc = capsule_scene(grid=12)
     rt = ShadowRuntime(ShadowSettings(processes=4, vertices_per_cluster=20))
@@ -142,15 +142,7 @@ STOPS = {"cancelled": """
         pass
     signal.setitimer(signal.ITIMER_REAL, 0)
 """, "half-result": """
-    def half_a_result(marker):
-        # in the worker: the header of a result (above 16 KiB, the size of a real
-        # part's result) whose body never comes, as when a kill lands between them
-        frame = sys._getframe()
-        while "result_queue" not in frame.f_locals:
-            frame = frame.f_back
-        frame.f_locals["result_queue"]._writer._send(struct.pack("!i", 100_000))
-        open(marker, "w").close()
-        time.sleep(60)
+    from stop_helpers import half_a_result  # a task must be importable in a worker
 
     marker = os.path.join(sys.argv[1], "sent")
     workers._pool.submit(half_a_result, marker)
@@ -160,7 +152,23 @@ STOPS = {"cancelled": """
 """}
 
 
-@needs_fork
+#: The "half-result" stop's task, a module in the test's folder (on the script's path).
+STOP_HELPERS = """
+import struct, sys, time
+
+def half_a_result(marker):
+    # in the worker: the header of a result (above 16 KiB, the size of a real
+    # part's result) whose body never comes, as when a kill lands between them
+    frame = sys._getframe()
+    while "result_queue" not in frame.f_locals:
+        frame = frame.f_back
+    frame.f_locals["result_queue"]._writer._send(struct.pack("!i", 100_000))
+    open(marker, "w").close()
+    time.sleep(60)
+"""
+
+
+@needs_workers
 @pytest.mark.parametrize("stop", STOPS)
 def test_stopped_workers_let_the_process_exit(stop, tmp_path):
     """Regressions of a bake that printed "stopped by" and never exited: Thread.join
@@ -168,8 +176,10 @@ def test_stopped_workers_let_the_process_exit(stop, tmp_path):
     stopped (CPython 3.11), so the exit waited forever for a worker no one told to
     stop; a half-sent result left that thread reading forever; and failing a
     cancelled part killed that thread (CPython 3.11), leaving a traceback."""
+    (tmp_path / "stop_helpers.py").write_text(STOP_HELPERS)
     script = textwrap.dedent("""
         import os, signal, struct, sys, time
+        sys.path.insert(0, sys.argv[1])
         from shtools.runtime import ShadowSettings
         from shtools.runtime.parallel import VertexWorkers
 

@@ -165,7 +165,9 @@ def test_early_stop_and_failures_leave_no_file(scene_file, tmp_path, monkeypatch
         return original(self, *args, **kwargs)
 
     monkeypatch.setattr(shtools.runtime.ShadowRuntime, "shade", failing)
-    code, _, stderr = run_cli("bake", scene_file, "-o", out)
+    # --workers 1: the frames run in this process, where the patch is (a worker process
+    # imports shtools afresh)
+    code, _, stderr = run_cli("bake", scene_file, "-o", out, "--workers", "1")
     assert code == 130 and "interrupted" in stderr
     assert not out.exists() and list(tmp_path.glob(".baked.h5.*")) == []
 
@@ -316,11 +318,12 @@ def test_bake_with_worker_processes_matches_one_process(scene_file, tmp_path, ru
     """`--processes 2` (forced for this small scene) bakes what one process bakes."""
     import importlib
 
-    from shtools.runtime.parallel import fork_supported
+    from shtools.runtime.parallel import workers_supported
 
-    if not fork_supported():
-        pytest.skip("this platform cannot fork, so bakes run in one process and there "
-                    "are no workers to compare (tests/runtime/test_parallel.py checks it)")
+    if not workers_supported():
+        pytest.skip("this platform cannot start worker processes, so bakes run in one "
+                    "process and there are no workers to compare (tests/runtime/test_parallel.py "
+                    "checks it)")
     monkeypatch.setattr(importlib.import_module("shtools.runtime.evaluator"),
                         "MIN_PARALLEL_PAIRS", 0)
     outs = []

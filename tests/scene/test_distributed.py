@@ -1,4 +1,4 @@
-"""Frames as tasks: the same bytes inline, on forked local workers and on Dask; faults.
+"""Frames as tasks: the same bytes inline, on local worker processes and on Dask; faults.
 
 The reference for "correct" here is the one-process bake itself: spreading
 frames over workers must not change a single byte of the asset (the frames
@@ -94,7 +94,7 @@ def test_setup_runs_once_per_worker_before_its_tasks(scheduler, workers):
     with task_pool(scheduler, workers) as pool, pool.share("state", setup=_note_setup) as shared:
         first = list(pool.map_ordered(_setup_seen, range(8), shared=shared))
         again = list(pool.map_ordered(_setup_seen, range(8), shared=shared))
-    # every task ran after its own process's one set-up (forked workers count their own)
+    # every task ran after its own process's one set-up (local workers count their own)
     assert {count for _, count in first + again} == {1}
     assert len({pid for pid, _ in first}) <= workers
 
@@ -334,7 +334,9 @@ def test_ctrl_c_stops_workers_and_leaves_no_file(tmp_path, sig):
         while len(children) < 2 and time.monotonic() < deadline:  # workers started
             assert proc.poll() is None, proc.stderr.read()
             time.sleep(0.5)
-            children = _children(proc.pid)
+            # forked by the fork server, a child of the bake (as its resource tracker is)
+            children = [w for c in _children(proc.pid) for w in _children(c)]
+        children += _children(proc.pid)  # the fork server and tracker must go too
         time.sleep(1.0)
         os.kill(proc.pid, sig)
         _, err = proc.communicate(timeout=120)
