@@ -496,10 +496,10 @@ SKINNED_VARIANTS = {
 PREVIOUS = "traced 32, previous"
 SKINNED_VARIANTS[PREVIOUS] = SKINNED_VARIANTS["wave 3 default"]
 #: The variants ``--skinned`` runs unless ``--skinned-variants`` names others: the old
-#: default (the baseline), the wave-3 default and the ground's ray counts (64: the
-#: current default).
+#: default (the baseline), the wave-3 default and the ground's ray counts (96: the
+#: current default, ``CONE_DIRECTIONS``).
 SKINNED_RUN = ("old", "wave 3 default",
-               "ground 32", "ground 48", "ground 64", "ground 128")
+               "ground 32", "ground 48", "ground 64", "ground 96", "ground 128")
 
 
 @contextlib.contextmanager

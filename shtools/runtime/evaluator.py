@@ -509,7 +509,9 @@ class ShadowRuntime:
 
         The exact truncated SH product at the shading order (quadrature); on rows
         where ``g`` is a constant (no other blocker reaches them: ``exp(0)``) the
-        product is the given visibility times that constant, with no quadrature.
+        product is the given visibility times that constant, and on rows where the
+        given visibility is exactly 1 (a traced shadow none of whose rays was blocked:
+        most of a ground) it is ``g`` itself, with no quadrature.
         """
         given = [sv for sv in self_visibility or () if sv.visibility is not None]
         if not given:
@@ -528,8 +530,11 @@ class ShadowRuntime:
             sub = g[rows]
             flat = ~sub[:, 1:].any(axis=1)  # constant: c Y_00 = c / sqrt(4 pi) everywhere
             out = vis * (sub[:, :1] * np.float32(1.0 / math.sqrt(4.0 * math.pi)))
-            if not flat.all():
-                out[~flat] = self._products.product(sub[~flat], vis[~flat])
+            one = ~vis[:, 1:].any(axis=1) & (vis[:, 0] == np.float32(math.sqrt(4.0 * math.pi)))
+            out[one] = sub[one]
+            full = ~flat & ~one
+            if full.any():
+                out[full] = self._products.product(sub[full], vis[full])
             g[rows] = out
         return g
 
@@ -931,8 +936,15 @@ class _Skipped:
     @classmethod
     def of(cls, skipped: np.ndarray) -> _Skipped:
         """From a ``(V, S)`` bool matrix of skipped sphere blockers."""
-        masks, labels = np.unique(skipped[:, ::-1], axis=0, return_inverse=True)
-        return cls(labels.reshape(-1).astype(np.int64), masks[:, ::-1])
+        n_sets = skipped.shape[1]
+        if n_sets > 62:  # rows as bit codes need S < 63; the row-wise unique is slower
+            masks, labels = np.unique(skipped[:, ::-1], axis=0, return_inverse=True)
+            return cls(labels.reshape(-1).astype(np.int64), masks[:, ::-1])
+        # a row's code has bit s for blocker s: sorting codes sorts the rows by their
+        # highest skipped blocker first, the order documented above
+        bits = np.left_shift(np.int64(1), np.arange(n_sets, dtype=np.int64))
+        codes, labels = np.unique(skipped.astype(np.int64) @ bits, return_inverse=True)
+        return cls(labels.reshape(-1).astype(np.int64), (codes[:, None] & bits) != 0)
 
 
 def _excluded_nodes(clusters: ReceiverClusters, exclude: _Skipped,

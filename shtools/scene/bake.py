@@ -140,7 +140,8 @@ class FrameBaker:
     def frame(self, frame: int, t: float) -> FrameResult:
         """Pose, shadow and shade scene frame ``frame`` at time ``t``."""
         start = time.perf_counter()
-        state = pose_frame(self.run.prepared, float(t), with_meshes=self.with_meshes)
+        state = pose_frame(self.run.prepared, float(t), with_meshes=self.with_meshes,
+                           clusters=self.run.cache.get("clusters"))
         vis = self.method.visibility(self.run, state)
         setup = self.run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
         radiance = shade_frame(self.run, state, vis)

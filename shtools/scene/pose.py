@@ -38,13 +38,17 @@ MAX_COORDINATE = 1e18
 
 
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
-               trace: bool = True) -> FrameState:
+               trace: bool = True, clusters=None) -> FrameState:
     """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
     ``trace=False`` leaves out the traced self-visibility of skinned objects and their
     traced shadow on the receiver-only objects (the frame's largest cost): for callers
-    that need only the posed geometry.
+    that need only the posed geometry.  ``clusters`` (the runtime's
+    :class:`~shtools.runtime.clusters.ReceiverClusters` of this bake) lets a traced
+    shadow stop at the object's reach: receivers of the clusters none of whose
+    vertices is within it keep the object's blocker (a cluster's receivers must
+    skip the same blockers); without clusters every receiver-only vertex is traced.
     """
     from shtools.runtime import SelfVisibility, SphereBlocker, SphereLight
     from shtools.scene.transfer import (
@@ -119,7 +123,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     # left visible ray noise on its ground (the common cone's sparser rays)
     casters.extend(_rigid_caster([r]) for r in rigid)
     if casters and ground and st.traced_shadows:
-        selfs.extend(_traced_shadow(c, ground, st) for c in casters)
+        selfs.extend(v for v in (_traced_shadow(c, ground, st, clusters) for c in casters)
+                     if v is not None)
     lights = []
     for spec in prepared.scene.lights:
         key = light_at(spec, t)
@@ -129,7 +134,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
 
 
-def _traced_shadow(caster_of, ground: list, st):
+def _traced_shadow(caster_of, ground: list, st, clusters=None):
     """A traced object's shadow on the receiver-only objects (the ground), traced against
     its real mesh (a skinned object's posed mesh: the same Embree scene as its own
     vertices); its blocker is skipped on those rows.  Each traced object gives one such
@@ -140,10 +145,13 @@ def _traced_shadow(caster_of, ground: list, st):
 
     caster, mesh_v, index = caster_of
     rows = np.concatenate([r for r, _, _ in ground])
-    g = traced_shadow_visibility(np.concatenate([v for _, v, _ in ground]),
-                                 np.concatenate([n for _, _, n in ground]), mesh_v, caster,
-                                 st.order, st.traced_shadow_directions)
-    return SelfVisibility(None, rows, blocker=index, visibility=g)
+    labels = None if clusters is None else clusters.labels[rows]
+    traced, g = traced_shadow_visibility(np.concatenate([v for _, v, _ in ground]),
+                                         np.concatenate([n for _, _, n in ground]), mesh_v,
+                                         caster, st.order, st.traced_shadow_directions,
+                                         labels=labels)
+    # receivers beyond the object's reach keep its blocker (no row traced: no entry)
+    return SelfVisibility(None, rows[traced], blocker=index, visibility=g) if len(traced) else None
 
 
 #: Embree scenes of rigid objects in world space, per process (a forked worker builds its

@@ -216,13 +216,19 @@ def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int, *,
 
 
 def traced_shadow_visibility(points, normals, vertices, caster, order: int,
-                             n_dirs: int) -> np.ndarray:
-    """Visibility ``(R, order^2)`` float32 of a posed mesh at other receivers (the ground).
+                             n_dirs: int, labels=None) -> tuple[np.ndarray, np.ndarray]:
+    """Visibility of a posed mesh at the other receivers within its reach (the ground).
 
     Rays only inside the cone each receiver sees the mesh's bounding sphere in
     (:func:`~shtools.fields.self_visibility.cone_visibility`; everything outside it
     is exactly unblocked), ``n_dirs`` for a cone that fills the hemisphere and fewer
-    in proportion to its solid angle.
+    in proportion to its solid angle.  Only receivers whose cone earns at least
+    ``CONE_MIN_RAYS`` rays at that density are traced (``Ω >= CONE_MIN_RAYS 2π /
+    n_dirs``: within about 3.5 bounding radii at the default 96); farther ones,
+    where the object is a small faint blocker, keep its spheres, which cost less
+    there than the fewest rays a cone may get.  Without ``labels`` every receiver is
+    traced; with them, whole groups (the runtime's receiver clusters) are traced or
+    left, so that a cluster's receivers skip the same blockers.
 
     Parameters
     ----------
@@ -236,14 +242,36 @@ def traced_shadow_visibility(points, normals, vertices, caster, order: int,
         Shading order.
     n_dirs : int
         Rays of a receiver whose cone is its whole hemisphere.
+    labels : array_like of int, shape (R,), optional
+        Group of each receiver (its cluster); a group is traced when any of its
+        receivers is within reach.  None: trace every receiver.
+
+    Returns
+    -------
+    traced : ndarray of int, shape (T,)
+        Indices into ``points`` of the receivers within reach.
+    visibility : ndarray, shape (T, order^2) float32
     """
-    from shtools.fields.self_visibility import cone_visibility
+    from shtools.fields.self_visibility import (
+        CONE_MIN_RAYS,
+        bounding_cones,
+        cone_visibility,
+    )
 
     v = np.asarray(vertices, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     center = 0.5 * (v.min(axis=0) + v.max(axis=0))
     radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
-    return cone_visibility(points, normals, caster, center, radius, order,
-                           n_dirs=n_dirs).astype(np.float32)
+    _, cos_half = bounding_cones(p, nrm, center, radius)
+    if labels is None:
+        traced = np.arange(len(p))
+    else:
+        labels = np.asarray(labels)
+        near = n_dirs * (1.0 - cos_half) >= CONE_MIN_RAYS - 1e-9  # Ω n_dirs / 2π
+        traced = np.flatnonzero(np.isin(labels, labels[near]))
+    return traced, cone_visibility(p[traced], nrm[traced], caster, center, radius, order,
+                                   n_dirs=n_dirs).astype(np.float32)
 
 
 def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE) -> np.ndarray:
