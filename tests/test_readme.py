@@ -91,8 +91,15 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
         os.chdir(cwd)
     from shtools.data_formats.bake import read_bake
 
-    baked = read_bake(tmp_path / "baked.h5")
     rgb = namespace["rgb"]
+    # the snippet is the sphere path: it matches a bake of the same scene whose objects
+    # shade the ground with their spheres (`traced_shadows = false`, as the README says)
+    scene = (tmp_path / "scene.toml").read_text()
+    assert "[settings]\n" in scene
+    (tmp_path / "spheres.toml").write_text(
+        scene.replace("[settings]\n", "[settings]\ntraced_shadows = false\n", 1))
+    _run_sh("shtools bake spheres.toml -o spheres.h5 --frames 0:1", tmp_path)
+    baked = read_bake(tmp_path / "spheres.h5")
     assert rgb.shape == (baked.n_vertices, 3) and np.all(np.isfinite(rgb))
     # the runtime from Python sees the bunny's shadows like the bake of frame 0; the
     # snippet leaves the ball (radius 0.25) out, so compare beyond 2.5 units of it, where
