@@ -237,12 +237,35 @@ def hemisphere_visibility(points, normals, caster, order: int, *,
         o = np.repeat(origins[start:stop], local.shape[0], axis=0)
         blocked = caster.occluded_embree(o, np.ascontiguousarray(dirs.reshape(-1, 3)))
         vi, qi = np.divmod(np.flatnonzero(blocked), local.shape[0])
-        weight = 2.0 * math.pi / local.shape[0]
-        for b in range(0, vi.size, BLOCKED_PER_STEP):  # the basis only where blocked
-            v, q = vi[b:b + BLOCKED_PER_STEP], qi[b:b + BLOCKED_PER_STEP]
-            rows, first = np.unique(v, return_index=True)  # v is sorted: one run per vertex
-            g[start + rows] -= weight * np.add.reduceat(basis(dirs[v, q], order), first, axis=0)
+        _subtract_blocked(g, start + vi, dirs[vi, qi], 2.0 * math.pi / local.shape[0], order)
     return g
+
+
+def _subtract_blocked(g, vertex, dirs, weight, order: int) -> None:
+    """``g[v] -= w_v Σ y(s)`` over the blocked rays ``s`` of each vertex, in place.
+
+    The SH basis is evaluated only on blocked rays, in chunks of ``BLOCKED_PER_STEP``,
+    and summed per vertex by segments (no Python loop over vertices).
+
+    Parameters
+    ----------
+    g : ndarray, shape (V, n*n)
+        Visibility vectors, changed in place.
+    vertex : ndarray of int, shape (B,)
+        Vertex of each blocked ray, sorted (one run per vertex).
+    dirs : ndarray, shape (B, 3)
+        The blocked rays' unit directions.
+    weight : float or ndarray, shape (V,)
+        Solid angle each ray of a vertex stands for.
+    order : int
+        SH order ``n``.
+    """
+    for b in range(0, vertex.size, BLOCKED_PER_STEP):
+        v = vertex[b:b + BLOCKED_PER_STEP]
+        rows, first = np.unique(v, return_index=True)
+        w = weight if np.ndim(weight) == 0 else weight[rows, None]
+        g[rows] -= w * np.add.reduceat(basis(dirs[b:b + BLOCKED_PER_STEP], order), first,
+                                       axis=0)
 
 
 #: Rays a receiver casts toward a traced object whose bounding sphere fills its whole
@@ -381,11 +404,7 @@ def cone_visibility(points, normals, caster, center, radius, order: int, *,
             # only directions above the tangent plane can be blocked (module convention)
             blocked &= (x * up[0].take(v_of) + y * up[1].take(v_of) + z * up[2].take(v_of)) > 0
             hit = np.flatnonzero(blocked)
-            for b in range(0, hit.size, BLOCKED_PER_STEP):  # the basis only where blocked
-                h = hit[b:b + BLOCKED_PER_STEP]
-                rows, first = np.unique(v_of[h], return_index=True)
-                g[rows] -= weight[rows, None] * np.add.reduceat(basis(dirs[h], order), first,
-                                                                axis=0)
+            _subtract_blocked(g, v_of[hit], dirs[hit], weight, order)
         v0 = v1
     return g
 

@@ -123,7 +123,9 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     # left visible ray noise on its ground (the common cone's sparser rays)
     casters.extend(_rigid_caster([r]) for r in rigid)
     if casters and ground and st.traced_shadows:
-        selfs.extend(v for v in (_traced_shadow(c, ground, st, clusters) for c in casters)
+        # (rows, points, normals) of every receiver-only object, once for all casters
+        receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
+        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters) for c in casters)
                      if v is not None)
     lights = []
     for spec in prepared.scene.lights:
@@ -134,22 +136,23 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
 
 
-def _traced_shadow(caster_of, ground: list, st, clusters=None):
+def _traced_shadow(caster_of, receivers: tuple, st, clusters=None):
     """A traced object's shadow on the receiver-only objects (the ground), traced against
     its real mesh (a skinned object's posed mesh: the same Embree scene as its own
     vertices); its blocker is skipped on those rows.  Each traced object gives one such
     visibility; the runtime multiplies them (the product of separately traced
-    visibilities, not a joint trace: ``bench_fidelity --rigid``)."""
+    visibilities, not a joint trace: measured on ``bench_fidelity``'s rigid scenes).
+
+    ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
+    ``(R,)``, ``(R, 3)``, ``(R, 3)``; returns None when none is within the object's reach."""
     from shtools.runtime import SelfVisibility
     from shtools.scene.transfer import traced_shadow_visibility
 
     caster, mesh_v, index = caster_of
-    rows = np.concatenate([r for r, _, _ in ground])
+    rows, points, normals = receivers
     labels = None if clusters is None else clusters.labels[rows]
-    traced, g = traced_shadow_visibility(np.concatenate([v for _, v, _ in ground]),
-                                         np.concatenate([n for _, _, n in ground]), mesh_v,
-                                         caster, st.order, st.traced_shadow_directions,
-                                         labels=labels)
+    traced, g = traced_shadow_visibility(points, normals, mesh_v, caster, st.order,
+                                         st.traced_shadow_directions, labels=labels)
     # receivers beyond the object's reach keep its blocker (no row traced: no entry)
     return SelfVisibility(None, rows[traced], blocker=index, visibility=g) if len(traced) else None
 

@@ -114,6 +114,27 @@ coeffs = [[1.0, 1.0, 1.0], [0, 0.6, 0], [0, 0.5, 0], [0, 0, 0],
 GROUND_VERTICES = 21 * 21
 
 
+def ground_scene_head(settings: str = "", *, size: float = 4.0, subdivisions: int = 24) -> str:
+    """Scene text up to a receiver-only ground plane: order 3, 2 frames at 2 fps, a sky
+    brighter above (bands 0 and 1), ``settings`` more ``[settings]`` lines; the rigid
+    traced-shadow and self-visibility tests append their objects."""
+    return f"""
+[settings]
+order = 3
+frames = 2
+fps = 2
+{settings}
+[environment]
+coeffs = [[5.0, 5.0, 5.0], [0.0, 0.0, 0.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0],
+          [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+
+[[objects]]
+name = "ground"
+primitive = {{ type = "plane", size = [{size:g}, {size:g}], subdivisions = {subdivisions} }}
+role = "receiver"
+"""
+
+
 def tube_scene_text(blocker: str, *, settings: str = "frames = 2", environment: str = SKY,
                     tube_keys: str = "") -> str:
     """A scene (TOML) of the rig ``rig.glb`` standing on a 4 x 4 ground plane

@@ -5,6 +5,8 @@ objects over one row (the runtime skips each one's spheres there)."""
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +16,9 @@ from shtools.reference import relative_rmse
 from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker
 from shtools.scene.bake import bake_scene, prepare_scene
 from shtools.scene.scene import load_scene
+
+sys.path.insert(0, str(Path(__file__).parent))
+from rig import ground_scene_head
 
 GROUND = 25 * 25  # vertices of the ground grid below
 
@@ -49,22 +54,8 @@ rotate = [60.0, 30.0, 0.0]
 
 
 def _scene(folder, settings="", second: str | None = None, second_x: float = 0.9):
-    text = f"""
-[settings]
-order = 3
-frames = 2
-fps = 2
-{settings}
-[environment]
-coeffs = [[5.0, 5.0, 5.0], [0.0, 0.0, 0.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0],
-          [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [4, 4], subdivisions = 24 }}
-role = "receiver"
-""" + TORUS.format(name="torus", role="both", x=-0.3 if second else 0.0,
-                   x2=-0.1 if second else 0.2)
+    text = ground_scene_head(settings, size=4, subdivisions=24) + TORUS.format(
+        name="torus", role="both", x=-0.3 if second else 0.0, x2=-0.1 if second else 0.2)
     if second:
         text += TORUS.format(name="ring", role=second, x=second_x, x2=second_x + 0.1)
     (folder / "scene.toml").write_text(text)

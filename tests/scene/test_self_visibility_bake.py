@@ -4,6 +4,8 @@ result against ray tracing of the real mesh."""
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +15,9 @@ from shtools.errors import AssetError, InputError
 from shtools.reference import relative_rmse
 from shtools.scene.bake import bake_scene, prepare_scene
 from shtools.scene.scene import load_scene, parse_scene
+
+sys.path.insert(0, str(Path(__file__).parent))
+from rig import ground_scene_head
 
 
 def _write_torus(folder):
@@ -31,21 +36,7 @@ def _write_torus(folder):
 
 
 def _scene(folder, settings="", object_key=""):
-    (folder / "scene.toml").write_text(f"""
-[settings]
-order = 3
-frames = 2
-fps = 2
-{settings}
-[environment]
-coeffs = [[5.0, 5.0, 5.0], [0.0, 0.0, 0.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0],
-          [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [3, 3], subdivisions = 12 }}
-role = "receiver"
-
+    (folder / "scene.toml").write_text(ground_scene_head(settings, size=3, subdivisions=12) + f"""
 [[objects]]
 name = "torus"
 mesh = "torus.obj"
