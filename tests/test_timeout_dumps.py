@@ -10,7 +10,6 @@ stuck in ``stuck_in_worker``.  About 15-20 s under load: a slow test.
 
 from __future__ import annotations
 
-import re
 import shutil
 import subprocess
 import sys
@@ -68,4 +67,10 @@ def test_a_timed_out_test_prints_its_workers_stacks(tmp_path):
     # (the caller waits in result(); its stack alone never names stuck_in_worker); at
     # least the forked worker and one of the pool's two (the second may still be starting)
     assert log.count("Fatal Python error: Aborted") >= 2, log
-    assert len(re.findall(r'test_hangs.py", line \d+ in stuck_in_worker', log)) >= 2, log
+    # counted per frame line of the suite's file, not by a whole-line pattern: the pool's
+    # two workers abort at the same instant and their dumps can interleave character by
+    # character on the shared stderr (seen in CI: 'line , line 1515 in  in
+    # stuck_in_workerstuck_in_worker'); pytest's own traceback lines of that file never
+    # name stuck_in_worker (the callers wait in result()), so only the dumps count
+    frames = [line for line in log.splitlines() if "test_hangs.py" in line]
+    assert sum(line.count("stuck_in_worker") for line in frames) >= 2, log
