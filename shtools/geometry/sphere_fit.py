@@ -162,6 +162,10 @@ MIN_CHILD_RADIUS = 1e-6
 COVER_LEVELS = 8
 COVER_PIECE = 2e-4
 
+#: Piece-sphere distances the surface cover builds at a time (a block of
+#: pieces x N that stays in cache; performance only, no effect on the result).
+GROW_BLOCK = 1 << 16
+
 #: Evenly spread surface points added to the points the spheres must contain.
 COVER_SURFACE_POINTS = 20_000
 
@@ -514,6 +518,7 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list
     """
     radii = np.asarray(radii, dtype=np.float64).copy()
     n = len(centers)
+    centers_t = np.ascontiguousarray(np.asarray(centers, dtype=np.float64).T)  # (3, N)
 
     def grow_for(pieces_: np.ndarray) -> None:
         """Grow, for each piece ``(T, K, 3)``, the sphere whose volume grows least.
@@ -524,14 +529,38 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list
         cover: the tests' character at N = 32 0.207 -> 0.187, spot N = 64
         0.249 -> 0.239, teapot N = 128 0.197 -> 0.168, CesiumMan N = 32
         1.154 -> 1.155)."""
-        per = max(1, 2_000_000 // (pieces_.shape[1] * n))
+        corners = pieces_.shape[1]
+        # the radii grow after each batch of ``per`` pieces (the batches are
+        # part of the rule: later pieces see the earlier growth); within a
+        # batch the (pieces, N) distances are built ``sub`` pieces at a time,
+        # axis by axis, in cache-sized blocks instead of one (T, K, N, 3)
+        # temporary (teapot N = 128: 13 s -> 1.7 s; same sums, same result)
+        per = max(1, 2_000_000 // (corners * n))
+        sub = max(1, GROW_BLOCK // n)
         for a in range(0, len(pieces_), per):
-            t = pieces_[a:a + per]
-            # the radius each sphere needs to hold each piece, (T, N)
-            need = np.sqrt(np.max(np.sum((t[:, :, None, :] - centers[None, None]) ** 2,
-                                         axis=-1), axis=1))
-            j = np.argmin(need**3 - radii[None, :] ** 3, axis=1)
-            np.maximum.at(radii, j, need[np.arange(len(t)), j])
+            batch = pieces_[a:a + per]
+            r3 = radii**3
+            j = np.empty(len(batch), dtype=np.int64)
+            need_j = np.empty(len(batch))
+            for b in range(0, len(batch), sub):
+                t = batch[b:b + sub]
+                # the squared radius each sphere needs to hold each piece, (T, N)
+                need2 = None
+                for k in range(corners):
+                    d = t[:, k, 0, None] - centers_t[0]
+                    s2 = d * d
+                    for axis in (1, 2):
+                        d = t[:, k, axis, None] - centers_t[axis]
+                        d *= d
+                        s2 += d
+                    need2 = s2 if need2 is None else np.maximum(need2, s2, out=need2)
+                need = np.sqrt(need2, out=need2)
+                cost = need**3
+                cost -= r3
+                jb = np.argmin(cost, axis=1)
+                j[b:b + sub] = jb
+                need_j[b:b + sub] = need[np.arange(len(t)), jb]
+            np.maximum.at(radii, j, need_j)
 
     def held(pieces_: np.ndarray, tree: cKDTree) -> np.ndarray:
         """Which pieces ``(T, K, 3)`` lie inside one sphere; ``tree`` of a point
@@ -1033,15 +1062,33 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
     slack = SHRINK_SLACK * solid.diag
 
     def covers(c: np.ndarray, r: float) -> np.ndarray:
-        return np.linalg.norm(pts - c, axis=1) <= r * (1 + 1e-9) + slack
+        limit = r * (1 + 1e-9) + slack
+        # k-d tree candidates within a margin, then the exact test on them only
+        near = np.asarray(solid.cover_tree.query_ball_point(c, limit * (1 + 1e-9) + slack),
+                          dtype=np.int64)
+        inside = np.zeros(len(pts), dtype=bool)
+        inside[near[np.linalg.norm(pts[near] - c, axis=1) <= limit]] = True
+        return inside
 
     def outside(c: np.ndarray, r: float) -> float:
         solid.evaluations += 1
         return max(FOUR_PI / 3 * r**3 - solid.flux.intersection_volume(c, r), 0.0)
 
+    # the cut of a set of own points does not depend on the parent: the same
+    # points (a sphere whose own points no earlier split changed) reuse it
+    cuts: dict = {}
+
     def best_split(own: np.ndarray, parent: float):
         """(gain, children, their outside volumes) of the best plane cut."""
-        best = (-np.inf, None, None)
+        key = hashlib.blake2b(np.ascontiguousarray(own).tobytes(), digest_size=16).digest()
+        if key not in cuts:
+            cuts[key] = plane_cut(own)
+        halves, out = cuts[key]
+        return (-np.inf, None, None) if halves is None else (parent - sum(out), halves, out)
+
+    def plane_cut(own: np.ndarray):
+        """(children, their outside volumes) of the best plane cut, or (None, None)."""
+        best = (None, None)
         if len(own) < 2:
             return best
         mean = own.mean(axis=0)
@@ -1064,8 +1111,7 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
         halves = [minimal_bounding_sphere(own[side]), minimal_bounding_sphere(own[~side])]
         if min(halves[0][1], halves[1][1]) <= MIN_CHILD_RADIUS * solid.diag:
             return best
-        out = [outside(c, r) for c, r in halves]
-        return (parent - sum(out), halves, out)
+        return halves, [outside(c, r) for c, r in halves]
 
     inside = [covers(c, r) for c, r in zip(centers, radii, strict=True)]
     count = np.sum(inside, axis=0)
