@@ -102,6 +102,36 @@ def solid_angle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return 2.0 * np.arctan2(num, den)
 
 
+def _solid_angle_soa(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """:func:`solid_angle` of corners given by coordinate, ``(3, T)`` each -> (T,).
+
+    The same operations in the same order as :func:`solid_angle` (``np.cross``;
+    ``einsum`` sums a 3-term dot product as (x0 y0 + x2 y2) + x1 y1), so the
+    result is bit-for-bit the same, on contiguous rows about 5x faster.
+    """
+    def norm(x):
+        s = x[0] * x[0]
+        s += x[1] * x[1]
+        s += x[2] * x[2]
+        return np.sqrt(s, out=s)
+
+    def dot(x, y):
+        s = x[0] * y[0]
+        s += x[2] * y[2]
+        s += x[1] * y[1]
+        return s
+
+    la, lb, lc = norm(a), norm(b), norm(c)
+    cross = (b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0])
+    num = dot(a, cross)
+    den = la * lb
+    den *= lc
+    den += dot(a, b) * lc
+    den += dot(a, c) * lb
+    den += dot(b, c) * la
+    return 2.0 * np.arctan2(num, den)
+
+
 def _flux_crossing(tris: np.ndarray, radii: np.ndarray, level: int) -> np.ndarray:
     """Flux of F through triangles that may cross their sphere.
 
@@ -201,10 +231,14 @@ class OutsideVolume:
         ``winding_number`` is not, which would break byte-identical assets).
         """
         points = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / self.scale
+        if not hasattr(self, "_corners"):
+            # corner, coordinate, triangle: every term below is a contiguous
+            # (F,) pass (the (F, 3) views of :func:`solid_angle` are strided)
+            self._corners = np.ascontiguousarray(self.triangles.transpose(1, 2, 0))
         out = np.empty(len(points))
         for i, p in enumerate(points):
-            rel = self.triangles - p
-            out[i] = np.sum(solid_angle(rel[:, 0], rel[:, 1], rel[:, 2])) / FOUR_PI
+            a, b, c = (corner - p[:, None] for corner in self._corners)  # (3, F) each
+            out[i] = np.sum(_solid_angle_soa(a, b, c)) / FOUR_PI
         return out
 
     def intersection_volume(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -380,7 +414,11 @@ class FluxSamples:
             cell = 0.5 * extent / np.sqrt(max_samples)
             for _ in range(60):
                 keys = np.floor((pts - lo) / cell).astype(np.int64)
-                _, inverse = np.unique(keys, axis=0, return_inverse=True)
+                # one int per cell, ordered as the rows (k0, k1, k2) lexicographically:
+                # a 1-D unique, much faster than np.unique(keys, axis=0), same labels
+                dims = keys.max(axis=0) + 1
+                cells = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
+                _, inverse = np.unique(cells, return_inverse=True)
                 if inverse.max() + 1 <= max_samples:
                     break
                 cell *= 1.1
@@ -403,6 +441,33 @@ class FluxSamples:
         rho = np.linalg.norm(d, axis=1)
         s = np.einsum("ij,ij->i", d, q)
         return float(np.sum(s * np.minimum(1.0, (radius / np.maximum(rho, 1e-300)) ** 3)))
+
+    def intersection_volume_each(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """:meth:`intersection_volume` of several spheres at once, ``(M, 3), (M,)`` -> (M,).
+
+        The same sums, bit for bit (the same operations on coordinate rows:
+        ``norm`` as (d0² + d1²) + d2², ``einsum`` as (d0 q0 + d2 q2) + d1 q1),
+        without a Python call and three strided passes per sphere; unlike
+        :meth:`intersection_volumes`, whose distances come from mat-muls.
+        """
+        centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+        radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+        if not hasattr(self, "_points_t"):
+            self._points_t = np.ascontiguousarray(self.points.T)  # (3, K)
+            self._q_t = np.ascontiguousarray(self.q.T)
+        d = [self._points_t[k] - centers[:, k, None] for k in range(3)]  # (M, K) each
+        rho2 = d[0] * d[0]
+        rho2 += d[1] * d[1]
+        rho2 += d[2] * d[2]
+        rho = np.sqrt(rho2, out=rho2)
+        s = d[0] * self._q_t[0]
+        s += d[2] * self._q_t[2]
+        s += d[1] * self._q_t[1]
+        w = radii[:, None] / np.maximum(rho, 1e-300)
+        w **= 3
+        np.minimum(1.0, w, out=w)
+        w *= s
+        return np.sum(w, axis=1)
 
     def relative(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """ρ² = |x_k - c|² and s = (x_k - c)·q_k of every sample from every centre,
