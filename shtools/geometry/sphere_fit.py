@@ -762,6 +762,16 @@ NEAR_REACH = 4.0
 KEEP_FRACTION = 0.8
 
 
+def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of coordinate rows ``(3, L)`` -> (L,), summed in the order
+    ``np.einsum("ij,ij->i")`` sums (L, 3) rows, (a0 b0 + a2 b2) + a1 b1, so
+    that both layouts give the same bits."""
+    out = a[0] * b[0]
+    out += a[2] * b[2]
+    out += a[1] * b[1]
+    return out
+
+
 def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.ndarray):
     """Move every centre within its box ``p0 ± delta`` to minimise V(S_i - T), the
     radius bounding ``hulls[i]``; all spheres in one batched compass search.
@@ -854,6 +864,9 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
     solid.evaluations += m
     solid.sample_terms += len(own)
     best = f0.copy()
+    # the passes below work on coordinate rows (3, L): contiguous elementwise
+    # passes, the same arithmetic (about a third faster than (L, 3) columns)
+    xn, qn = np.ascontiguousarray(xn.T), np.ascontiguousarray(qn.T)
     r2u = r0**2  # squared radius at the current centre
 
     # compass search in units of delta, inside the box [-1, 1]^3; each pass
@@ -867,8 +880,10 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
             break
         e = delta[:, None] * u
         h = delta * step
-        y = xn - e[own]
-        a = np.einsum("ij,ij->i", y, y)
+        y = np.empty((3, len(own)))
+        for k in range(3):
+            np.subtract(xn[k], e[:, k].take(own), out=y[k])
+        a = _dot_rows(y, y)
         # samples a move of this pass (or the next few) cannot bring inside
         # the sphere, and every sample of a sphere that has converged, leave
         # the exact sum: the first ones enter the far field through a
@@ -878,34 +893,36 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
         if keep.sum() < KEEP_FRACTION * len(keep):
             # (np.take of indices: about 3x faster than boolean indexing of rows)
             drop = np.flatnonzero(~keep & active[own])
-            yd, qd, od = y.take(drop, axis=0), qn.take(drop, axis=0), own[drop]
+            yd, qd, od = y.take(drop, axis=1), qn.take(drop, axis=1), own[drop]
             inv2 = 1.0 / np.maximum(a[drop], 1e-300)
             inv3 = inv2 * np.sqrt(inv2)
-            sd = np.einsum("ij,ij->i", yd, qd)
-            g = -qd * inv3[:, None] + (3.0 * sd * inv3 * inv2)[:, None] * yd
-            gsum = np.stack([np.bincount(od, weights=g[:, k], minlength=m) for k in range(3)],
-                            axis=1)
+            sd = _dot_rows(yd, qd)
+            c3 = 3.0 * sd * inv3 * inv2
+            gsum = np.stack([np.bincount(od, weights=-qd[k] * inv3 + c3 * yd[k], minlength=m)
+                             for k in range(3)], axis=1)
             far_c += np.bincount(od, weights=sd * inv3, minlength=m) - np.sum(gsum * e, axis=1)
             far_g += gsum
             keep = np.flatnonzero(keep)
-            xn, qn, own = xn.take(keep, axis=0), qn.take(keep, axis=0), own[keep]
-            y, a = y.take(keep, axis=0), a[keep]
+            xn, qn, own = xn.take(keep, axis=1), qn.take(keep, axis=1), own[keep]
+            y, a = y.take(keep, axis=1), a[keep]
             segments = segment_matrix(own)
             hkeep = np.flatnonzero(active[hown])
             hr, hown = hr.take(hkeep, axis=0), hown[hkeep]
-        # columns: +x, +y, +z, -x, -y, -z (written into halves, no concatenation)
+        # rows: +x, +y, +z, -x, -y, -z
         t = h[own]
-        ty = (2.0 * t)[:, None] * y
-        base = (a + t * t)[:, None]
-        rho2 = np.empty((len(own), 6))
-        np.subtract(base, ty, out=rho2[:, :3])
-        np.add(base, ty, out=rho2[:, 3:])
+        t2 = 2.0 * t
+        base = a + t * t
+        rho2 = np.empty((6, len(own)))
+        sq = _dot_rows(y, qn)
+        sn = np.empty((6, len(own)))
+        for k in range(3):
+            ty = t2 * y[k]
+            np.subtract(base, ty, out=rho2[k])
+            np.add(base, ty, out=rho2[3 + k])
+            tq = t * qn[k]
+            np.subtract(sq, tq, out=sn[k])
+            np.add(sq, tq, out=sn[3 + k])
         np.maximum(rho2, 1e-300, out=rho2)
-        sq = np.einsum("ij,ij->i", y, qn)[:, None]
-        tq = t[:, None] * qn
-        sn = np.empty((len(own), 6))
-        np.subtract(sq, tq, out=sn[:, :3])
-        np.add(sq, tq, out=sn[:, 3:])
         yh = hr - e[hown]
         th = h[hown]
         tyh = (2.0 * th)[:, None] * yh
@@ -919,14 +936,14 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
         r2[present] = np.maximum.reduceat(hull_r2, starts[:-1][present], axis=0)
         np.maximum(r2, 0.0, out=r2)
         # min(1, r³/ρ³) = min(1, r²/ρ²)^1.5
-        w = r2.take(own, axis=0)
+        w = r2.T.take(own, axis=1)  # (6, L)
         w /= rho2
         np.minimum(w, 1.0, out=w)
         w *= np.sqrt(w)
         w *= sn
         r3 = r2 * np.sqrt(r2)
         moves = e[:, None, :] + h[:, None, None] * _COMPASS  # (M, 6, 3)
-        inter = segments @ w + r3 * (far_c[:, None] + np.einsum("mj,mdj->md", far_g, moves))
+        inter = segments @ w.T + r3 * (far_c[:, None] + np.einsum("mj,mdj->md", far_g, moves))
         solid.evaluations += 6 * int(active.sum())
         solid.sample_terms += 6 * len(own)
         f = FOUR_PI / 3.0 * r3 - inter
@@ -1349,7 +1366,9 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     def members(idx: np.ndarray):
         """Cover points inside spheres ``idx``: (points, owner sphere, distance),
         grouped by sphere in the order of ``idx``."""
-        lists = solid.cover_tree.query_ball_point(centers[idx], radii[idx] + 2.0 * slack)
+        # (unsorted lists: nothing below depends on the order within a sphere)
+        lists = solid.cover_tree.query_ball_point(centers[idx], radii[idx] + 2.0 * slack,
+                                                  return_sorted=False)
         flat = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
         owner = np.repeat(idx, [len(ix) for ix in lists])
         dist = np.linalg.norm(pts[flat] - centers[owner], axis=1)
