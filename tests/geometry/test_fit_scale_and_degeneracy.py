@@ -138,7 +138,9 @@ def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh):
     shrink), each a compass search of at most 1 + 6 COMPASS_ITERATIONS
     evaluations, plus 2 for the profiles and the estimate; the final shrink
     and each of the COVER_PASSES surface-cover passes run SHRINK_ROUNDS such
-    re-centrings.  A change that makes rounds costlier or spends more rounds
+    re-centrings; the surface-bounding candidates (the grown search result and
+    each pass's result) are compared by one inner-loop estimate of every
+    sphere each.  A change that makes rounds costlier or spends more rounds
     trips it.
 
     Sample terms: an evaluation sums the samples within the sphere's radius
@@ -154,7 +156,7 @@ def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh):
     assert fit.info["sample_terms"] == again.info["sample_terms"]
     per_recentre = 1 + 6 * COMPASS_ITERATIONS
     bound = (fit.info["iterations"] * n * (2 * per_recentre + 2)
-             + (1 + COVER_PASSES) * SHRINK_ROUNDS * n * per_recentre)
+             + (1 + COVER_PASSES) * (SHRINK_ROUNDS * per_recentre + 1) * n)
     assert fit.info["iterations"] <= rounds
     assert 0 < fit.info["evaluations"] <= bound
     share = fit.info["flux_samples"] / n

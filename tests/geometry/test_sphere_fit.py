@@ -72,6 +72,42 @@ def test_bounding_property(request, which):
     assert result.info["distinct_spheres"] == 8
 
 
+def test_pair_held_triangles_lie_in_the_union_of_two_spheres():
+    """The cover's two-sphere test against dense sampling of each triangle.
+
+    Independent check: 20 000 barycentric samples (and the corners) of every
+    accepted triangle tested against the balls directly.  No accepted triangle
+    may have a sample outside the union (the test is exact, so no tolerance);
+    and a thin triangle across the seam of two overlapping spheres, in neither
+    alone, must be accepted."""
+    from shtools.geometry.sphere_fit import _pair_held
+
+    rng = np.random.default_rng(3)
+    centers = np.array([[0.0, 0.0, 0.0], [1.2, 0.0, 0.0], [0.5, 1.1, 0.2]])
+    radii = np.array([1.0, 0.9, 0.7])
+    tri = rng.normal(scale=0.5, size=(400, 3, 3)) + rng.normal(scale=0.4, size=(400, 1, 3))
+    seam = np.array([[[0.2, 0.0, 0.05], [1.0, 0.05, 0.0], [0.6, -0.05, 0.1]]])
+    tri = np.concatenate([tri, seam])
+    held = _pair_held(tri, centers, radii)
+    u = rng.random((20_000, 2))
+    flip = u.sum(axis=1) > 1
+    u[flip] = 1 - u[flip]
+    for t in tri[held]:
+        x = np.vstack([t[0] + u[:, :1] * (t[1] - t[0]) + u[:, 1:] * (t[2] - t[0]), t])
+        inside = np.linalg.norm(x[:, None] - centers[None], axis=-1) <= radii
+        assert np.all(inside.any(axis=1))
+    assert held[-1]  # the seam triangle: in the union, in neither ball alone
+    d = np.linalg.norm(seam[0][:, None] - centers[None], axis=-1)
+    assert not np.any(np.all(d <= radii, axis=0))
+    assert held.sum() > 20  # the random set exercises accepted triangles too
+    # corners in the union but an edge's midpoint (0.95, 0.55, 0) in neither
+    # ball (1.098 from both centres): must be rejected
+    pair_c, pair_r = np.array([[0.0, 0.0, 0.0], [1.9, 0.0, 0.0]]), np.array([1.0, 1.0])
+    gap = np.array([[[0.8, 0.55, 0.0], [1.1, 0.55, 0.0], [0.95, 0.0, 0.0]]])
+    assert np.all(np.min(np.linalg.norm(gap[0][:, None] - pair_c[None], axis=-1), axis=1) <= 1)
+    assert not _pair_held(gap, pair_c, pair_r)[0]
+
+
 @pytest.mark.slow  # five variational fits (torus_fits) or restarts: minutes under load
 def test_outside_volume_ratio_matches_monte_carlo(torus_fits):
     mesh, fits = torus_fits
