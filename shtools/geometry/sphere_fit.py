@@ -1453,17 +1453,30 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     n = len(centers)
     order = np.argsort(-radii, kind="stable")
 
+    # a sphere that neither moved nor shrank since its last query (most of them
+    # once the rounds settle) reuses that query's points: (indices, distances)
+    found: dict = {}
+
     def members(idx: np.ndarray):
         """Cover points inside spheres ``idx``: (points, owner sphere, distance),
         grouped by sphere in the order of ``idx``."""
-        # (unsorted lists: nothing below depends on the order within a sphere)
-        lists = solid.cover_tree.query_ball_point(centers[idx], radii[idx] + 2.0 * slack,
-                                                  return_sorted=False)
-        flat = np.concatenate([np.asarray(ix, dtype=np.int64) for ix in lists])
-        owner = np.repeat(idx, [len(ix) for ix in lists])
-        dist = np.linalg.norm(pts[flat] - centers[owner], axis=1)
-        keep = dist <= radii[owner] + slack  # the same test as every later one
-        return flat[keep], owner[keep], dist[keep]
+        keys = [centers[i].tobytes() + radii[i].tobytes() for i in idx]
+        todo = [k for k, key in enumerate(keys) if key not in found]
+        if todo:
+            ask = idx[todo]
+            # (unsorted lists: nothing below depends on the order within a sphere)
+            lists = solid.cover_tree.query_ball_point(centers[ask], radii[ask] + 2.0 * slack,
+                                                      return_sorted=False)
+            for k, i, ix in zip(todo, ask, lists, strict=True):
+                ix = np.asarray(ix, dtype=np.int64)
+                dist = np.linalg.norm(pts[ix] - centers[i], axis=1)
+                keep = dist <= radii[i] + slack  # the same test as every later one
+                found[keys[k]] = (ix[keep], dist[keep])
+        parts = [found[key] for key in keys]
+        owner = np.repeat(idx, [len(ix) for ix, _ in parts])
+        if not parts:
+            return np.zeros(0, dtype=np.int64), owner, np.zeros(0)
+        return np.concatenate([ix for ix, _ in parts]), owner, np.concatenate([d for _, d in parts])
 
     everyone = np.arange(n)
     for _ in range(rounds):
