@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from shtools.geometry.bounding import minimal_enclosing_sphere, sphere_pair_bound
+from shtools.geometry.sphere_set import minimal_bounding_sphere
 
 #: SLSQP stops at ftol 1e-13 of the starting radius; 1e-7 relative leaves a wide
 #: margin for its last step while still catching any suboptimal (e.g. Ritter) bound,
@@ -109,6 +110,46 @@ def test_points_are_zero_radius_spheres():
     c, r = minimal_enclosing_sphere(pts, np.zeros(3))
     np.testing.assert_allclose(c, [1, 1, 0], atol=1e-7)
     assert r == pytest.approx(np.sqrt(2), rel=OPT_RTOL)
+
+
+#: minimal_bounding_sphere is exact up to rounding: it accepts a core ball that holds
+#: its points to 1e-10 of r² and returns the largest distance from that centre, so its
+#: radius is >= the minimum and within ~1e-10 of it; 1e-9 leaves a margin for rounding.
+POINTS_RTOL = 1e-9
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_minimal_ball_of_points_matches_exhaustive_search(seed):
+    rng = np.random.default_rng(100 + seed)
+    k = int(rng.integers(2, 10))
+    pts = rng.normal(size=(k, 3)) * rng.uniform(0.01, 100.0, size=3)  # anisotropic, any scale
+    c, r = minimal_bounding_sphere(pts)
+    assert np.all(np.linalg.norm(pts - c, axis=1) <= r)  # bounds every point, exactly
+    _, r_exact = brute_force_enclosing(pts, np.zeros(k))
+    assert r == pytest.approx(r_exact, rel=POINTS_RTOL)
+
+
+@pytest.mark.parametrize("case", ["octahedron", "coincident", "collinear", "square", "one"])
+def test_minimal_ball_of_points_closed_forms(case):
+    rng = np.random.default_rng(7)
+    if case == "octahedron":  # vertices on the unit sphere, a cloud inside: the unit ball
+        inner = rng.normal(size=(500, 3))
+        inner *= 0.57 / np.linalg.norm(inner, axis=1).max()  # inside the octahedron
+        pts, center, radius = np.vstack([np.eye(3), -np.eye(3), inner]), np.zeros(3), 1.0
+    elif case == "coincident":
+        pts, center, radius = np.tile([[1.0, 2.0, 3.0]], (6, 1)), np.array([1.0, 2.0, 3.0]), 0.0
+    elif case == "collinear":  # the extreme pair is a diameter
+        pts = np.outer(np.linspace(-1.0, 3.0, 9), [1.0, 2.0, 2.0])
+        center, radius = np.array([1.0, 2.0, 2.0]), 6.0
+    elif case == "square":  # coplanar: the diagonal is a diameter
+        pts = np.array([[0.0, 0, 5], [2, 0, 5], [0, 2, 5], [2, 2, 5], [1, 1, 5]])
+        center, radius = np.array([1.0, 1.0, 5.0]), np.sqrt(2.0)
+    else:
+        pts, center, radius = np.array([[4.0, -1.0, 0.5]]), np.array([4.0, -1.0, 0.5]), 0.0
+    c, r = minimal_bounding_sphere(pts)
+    np.testing.assert_allclose(c, center, atol=1e-12)
+    assert r == pytest.approx(radius, rel=POINTS_RTOL, abs=1e-12)
+    assert np.all(np.linalg.norm(pts - c, axis=1) <= r)
 
 
 def test_pair_bound_batched_is_minimal():
