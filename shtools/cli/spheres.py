@@ -19,7 +19,7 @@ from shtools.cli._common import (
     report,
     scheduler_options,
 )
-from shtools.geometry.fit_methods import FIT_METHODS
+from shtools.geometry.fit_methods import DEFAULT_ROUNDS, FIT_METHODS
 
 
 @click.group()
@@ -45,7 +45,7 @@ def spheres():
 @click.option("--iterations", type=option_type("iterations"), default=None,
               help="Round budget of the variational fit, counted in rounds at N spheres "
                    "(from N = 64 the coarse stages spend part of it in cheaper rounds) "
-                   "[default: 60 below N = 64, 30 from it on].")
+                   f"[default: {DEFAULT_ROUNDS}].")
 @click.option("--restarts", type=option_type("restarts"), default=1, show_default=True,
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
                    "The fit is a non-convex search: a few starts buy a few percent of E.")

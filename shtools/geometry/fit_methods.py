@@ -1,4 +1,4 @@
-"""Names of sphere-set choices (light: the scene schema and the CLI import them).
+"""Names and defaults of sphere-set choices (light: the scene schema and the CLI import them).
 
 The fit methods (the fitter checks them) and the spaces a set to bind may be given in
 (:func:`shtools.geometry.binding.spheres_to_bind_space`).
@@ -19,6 +19,10 @@ class FitMethod(StrEnum):
 
 
 FIT_METHODS = tuple(m.value for m in FitMethod)
+
+#: default round budget of the variational fit, in rounds at N spheres (why 60:
+#: the measurements beside :data:`shtools.geometry.sphere_fit.ROUNDS`)
+DEFAULT_ROUNDS = 60
 
 #: spaces a sphere set to bind may be given in: "bind" (the rig's POSITION data),
 #: "scene" (the glTF as placed in its scene) or "auto" (whichever the spheres cover)

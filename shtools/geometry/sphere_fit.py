@@ -66,7 +66,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from shtools.errors import InputError
-from shtools.geometry.fit_methods import FIT_METHODS
+from shtools.geometry.fit_methods import DEFAULT_ROUNDS, FIT_METHODS
 from shtools.geometry.outside_volume import FOUR_PI, FluxSamples, OutsideVolume
 from shtools.geometry.sphere_set import SphereSet, hull_vertices, minimal_bounding_sphere
 
@@ -122,15 +122,16 @@ SHRINK_TOLERANCE = 1e-5
 #: sphere during shrinking: absorbs the rounding of the mat-mul distances.
 SHRINK_SLACK = 1e-9
 
-#: Default round budget (rounds at N spheres; see ``max_iterations``), below
-#: COARSE_TO_FINE_MIN spheres and from it on (where the coarse fit gives the
-#: search a good start).  Measured: CesiumMan at N = 32, E 1.231 after 30
-#: rounds, 1.154 after 60 and 90; the torus of the tests at N = 32, 0.156 /
-#: 0.115 / 0.108 after 30 / 60 / 150 (the previous fit: 0.115 after 150);
-#: dragon N = 64 and 128 after 30: 0.917 and 0.764 (previous fit, made
-#: bounding: 1.028, 0.793).
-ROUNDS = 60
-ROUNDS_COARSE_TO_FINE = 30
+#: Default round budget (rounds at N spheres; see ``max_iterations``) at every
+#: N.  Measured: CesiumMan at N = 32, E 1.231 after 30 rounds, 1.154 after 60
+#: and 90; the torus of the tests at N = 32, 0.156 / 0.115 / 0.108 after
+#: 30 / 60 / 150.  From COARSE_TO_FINE_MIN spheres on the coarse fit gives the
+#: search a good start, and 30 rounds had been the default there; 60 lowers
+#: the mean E over seeds 0-2 (wave 5, main b600a11, load 4-8): spot N = 128
+#: 0.236 -> 0.219, the tests' torus N = 64 0.084 -> 0.072, dragon N = 64
+#: 0.929 -> 0.909, N = 128 0.685 -> 0.669 (spot N = 64 0.227 -> 0.226), for
+#: 1.3x (dragon) to 1.55x (spot N = 128) the CPU.
+ROUNDS = DEFAULT_ROUNDS
 
 #: Teleportation candidates (split cluster, deleted sphere) tried per stall;
 #: the one with the lowest E after a Lloyd step is refined and kept if E drops.
@@ -374,8 +375,7 @@ def fit_spheres(
         Budget of clustering + centre-update rounds (variational), counted
         in rounds at ``n`` spheres: the coarse stages (ceil(n/2), ... spheres)
         spend their share of it in proportionally cheaper rounds, so the total
-        round count reported in ``info`` can exceed it.  Default ``ROUNDS``
-        (``ROUNDS_COARSE_TO_FINE`` from ``COARSE_TO_FINE_MIN`` spheres on).
+        round count reported in ``info`` can exceed it.  Default ``ROUNDS``.
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
     samples : int, optional
@@ -453,7 +453,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             f"asked for {n} spheres but the solid has only {len(solid.points)} sample points; "
             "use fewer spheres", path)
     if max_iterations is None:
-        max_iterations = ROUNDS if n < COARSE_TO_FINE_MIN else ROUNDS_COARSE_TO_FINE
+        max_iterations = ROUNDS
     bar.total = max_iterations  # known once the solid is sampled; shown at the next update
 
     def progress(rounds: float, energy: float) -> None:
