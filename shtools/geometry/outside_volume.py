@@ -102,6 +102,16 @@ def solid_angle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return 2.0 * np.arctan2(num, den)
 
 
+def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of coordinate rows ``(3, L)`` -> (L,), summed in the order
+    ``np.einsum("ij,ij->i")`` sums (L, 3) rows, (a0 b0 + a2 b2) + a1 b1, so
+    that both layouts give the same bits."""
+    out = a[0] * b[0]
+    out += a[2] * b[2]
+    out += a[1] * b[1]
+    return out
+
+
 def _solid_angle_soa(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """:func:`solid_angle` of corners given by coordinate, ``(3, T)`` each -> (T,).
 
@@ -115,20 +125,14 @@ def _solid_angle_soa(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
         s += x[2] * x[2]
         return np.sqrt(s, out=s)
 
-    def dot(x, y):
-        s = x[0] * y[0]
-        s += x[2] * y[2]
-        s += x[1] * y[1]
-        return s
-
     la, lb, lc = norm(a), norm(b), norm(c)
     cross = (b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0])
-    num = dot(a, cross)
+    num = dot_rows(a, cross)
     den = la * lb
     den *= lc
-    den += dot(a, b) * lc
-    den += dot(a, c) * lb
-    den += dot(b, c) * la
+    den += dot_rows(a, b) * lc
+    den += dot_rows(a, c) * lb
+    den += dot_rows(b, c) * la
     return 2.0 * np.arctan2(num, den)
 
 
@@ -460,9 +464,7 @@ class FluxSamples:
         rho2 += d[1] * d[1]
         rho2 += d[2] * d[2]
         rho = np.sqrt(rho2, out=rho2)
-        s = d[0] * self._q_t[0]
-        s += d[2] * self._q_t[2]
-        s += d[1] * self._q_t[1]
+        s = dot_rows(d, self._q_t[:, None, :])
         w = radii[:, None] / np.maximum(rho, 1e-300)
         w **= 3
         np.minimum(1.0, w, out=w)
@@ -491,6 +493,13 @@ class FluxSamples:
             w = np.minimum(radii[s:s + per, None] ** 2 / rho2, 1.0)
             out[s:s + per] = np.sum(sk * w * np.sqrt(w), axis=1)
         return out
+
+    def outside_volumes(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """V(S_i - T) = V(S_i) - V(S_i ∩ T) of many spheres, clipped at 0,
+        ``(N, 3), (N,)`` -> (N,) (:meth:`intersection_volumes`)."""
+        radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+        return np.maximum(FOUR_PI / 3 * radii**3 - self.intersection_volumes(centers, radii),
+                          0.0)
 
     def outside_profiles(self, centers: np.ndarray, r_grid: np.ndarray) -> np.ndarray:
         """V(S - T) of spheres about fixed centres for every radius of a grid.

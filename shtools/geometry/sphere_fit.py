@@ -67,7 +67,7 @@ from scipy.spatial import cKDTree
 
 from shtools.errors import InputError
 from shtools.geometry.fit_methods import DEFAULT_ROUNDS, FIT_METHODS
-from shtools.geometry.outside_volume import FOUR_PI, FluxSamples, OutsideVolume
+from shtools.geometry.outside_volume import FOUR_PI, FluxSamples, OutsideVolume, dot_rows
 from shtools.geometry.sphere_set import SphereSet, hull_vertices, minimal_bounding_sphere
 
 METHODS = FIT_METHODS
@@ -567,15 +567,9 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list
             for b in range(0, len(batch), sub):
                 t = batch[b:b + sub]
                 # the squared radius each sphere needs to hold each piece, (T, N)
-                need2 = None
-                for k in range(corners):
-                    d = t[:, k, 0, None] - centers_t[0]
-                    s2 = d * d
-                    for axis in (1, 2):
-                        d = t[:, k, axis, None] - centers_t[axis]
-                        d *= d
-                        s2 += d
-                    need2 = s2 if need2 is None else np.maximum(need2, s2, out=need2)
+                need2 = _squared_distances(t[:, 0], centers_t)
+                for k in range(1, corners):
+                    np.maximum(need2, _squared_distances(t[:, k], centers_t), out=need2)
                 need = np.sqrt(need2, out=need2)
                 cost = need**3
                 cost -= r3
@@ -627,6 +621,19 @@ def _cover(solid: Solid, centers: np.ndarray, radii: np.ndarray, *, pieces: list
         if pieces is not None:
             pieces.append(tri.reshape(-1, 3))
     return radii * (1.0 + 1e-12) + COVER_SLACK * solid.diag
+
+
+def _squared_distances(points: np.ndarray, centers_t: np.ndarray) -> np.ndarray:
+    """|p - c|² of points ``(P, 3)`` to centres given as coordinate rows ``(3, N)``
+    -> (P, N), summed axis by axis as ``np.linalg.norm`` does (the same bits),
+    without a (P, N, 3) temporary."""
+    d2 = points[:, 0, None] - centers_t[0]
+    d2 *= d2
+    for axis in (1, 2):
+        d = points[:, axis, None] - centers_t[axis]
+        d *= d
+        d2 += d
+    return d2
 
 
 def _pair_held(tri: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -703,8 +710,7 @@ def _settle_cover(solid: Solid, centers: np.ndarray, radii: np.ndarray):
     """
     def estimate(c: np.ndarray, r: np.ndarray) -> float:
         solid.evaluations += len(c)
-        return float(np.sum(np.maximum(FOUR_PI / 3 * r**3 - solid.flux.intersection_volumes(c, r),
-                                       0.0)))
+        return float(np.sum(solid.flux.outside_volumes(c, r)))
 
     pieces: list = []
     grown = _cover(solid, centers, radii, pieces=pieces)
@@ -816,15 +822,7 @@ def _flood_fill(solid: Solid, centers: np.ndarray, table: np.ndarray, step: floa
             cand = np.flatnonzero(unlabelled)
             if len(cand) == 0:
                 break
-        # distances (C, N), summed axis by axis as np.linalg.norm does
-        pc = pts[cand]
-        d = pc[:, 0, None] - centers_t[0]
-        d *= d
-        for axis in (1, 2):
-            dk = pc[:, axis, None] - centers_t[axis]
-            dk *= dk
-            d += dk
-        np.sqrt(d, out=d)
+        d = np.sqrt(_squared_distances(pts[cand], centers_t))  # (C, N)
         grown = np.maximum(radii[None, :], d)
         cost = _profile_lookup(table, step, grown) - _profile_lookup(table, step, radii[None, :])
         j = np.argmin(cost + tie * d, axis=1)
@@ -850,16 +848,6 @@ COMPASS_ITERATIONS = 18
 #: far field once fewer than KEEP_FRACTION of the samples remain.
 NEAR_REACH = 4.0
 KEEP_FRACTION = 0.8
-
-
-def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Dot products of coordinate rows ``(3, L)`` -> (L,), summed in the order
-    ``np.einsum("ij,ij->i")`` sums (L, 3) rows, (a0 b0 + a2 b2) + a1 b1, so
-    that both layouts give the same bits."""
-    out = a[0] * b[0]
-    out += a[2] * b[2]
-    out += a[1] * b[1]
-    return out
 
 
 def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.ndarray):
@@ -973,7 +961,7 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
         y = np.empty((3, len(own)))
         for k in range(3):
             np.subtract(xn[k], e[:, k].take(own), out=y[k])
-        a = _dot_rows(y, y)
+        a = dot_rows(y, y)
         # samples a move of this pass (or the next few) cannot bring inside
         # the sphere, and every sample of a sphere that has converged, leave
         # the exact sum: the first ones enter the far field through a
@@ -986,7 +974,7 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
             yd, qd, od = y.take(drop, axis=1), qn.take(drop, axis=1), own[drop]
             inv2 = 1.0 / np.maximum(a[drop], 1e-300)
             inv3 = inv2 * np.sqrt(inv2)
-            sd = _dot_rows(yd, qd)
+            sd = dot_rows(yd, qd)
             c3 = 3.0 * sd * inv3 * inv2
             gsum = np.stack([np.bincount(od, weights=-qd[k] * inv3 + c3 * yd[k], minlength=m)
                              for k in range(3)], axis=1)
@@ -1003,7 +991,7 @@ def _recenter(solid: Solid, hulls: list[np.ndarray], p0: np.ndarray, delta: np.n
         t2 = 2.0 * t
         base = a + t * t
         rho2 = np.empty((6, len(own)))
-        sq = _dot_rows(y, qn)
+        sq = dot_rows(y, qn)
         sn = np.empty((6, len(own)))
         for k in range(3):
             ty = t2 * y[k]
@@ -1115,7 +1103,7 @@ def _lloyd_step(solid: Solid, centers: np.ndarray) -> _State:
     labels, _ = _flood_fill(solid, centers, table, r_grid[1])
     c, r, _ = _update_centers(solid, centers, labels)
     c, r = _shrink(solid, c, r, rounds=1)
-    out = np.maximum(FOUR_PI / 3 * r**3 - solid.flux.intersection_volumes(c, r), 0.0)
+    out = solid.flux.outside_volumes(c, r)
     return _State(c, r, labels, out, float(out.sum() / solid.volume))
 
 

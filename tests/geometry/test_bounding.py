@@ -147,6 +147,8 @@ def test_minimal_ball_of_points_closed_forms(case):
     else:
         pts, center, radius = np.array([[4.0, -1.0, 0.5]]), np.array([4.0, -1.0, 0.5]), 0.0
     c, r = minimal_bounding_sphere(pts)
+    # 1e-12: a few rounding steps on coordinates of size <= 6 (a 2-4-point
+    # circumscribed centre by one small linear solve); abs for the zero radii
     np.testing.assert_allclose(c, center, atol=1e-12)
     assert r == pytest.approx(radius, rel=POINTS_RTOL, abs=1e-12)
     assert np.all(np.linalg.norm(pts - c, axis=1) <= r)
