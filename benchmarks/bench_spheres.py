@@ -246,42 +246,45 @@ def run(meshes: dict, counts, methods=METHODS, log=print, baseline: Path | None 
 
     rows = []
     externals = externals or {}
-    for name, (path, mesh) in meshes.items():
-        evaluator = OutsideVolume(mesh)
-        ply = None
-        if externals or (baseline is not None and path is None):
-            # binary PLY of the mesh as loaded here: float32 vertices (~1e-7 of the size,
-            # far below the fits' tolerances); the external fitters all see these triangles
-            ply = Path(tempfile.mkdtemp(prefix="bench_spheres_")) / f"{name}.ply"
-            mesh.export(ply)
-        if path is None:  # a procedural mesh: the baseline reads the PLY
-            path = ply
-        for n in (counts if cases is None else [k for m, k in cases if m == name]):
-            runs = [(m, lambda m=m, mesh=mesh, n=n: fit_here(mesh, n, m)) for m in methods]
-            runs += [(f"variational@{k}",
-                      lambda k=k, mesh=mesh, n=n: fit_here(mesh, n, "variational", k))
-                     for k in iterations]
-            if baseline is not None:
-                runs.insert(0, ("baseline",
-                                lambda path=path, n=n: fit_baseline(baseline, path, n)))
-            for ext, argv in reversed(externals.items()):
-                runs.insert(0, (ext, lambda argv=argv, n=n, ply=ply: fit_external(argv, ply, n)))
-            for method, fit in runs:
-                before = load()
-                centers, radii, wall, cpu = fit()
-                spheres = SimpleNamespace(centers=centers, radii=radii)
-                row = {"mesh": name, "triangles": len(mesh.faces), "N": n, "method": method,
-                       "spheres": len(radii), "distinct": distinct(centers, radii),
-                       "E": evaluator.outside_volume_ratio(centers, radii),
-                       "E_mc": monte_carlo_ratio(mesh, spheres),
-                       "coverage": surface_coverage(mesh, centers, radii),
-                       "wall": wall, "cpu": cpu, "load": f"{before} -> {load()}"}
-                if method == "baseline" or method in externals:
-                    row["E_bounding"] = made_bounding(mesh, centers, radii)
-                rows.append(row)
-                log(f"  {name} N={n} {method}: E={row['E']:.3f} (MC {row['E_mc']:.3f}) "
-                    f"wall {wall:.1f} s, CPU {cpu:.1f} s, load {row['load']}",
-                    file=sys.stderr, flush=True)
+    # the meshes' PLY copies for the other fitters live only as long as the run
+    with tempfile.TemporaryDirectory(prefix="bench_spheres_") as tmp:
+        for name, (path, mesh) in meshes.items():
+            evaluator = OutsideVolume(mesh)
+            ply = None
+            if externals or (baseline is not None and path is None):
+                # binary PLY of the mesh as loaded here: float32 vertices (~1e-7 of the size,
+                # far below the fits' tolerances); the external fitters all see these triangles
+                ply = Path(tmp) / f"{name}.ply"
+                mesh.export(ply)
+            if path is None:  # a procedural mesh: the baseline reads the PLY
+                path = ply
+            for n in (counts if cases is None else [k for m, k in cases if m == name]):
+                runs = [(m, lambda m=m, mesh=mesh, n=n: fit_here(mesh, n, m)) for m in methods]
+                runs += [(f"variational@{k}",
+                          lambda k=k, mesh=mesh, n=n: fit_here(mesh, n, "variational", k))
+                         for k in iterations]
+                if baseline is not None:
+                    runs.insert(0, ("baseline",
+                                    lambda path=path, n=n: fit_baseline(baseline, path, n)))
+                for ext, argv in reversed(externals.items()):
+                    runs.insert(0, (ext, lambda argv=argv, n=n, ply=ply:
+                                    fit_external(argv, ply, n)))
+                for method, fit in runs:
+                    before = load()
+                    centers, radii, wall, cpu = fit()
+                    spheres = SimpleNamespace(centers=centers, radii=radii)
+                    row = {"mesh": name, "triangles": len(mesh.faces), "N": n, "method": method,
+                           "spheres": len(radii), "distinct": distinct(centers, radii),
+                           "E": evaluator.outside_volume_ratio(centers, radii),
+                           "E_mc": monte_carlo_ratio(mesh, spheres),
+                           "coverage": surface_coverage(mesh, centers, radii),
+                           "wall": wall, "cpu": cpu, "load": f"{before} -> {load()}"}
+                    if method == "baseline" or method in externals:
+                        row["E_bounding"] = made_bounding(mesh, centers, radii)
+                    rows.append(row)
+                    log(f"  {name} N={n} {method}: E={row['E']:.3f} (MC {row['E_mc']:.3f}) "
+                        f"wall {wall:.1f} s, CPU {cpu:.1f} s, load {row['load']}",
+                        file=sys.stderr, flush=True)
     return rows
 
 

@@ -9,7 +9,9 @@ must reproduce.
 from __future__ import annotations
 
 import sys
+import tempfile
 import textwrap
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -48,8 +50,12 @@ def _run(tmp_path, mesh, radius, out="{out}", n=1):
     script.write_text(WRITER)
     name, argv = bench_spheres.parse_external(
         f"ext={sys.executable} {script} {{mesh}} {{n}} {out} {radius}")
-    rows = bench_spheres.run({"ico": (None, mesh)}, [n], methods=(), externals={name: argv},
-                             log=lambda *a, **k: None)
+    scratch = tmp_path / "scratch"  # the run's temporary files go here, and must go away
+    scratch.mkdir(exist_ok=True)  # (a test may run several)
+    with mock.patch.object(tempfile, "tempdir", str(scratch)):
+        rows = bench_spheres.run({"ico": (None, mesh)}, [n], methods=(),
+                                 externals={name: argv}, log=lambda *a, **k: None)
+    assert list(scratch.iterdir()) == []
     assert [r["method"] for r in rows] == ["ext"]
     return rows[0]
 
