@@ -93,7 +93,7 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
         "seconds": round(result.info.get("seconds", 0.0), 3),
         "volume": result.info.get("volume"),
         **{k: v for k, v in result.info.items()
-           if k in ("iterations", "teleports_tried", "teleports_accepted", "points")},
+           if k in ("iterations", "teleports_tried", "teleports_accepted", "points", "start")},
     }
     report(summary, as_json,
            f"wrote {output}: {len(result)} spheres ({method}), "

@@ -10,13 +10,16 @@ import trimesh
 
 from shtools.geometry.outside_volume import OutsideVolume
 from shtools.geometry.sphere_fit import (
+    COARSE_TO_FINE_MIN,
     COMPASS_ITERATIONS,
     COVER_PASSES,
+    RACE_MIN,
     SHRINK_ROUNDS,
     _revive,
     discretize,
     distinct_spheres,
     fit_spheres,
+    race_overhead,
 )
 
 SCALES = [1e-9, 1e-6, 1e-3, 1.0, 1e3, 1e9]
@@ -129,19 +132,25 @@ def test_open_mesh_fit_has_no_degenerate_spheres(open_mesh):
     assert np.all(fit.radii > 1e-6 * np.linalg.norm(np.ptp(open_mesh.vertices, axis=0)))
 
 
-def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh):
+@pytest.mark.parametrize("n", [12, RACE_MIN])  # a random start; a race of two starts
+def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh, n):
     """A guard against slowdowns that does not depend on the machine: the fit
     counts its single-sphere outside-volume evaluations and the flux-sample
     terms they sum (both deterministic).
+
+    Work (rounds x spheres, summed over the stages): at most the budget, and
+    where two starts race (N = RACE_MIN here) at most :func:`race_overhead` rounds
+    more.
 
     Evaluations: a round re-centres every sphere twice (cluster update and
     shrink), each a compass search of at most 1 + 6 COMPASS_ITERATIONS
     evaluations, plus 2 for the profiles and the estimate; the final shrink
     and each of the COVER_PASSES surface-cover passes run SHRINK_ROUNDS such
-    re-centrings; the surface-bounding candidates (the grown search result and
-    each pass's result) are compared by one inner-loop estimate of every
-    sphere each.  A change that makes rounds costlier or spends more rounds
-    trips it.
+    re-centrings and an estimate of every sphere after each (the shrink keeps
+    its round of least E), and so does a race's coarse stage at its end; the
+    surface-bounding candidates (the grown search result and each pass's
+    result) are compared by one inner-loop estimate of every sphere each.  A
+    change that makes rounds costlier or spends more rounds trips it.
 
     Sample terms: an evaluation sums the samples within the sphere's radius
     plus a few compass steps, about one or two spheres' share K / N of the K
@@ -149,15 +158,52 @@ def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh):
     first step's reach for the whole search, as before the per-pass near
     sets, measured 4.2 K / N; evaluating converged spheres costs more still.
     """
-    n, rounds = 12, 6
+    rounds = 6
     fit = fit_spheres(capsule_union_mesh, n, seed=0, max_iterations=rounds, samples=400)
     again = fit_spheres(capsule_union_mesh, n, seed=0, max_iterations=rounds, samples=400)
     assert fit.info["evaluations"] == again.info["evaluations"]  # deterministic
     assert fit.info["sample_terms"] == again.info["sample_terms"]
+    races = RACE_MIN <= n < COARSE_TO_FINE_MIN
+    assert ("start" in fit.info) == races
+    assert 0 < fit.info["work"] <= (rounds + (race_overhead(rounds) if races else 0)) * n
     per_recentre = 1 + 6 * COMPASS_ITERATIONS
-    bound = (fit.info["iterations"] * n * (2 * per_recentre + 2)
-             + (1 + COVER_PASSES) * (SHRINK_ROUNDS * per_recentre + 1) * n)
-    assert fit.info["iterations"] <= rounds
+    bound = (fit.info["work"] * (2 * per_recentre + 2)
+             + (1 + COVER_PASSES + races) * (SHRINK_ROUNDS * (per_recentre + 1) + 1) * n)
     assert 0 < fit.info["evaluations"] <= bound
     share = fit.info["flux_samples"] / n
     assert 0 < fit.info["sample_terms"] <= 3.0 * share * fit.info["evaluations"]
+
+
+def test_shrink_keeps_its_round_of_least_outside_volume(capsule_union_mesh, monkeypatch):
+    """A shrink round can raise E (a re-centred sphere leaves points another
+    must grow to take back; on spot at N = 40 one round went 0.201 -> 0.406),
+    so the multi-round shrink returns its round of least estimated E.  Here
+    the second round's re-centring is made to throw one sphere far off (the
+    compass search claiming it improved): the result must be the first
+    round's set, not the blown-up one, and must still hold every cover point."""
+    import shtools.geometry.sphere_fit as sphere_fit
+
+    solid = discretize(capsule_union_mesh, 8, seed=0, samples=400)
+    rng = np.random.default_rng(0)
+    state = sphere_fit._lloyd_step(solid, sphere_fit._initial_centers(solid.points, 8, rng))
+    first = sphere_fit._shrink(solid, state.centers, state.radii, rounds=1)
+    calls = []
+    honest = sphere_fit._recenter
+
+    def sabotaged(solid_, hulls, p0, delta):
+        p, fp, f0 = honest(solid_, hulls, p0, delta)
+        calls.append(len(p))
+        if len(calls) == 2:  # the second round: move the first mover a diagonal away
+            p = p.copy()
+            p[0] += solid_.diag
+            fp = np.minimum(fp, f0 - 1.0)
+        return p, fp, f0
+
+    monkeypatch.setattr(sphere_fit, "_recenter", sabotaged)
+    centers, radii = sphere_fit._shrink(solid, state.centers, state.radii, rounds=3)
+    assert len(calls) >= 2  # the sabotaged round ran
+    estimate = solid.flux.outside_volumes(centers, radii).sum()
+    assert estimate <= solid.flux.outside_volumes(*first).sum()
+    d = np.linalg.norm(solid.cover[:, None] - centers[None], axis=-1)
+    # 1e-9 of the diagonal: the shrink's own slack for rounding
+    assert np.all(np.any(d <= radii + 1e-9 * solid.diag, axis=1))
