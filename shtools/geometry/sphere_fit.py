@@ -34,11 +34,11 @@ SHEXP (Ren et al. 2006, section 6.2):
    fit of ceil(N/2) spheres (itself fitted the same way) whose clusters with
    the largest gain are split in two, so that E keeps falling as N grows;
    Lloyd steps and teleports then refine at N.  Each stage spends part of one
-   work budget (rounds x spheres).  From RACE_MIN to COARSE_TO_FINE_MIN
-   spheres the random and the coarse start race: each runs a few rounds,
-   and the one whose estimated E is lower then spends its whole budget
-   (the coarse start wins on shapes of many thin parts, the random one on
-   compact shapes; :func:`_race`).
+   work budget (rounds x spheres).  On request (``race=True``), from
+   RACE_MIN to COARSE_TO_FINE_MIN spheres the random and the coarse start
+   race: each runs a few rounds, and the one whose estimated E is lower
+   then spends its whole budget (the coarse start wins on shapes of many
+   thin parts, the random one on compact shapes; :func:`_race`).
 
 The shrink-and-re-centre step is iterated to a fixed point at the end.  The
 spheres then must hold the whole surface, not only its samples
@@ -152,9 +152,9 @@ STALL_SHARE = 0.08
 #: whose clusters are split in two (recursively), instead of random centres:
 #: Lloyd steps and one-sphere teleports relocate spheres one at a time, which
 #: does not converge within the round budget once N is large (E at N = 128 was
-#: no better than at N = 64).  Below 64 it depends on the shape: the two
-#: starts race (RACE_MIN).  The coarse fit gets COARSE_SHARE of the work
-#: budget (rounds x spheres).
+#: no better than at N = 64).  Below 64 it depends on the shape (the random
+#: start is the default; the two starts can race, RACE_MIN).  The coarse fit
+#: gets COARSE_SHARE of the work budget (rounds x spheres).
 COARSE_TO_FINE_MIN = 64
 COARSE_SHARE = 0.5
 
@@ -187,7 +187,10 @@ COARSE_SHARE = 0.5
 #: character 0.120 vs 0.124, CesiumMan 1.026 vs 1.033, armadillo 0.671 vs
 #: 0.687, the capsules and the torus equal) for less CPU.  The race costs the
 #: losing start's work on top of the winner's budget: at most
-#: :func:`race_overhead` rounds at N.  Below N = 32 the coarse stage (< 16
+#: :func:`race_overhead` rounds at N: 1.2-1.4x the CPU of one start on
+#: CesiumMan at N = 32 (side by side, wave 6), which would break its 6x
+#: speed target, so the race is on request (``fit_spheres(race=True)``,
+#: ``spheres fit --race``, the scene's ``race = true``).  Below N = 32 the coarse stage (< 16
 #: spheres) predicts little: at N = 16 and 24 the race lost as often as it
 #: won (the character at N = 16, seed 1: 0.440 raced vs 0.392 random; at
 #: N = 24, seed 0: 0.197 vs 0.179, seed 1: 0.177 vs 0.218).
@@ -399,6 +402,7 @@ def fit_spheres(
     path=None,
     progress=None,
     restarts: int = 1,
+    race: bool = False,
     _desc: str = "fit",
 ) -> SphereSet:
     """Fit ``n`` spheres bounding the solid of ``mesh`` with minimal outside volume.
@@ -441,6 +445,13 @@ def fit_spheres(
         lowest E is returned (the search is non-convex: on spot at N = 40,
         seeds 0-5 gave E = 0.168, 0.185, 0.164, 0.185, 0.169, 0.197).
         ``info["restart_E"]`` lists every start's E.
+    race : bool
+        Variational fits of RACE_MIN to COARSE_TO_FINE_MIN - 1 spheres: race a
+        coarse start (a fit of ceil(n/2) spheres, split) against the random
+        one and go on with the one ahead (:func:`_race`).  Far lower E on
+        shapes of many thin parts (the tests' character at N = 32: -29 %),
+        the same fit on compact ones, for 1.1-1.4x the CPU; off by default
+        so that a fit's cost stays that of one start.
 
     Returns
     -------
@@ -465,7 +476,8 @@ def fit_spheres(
         fits = [fit_spheres(mesh, n, method=method, seed=seed + k, thickness=thickness,
                             max_iterations=max_iterations,
                             max_teleport_failures=max_teleport_failures, samples=samples,
-                            path=path, progress=progress, _desc=f"fit {k + 1}/{restarts}")
+                            path=path, progress=progress, race=race,
+                            _desc=f"fit {k + 1}/{restarts}")
                 for k in range(int(restarts))]
         best = min(fits, key=lambda f: f.outside_volume_ratio)  # first of equals
         best.info["restart_E"] = [f.outside_volume_ratio for f in fits]
@@ -477,11 +489,11 @@ def fit_spheres(
         return _fit_once(mesh, n, method=method, seed=seed, thickness=thickness,
                          max_iterations=max_iterations,
                          max_teleport_failures=max_teleport_failures, samples=samples,
-                         path=path, bar=bar)
+                         path=path, race=race, bar=bar)
 
 
 def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_failures,
-              samples, path, bar) -> SphereSet:
+              samples, path, race, bar) -> SphereSet:
     """One start of :func:`fit_spheres`, reporting to the progress object ``bar``."""
     start = time.perf_counter()
     if thickness is not None:
@@ -505,8 +517,8 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
     if max_iterations is None:
         max_iterations = ROUNDS
     # known once the solid is sampled; shown at the next update
-    bar.total = max_iterations + (race_overhead(max_iterations)
-                                  if method == "variational" and _races(n) else 0)
+    races = race and method == "variational" and _races(n)
+    bar.total = max_iterations + (race_overhead(max_iterations) if races else 0)
 
     def progress(rounds: float, energy: float) -> None:
         bar.set_postfix(E=f"{energy:.3f}", refresh=False)
@@ -518,7 +530,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
     if method == "variational":
         centers, radii, _, extra = _variational(
             solid, n, rng, max_iterations=max_iterations,
-            max_teleport_failures=max_teleport_failures, progress=progress)
+            max_teleport_failures=max_teleport_failures, progress=progress, race=races)
         info.update(extra)
         centers, radii, info["revived"] = _revive(solid, centers, radii)
         centers, radii, info["cover_passes_kept"] = _settle_cover(solid, centers, radii)
@@ -1369,15 +1381,14 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
 
 
 def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iterations: int,
-                 max_teleport_failures: int, progress=None, race: bool = True):
+                 max_teleport_failures: int, progress=None, race: bool = False):
     """The search of :func:`fit_spheres` at ``n`` spheres: its start, its rounds and
     the final shrink.
 
     From COARSE_TO_FINE_MIN spheres on the search starts from a coarse fit
-    (:func:`_coarse_search`); from RACE_MIN on below that, the random and
-    the coarse start race (:func:`_race`) unless ``race`` is false (the
-    coarse stages: their start is part of the caller's plan); below RACE_MIN
-    the start is random.
+    (:func:`_coarse_search`); with ``race``, from RACE_MIN on below that,
+    the random and the coarse start race (:func:`_race`); otherwise the
+    start is random.
 
     Returns
     -------
@@ -1392,7 +1403,7 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
                        progress=progress)
     if n >= COARSE_TO_FINE_MIN:
         search = _coarse_search(solid, n, rng, **search_args)
-    elif race and _races(n):
+    elif race:
         search = _race(solid, n, rng, **search_args)
     else:
         search = _LloydSearch(solid, _initial_centers(solid.points, n, rng), budget=max_iterations,

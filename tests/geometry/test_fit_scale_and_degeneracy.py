@@ -132,14 +132,14 @@ def test_open_mesh_fit_has_no_degenerate_spheres(open_mesh):
     assert np.all(fit.radii > 1e-6 * np.linalg.norm(np.ptp(open_mesh.vertices, axis=0)))
 
 
-@pytest.mark.parametrize("n", [12, RACE_MIN])  # a random start; a race of two starts
-def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh, n):
+@pytest.mark.parametrize(("n", "race"), [(12, False), (RACE_MIN, True)])
+def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh, n, race):
     """A guard against slowdowns that does not depend on the machine: the fit
     counts its single-sphere outside-volume evaluations and the flux-sample
     terms they sum (both deterministic).
 
     Work (rounds x spheres, summed over the stages): at most the budget, and
-    where two starts race (N = RACE_MIN here) at most :func:`race_overhead` rounds
+    where two starts race (``race=True``, N = RACE_MIN here) at most :func:`race_overhead` rounds
     more.
 
     Evaluations: a round re-centres every sphere twice (cluster update and
@@ -159,11 +159,12 @@ def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh, n):
     sets, measured 4.2 K / N; evaluating converged spheres costs more still.
     """
     rounds = 6
-    fit = fit_spheres(capsule_union_mesh, n, seed=0, max_iterations=rounds, samples=400)
-    again = fit_spheres(capsule_union_mesh, n, seed=0, max_iterations=rounds, samples=400)
+    kwargs = dict(seed=0, max_iterations=rounds, samples=400, race=race)
+    fit = fit_spheres(capsule_union_mesh, n, **kwargs)
+    again = fit_spheres(capsule_union_mesh, n, **kwargs)
     assert fit.info["evaluations"] == again.info["evaluations"]  # deterministic
     assert fit.info["sample_terms"] == again.info["sample_terms"]
-    races = RACE_MIN <= n < COARSE_TO_FINE_MIN
+    races = race and RACE_MIN <= n < COARSE_TO_FINE_MIN
     assert ("start" in fit.info) == races
     assert 0 < fit.info["work"] <= (rounds + (race_overhead(rounds) if races else 0)) * n
     per_recentre = 1 + 6 * COMPASS_ITERATIONS

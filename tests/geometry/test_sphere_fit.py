@@ -217,17 +217,15 @@ def test_unknown_method(small_torus):
 
 
 @pytest.mark.slow  # two fits at the default budget: about a minute under load
-def test_race_goes_on_with_the_coarse_start_on_thin_parts(character_mesh, monkeypatch):
-    """Between RACE_MIN and COARSE_TO_FINE_MIN the random and the coarse start
-    race.  On the character (a body, a head and four thin limbs) the coarse
+def test_race_goes_on_with_the_coarse_start_on_thin_parts(character_mesh):
+    """With ``race=True``, between RACE_MIN and COARSE_TO_FINE_MIN the random
+    and the coarse start race.  On the character (a body, a head and four thin limbs) the coarse
     start must win the race and end lower than the random start alone: the
     random start's teleports move one sphere at a time and leave limbs
-    under-served.  The reference is the same fit with the race switched off;
-    the case is the one of issue 17 (N = 32, default samples and budget)."""
-    import shtools.geometry.sphere_fit as sphere_fit
-
-    raced = fit_spheres(character_mesh, 32, seed=0)
-    monkeypatch.setattr(sphere_fit, "RACE_MIN", 10**9)
+    under-served.  The reference is the same fit without the race (the
+    default); the case is the one of issue 17 (N = 32, default samples and
+    budget)."""
+    raced = fit_spheres(character_mesh, 32, seed=0, race=True)
     alone = fit_spheres(character_mesh, 32, seed=0)
     assert raced.info["start"] == "coarse"
     assert "start" not in alone.info
