@@ -182,17 +182,17 @@ COARSE_SHARE = 0.5
 #: vs 0.283); without the margin the bunny at seed 1 went coarse (0.515
 #: instead of 0.427), worse than without the race, and so did CesiumMan at
 #: seed 0 in the race as built (a lead of 1.085; 1.208 coarse, 1.145
-#: random).  A coarse stage
-#: of 1/6 of the budget instead of 1/2 gave as low an E (mean over seeds 0-2:
-#: character 0.120 vs 0.124, CesiumMan 1.026 vs 1.033, armadillo 0.671 vs
-#: 0.687, the capsules and the torus equal) for less CPU.  The race costs the
+#: random).  A coarse stage of 1/6 of the budget instead of 1/2 gave as low
+#: an E (mean over seeds 0-2: character 0.120 vs 0.124, CesiumMan 1.026 vs
+#: 1.033, armadillo 0.671 vs 0.687, the capsules and the torus equal) for
+#: less CPU.  The race costs the
 #: losing start's work on top of the winner's budget: at most
 #: :func:`race_overhead` rounds at N: 1.2-1.4x the CPU of one start on
 #: CesiumMan at N = 32 (side by side, wave 6), which would break its 6x
 #: speed target, so the race is on request (``fit_spheres(race=True)``,
-#: ``spheres fit --race``, the scene's ``race = true``).  Below N = 32 the coarse stage (< 16
-#: spheres) predicts little: at N = 16 and 24 the race lost as often as it
-#: won (the character at N = 16, seed 1: 0.440 raced vs 0.392 random; at
+#: ``spheres fit --race``, the scene's ``race = true``).  Below N = 32 the
+#: coarse stage (< 16 spheres) predicts little: at N = 16 and 24 the race
+#: lost as often as it won (the character at N = 16, seed 1: 0.440 raced vs 0.392 random; at
 #: N = 24, seed 0: 0.197 vs 0.179, seed 1: 0.177 vs 0.218).
 RACE_MIN = 32
 RACE_ROUNDS = 15
@@ -424,11 +424,12 @@ def fit_spheres(
         Budget of clustering + centre-update rounds (variational), counted
         in rounds at ``n`` spheres: the coarse stages (ceil(n/2), ... spheres)
         spend their share of it in proportionally cheaper rounds, so the total
-        round count reported in ``info`` can exceed it.  Between ``RACE_MIN``
-        and ``COARSE_TO_FINE_MIN`` spheres two starts race and the one behind
-        stops early: the work adds at most :func:`race_overhead` rounds at
-        ``n`` (``info["start"]`` names the start that went on,
-        ``info["race_energies"]`` their estimated E at the comparison).
+        round count reported in ``info`` can exceed it.  With ``race``,
+        between ``RACE_MIN`` and ``COARSE_TO_FINE_MIN`` spheres two starts
+        race and the one behind stops early: the work adds at most
+        :func:`race_overhead` rounds at ``n`` (``info["start"]`` names the
+        start that went on, ``info["race_energies"]`` their estimated E at
+        the comparison).
         Default ``ROUNDS``.
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
@@ -1413,11 +1414,12 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
 
 
 def _races(n: int) -> bool:
-    """Whether a variational fit of ``n`` spheres races two starts (:func:`_race`)."""
+    """Whether a variational fit of ``n`` spheres races two starts when asked
+    (``race=True``; :func:`_race`)."""
     return RACE_MIN <= n < COARSE_TO_FINE_MIN
 
 
-def race_overhead(max_iterations: int) -> float:
+def race_overhead(max_iterations: int) -> int:
     """Most work the race of two starts adds to a budget of ``max_iterations``
     rounds at N, in rounds at N: the random start's rounds (coarse start
     ahead) or the coarse start's stage and its rounds at N (random ahead)."""
