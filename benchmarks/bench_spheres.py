@@ -236,6 +236,24 @@ def made_bounding(mesh, centers, radii) -> float:
     return solid.evaluator.outside_volume_ratio(c, r)
 
 
+def _measure(name: str, mesh, evaluator, n: int, method: str, fit, *,
+             scored_bounding: bool) -> dict:
+    """Run one fit (``fit()`` -> centres, radii, wall s, CPU s) and score it: a table row.
+    ``scored_bounding`` adds the E of its spheres grown to hold the whole surface (for
+    fitters that do not bound it)."""
+    before = load()
+    centers, radii, wall, cpu = fit()
+    row = {"mesh": name, "triangles": len(mesh.faces), "N": n, "method": method,
+           "spheres": len(radii), "distinct": distinct(centers, radii),
+           "E": evaluator.outside_volume_ratio(centers, radii),
+           "E_mc": monte_carlo_ratio(mesh, SimpleNamespace(centers=centers, radii=radii)),
+           "coverage": surface_coverage(mesh, centers, radii),
+           "wall": wall, "cpu": cpu, "load": f"{before} -> {load()}"}
+    if scored_bounding:
+        row["E_bounding"] = made_bounding(mesh, centers, radii)
+    return row
+
+
 def run(meshes: dict, counts, methods=METHODS, log=print, baseline: Path | None = None,
         cases=None, externals=None, iterations=()):
     """Fit every mesh x N x method (and the baseline's variational fit); rows of dicts.
@@ -270,20 +288,11 @@ def run(meshes: dict, counts, methods=METHODS, log=print, baseline: Path | None 
                     runs.insert(0, (ext, lambda argv=argv, n=n, ply=ply:
                                     fit_external(argv, ply, n)))
                 for method, fit in runs:
-                    before = load()
-                    centers, radii, wall, cpu = fit()
-                    spheres = SimpleNamespace(centers=centers, radii=radii)
-                    row = {"mesh": name, "triangles": len(mesh.faces), "N": n, "method": method,
-                           "spheres": len(radii), "distinct": distinct(centers, radii),
-                           "E": evaluator.outside_volume_ratio(centers, radii),
-                           "E_mc": monte_carlo_ratio(mesh, spheres),
-                           "coverage": surface_coverage(mesh, centers, radii),
-                           "wall": wall, "cpu": cpu, "load": f"{before} -> {load()}"}
-                    if method == "baseline" or method in externals:
-                        row["E_bounding"] = made_bounding(mesh, centers, radii)
+                    row = _measure(name, mesh, evaluator, n, method, fit,
+                                   scored_bounding=method == "baseline" or method in externals)
                     rows.append(row)
                     log(f"  {name} N={n} {method}: E={row['E']:.3f} (MC {row['E_mc']:.3f}) "
-                        f"wall {wall:.1f} s, CPU {cpu:.1f} s, load {row['load']}",
+                        f"wall {row['wall']:.1f} s, CPU {row['cpu']:.1f} s, load {row['load']}",
                         file=sys.stderr, flush=True)
     return rows
 

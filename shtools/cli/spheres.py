@@ -50,10 +50,10 @@ def spheres():
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
                    "The fit is a non-convex search: a few starts buy a few percent of E.")
 @click.option("--race", is_flag=True, default=False,
-              help="From N = 32 to 63: race a coarse start (N/2 spheres, split) against the "
-                   "random one and go on with the one ahead: much lower E on shapes of many "
-                   "thin parts (characters, limbs), the same fit on compact ones, for "
-                   "1.1-1.4x the CPU (docs/sphere-fits.md).")
+              help="From N = 32 to 63 (no effect at other N): race a coarse start (N/2 "
+                   "spheres, split) against the random one and go on with the one ahead: much "
+                   "lower E on shapes of many thin parts (characters, limbs), the same fit on "
+                   "compact ones, for up to 1.4x the CPU (docs/sphere-fits.md).")
 @scheduler_options("meshes (several MESH)")
 @json_option
 def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts, race,

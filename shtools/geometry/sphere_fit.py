@@ -185,15 +185,14 @@ COARSE_SHARE = 0.5
 #: random).  A coarse stage of 1/6 of the budget instead of 1/2 gave as low
 #: an E (mean over seeds 0-2: character 0.120 vs 0.124, CesiumMan 1.026 vs
 #: 1.033, armadillo 0.671 vs 0.687, the capsules and the torus equal) for
-#: less CPU.  The race costs the
-#: losing start's work on top of the winner's budget: at most
-#: :func:`race_overhead` rounds at N: 1.2-1.4x the CPU of one start on
-#: CesiumMan at N = 32 (side by side, wave 6), which would break its 6x
-#: speed target, so the race is on request (``fit_spheres(race=True)``,
+#: less CPU.  The race costs the losing start's work on top of the winner's
+#: budget, at most :func:`race_overhead` rounds at N: 1.2-1.4x the CPU of
+#: one start on CesiumMan at N = 32 (side by side, wave 6), which would break
+#: its 6x speed target, so the race is on request (``fit_spheres(race=True)``,
 #: ``spheres fit --race``, the scene's ``race = true``).  Below N = 32 the
 #: coarse stage (< 16 spheres) predicts little: at N = 16 and 24 the race
-#: lost as often as it won (the character at N = 16, seed 1: 0.440 raced vs 0.392 random; at
-#: N = 24, seed 0: 0.197 vs 0.179, seed 1: 0.177 vs 0.218).
+#: lost as often as it won (the character at N = 16, seed 1: 0.440 raced vs
+#: 0.392 random; at N = 24, seed 0: 0.197 vs 0.179, seed 1: 0.177 vs 0.218).
 RACE_MIN = 32
 RACE_ROUNDS = 15
 RACE_FINE_ROUNDS = 2
@@ -301,6 +300,12 @@ class Solid:
     def points_tree(self) -> cKDTree:
         """k-d tree of ``points`` (they never change: built once, not per round)."""
         return cKDTree(self.points)
+
+    def outside_estimate(self, centers: np.ndarray, radii: np.ndarray) -> float:
+        """Σ V(S_i - T) of a set ``(N, 3), (N,)`` by the inner-loop quadrature,
+        counted as N evaluations."""
+        self.evaluations += len(centers)
+        return float(np.sum(self.flux.outside_volumes(centers, radii)))
 
     def hull(self, points: np.ndarray, index: np.ndarray) -> np.ndarray:
         """Convex-hull vertices of ``points[index]``, remembered by the points
@@ -447,11 +452,12 @@ def fit_spheres(
         seeds 0-5 gave E = 0.168, 0.185, 0.164, 0.185, 0.169, 0.197).
         ``info["restart_E"]`` lists every start's E.
     race : bool
-        Variational fits of RACE_MIN to COARSE_TO_FINE_MIN - 1 spheres: race a
-        coarse start (a fit of ceil(n/2) spheres, split) against the random
-        one and go on with the one ahead (:func:`_race`).  Far lower E on
-        shapes of many thin parts (the tests' character at N = 32: -29 %),
-        the same fit on compact ones, for 1.1-1.4x the CPU; off by default
+        Variational fits of RACE_MIN to COARSE_TO_FINE_MIN - 1 spheres (no
+        effect at other N): race a coarse start (a fit of ceil(n/2) spheres,
+        split) against the random one and go on with the one ahead
+        (:func:`_race`).  Far lower E on shapes of many thin parts (the
+        tests' character at N = 32: -29 %), the same fit on compact ones, for
+        up to 1.4x the CPU (1.2-1.4x on CesiumMan at N = 32); off by default
         so that a fit's cost stays that of one start.
 
     Returns
@@ -773,13 +779,9 @@ def _settle_cover(solid: Solid, centers: np.ndarray, radii: np.ndarray):
     passes : int
         Re-centring passes behind the returned set (0: growth alone).
     """
-    def estimate(c: np.ndarray, r: np.ndarray) -> float:
-        solid.evaluations += len(c)
-        return float(np.sum(solid.flux.outside_volumes(c, r)))
-
     pieces: list = []
     grown = _cover(solid, centers, radii, pieces=pieces)
-    best = (estimate(centers, grown), centers, grown, 0)
+    best = (solid.outside_estimate(centers, grown), centers, grown, 0)
     for k in range(COVER_PASSES):
         if not pieces:
             break
@@ -789,7 +791,7 @@ def _settle_cover(solid: Solid, centers: np.ndarray, radii: np.ndarray):
         centers, radii = _shrink(solid, centers, grown, rounds=SHRINK_ROUNDS)
         pieces = []
         grown = _cover(solid, centers, radii, pieces=pieces)
-        e = estimate(centers, grown)
+        e = solid.outside_estimate(centers, grown)
         if e < best[0]:
             best = (e, centers, grown, k + 1)
     return best[1], best[2], best[3]
@@ -1496,15 +1498,13 @@ def _race(solid: Solid, n: int, rng: np.random.Generator, *, max_iterations: int
     return winner
 
 
-def _add_spent(a: dict | None, b: dict) -> dict:
-    """Sum the counters of two searches' info (rounds, teleports, work)."""
-    out = dict(a or {})
-    for key in _COUNTERS:
-        out[key] = out.get(key, 0) + b[key]
-    return out
-
-
+#: The counters a search's info sums over its stages.
 _COUNTERS = ("iterations", "teleports_tried", "teleports_accepted", "work")
+
+
+def _add_spent(a: dict, b: dict) -> dict:
+    """``a`` with the counters of ``b`` added (rounds, teleports, work)."""
+    return {**a, **{key: a.get(key, 0) + b[key] for key in _COUNTERS}}
 
 
 class _LloydSearch:
@@ -1520,7 +1520,7 @@ class _LloydSearch:
                  max_teleport_failures: int, progress=None, spent: dict | None = None):
         self.solid, self.budget, self.progress = solid, budget, progress
         self.max_teleport_failures = max_teleport_failures
-        self.spent = None if spent is None else _add_spent(None, spent)
+        self.spent = _add_spent({}, spent or dict.fromkeys(_COUNTERS, 0))
         self.n = len(start.centers) if isinstance(start, _State) else len(start)
         # Lloyd steps are deterministic: after a rejected teleport the search
         # resumes from the best state, whose successor is often already known
@@ -1533,7 +1533,7 @@ class _LloydSearch:
     @property
     def work(self) -> int:
         """Work spent by this search and its earlier stages, in rounds x spheres."""
-        return self.iterations * self.n + (self.spent or {}).get("work", 0)
+        return self.iterations * self.n + self.spent["work"]
 
     def counters(self) -> dict:
         """This search's counters plus those of its earlier stages."""
@@ -1615,7 +1615,7 @@ class _LloydSearch:
         labels (P,) and info (counters over every stage, the estimated E)."""
         centers, radii = _shrink(self.solid, self.best.centers, self.best.radii,
                                  rounds=SHRINK_ROUNDS)
-        info = {k: v for k, v in (self.spent or {}).items() if k not in _COUNTERS}
+        info = {k: v for k, v in self.spent.items() if k not in _COUNTERS}
         info.update(self.counters(), energy_estimate=self.best.energy)
         return centers, radii, self.best.labels, info
 
@@ -1668,6 +1668,7 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
     # a round can raise E (a re-centred sphere leaves points that another
     # must grow to take back: spot at N = 40 went 0.201 -> 0.406 in one
     # round), so from two rounds on the round of least estimated E is kept
+    keep_best = rounds > 1
     kept = (np.inf, centers, radii)
     for _ in range(rounds):
         before = (centers.copy(), radii.copy())
@@ -1715,18 +1716,15 @@ def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
                     d = np.linalg.norm(pts[lost, None, :] - centers[None, :, :], axis=-1)
                     j = np.argmin(d - radii, axis=1)
                     np.maximum.at(radii, j, d[np.arange(len(lost)), j])
-        if rounds > 1:
-            solid.evaluations += n
-            estimate = float(np.sum(solid.flux.outside_volumes(centers, radii)))
+        if keep_best:
+            estimate = solid.outside_estimate(centers, radii)
             if estimate < kept[0]:
                 kept = (estimate, centers.copy(), radii.copy())
         # a fixed point: no sphere moved or shrank noticeably this round
         moved = np.max(np.linalg.norm(centers - before[0], axis=1) + before[1] - radii)
         if moved <= SHRINK_TOLERANCE * solid.diag:
             break
-    if rounds > 1:
-        return kept[1], kept[2]
-    return centers, radii
+    return (kept[1], kept[2]) if keep_best else (centers, radii)
 
 
 # --------------------------------------------------------------------------- baselines
