@@ -44,7 +44,8 @@ def spheres():
               help="Fit a shell of this thickness around the surface (for flat/open sheets).")
 @click.option("--iterations", type=option_type("iterations"), default=None,
               help="Round budget of the variational fit, counted in rounds at N spheres "
-                   "(from N = 64 the coarse stages spend part of it in cheaper rounds) "
+                   "(from N = 64 the coarse stages spend part of it in cheaper rounds); "
+                   "a short budget shortens the finishing passes too (quick previews) "
                    f"[default: {DEFAULT_ROUNDS}].")
 @click.option("--restarts", type=option_type("restarts"), default=1, show_default=True,
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "

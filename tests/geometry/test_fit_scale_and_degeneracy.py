@@ -15,6 +15,7 @@ from shtools.geometry.sphere_fit import (
     COVER_PASSES,
     RACE_MIN,
     SHRINK_ROUNDS,
+    _finish_effort,
     _revive,
     discretize,
     distinct_spheres,
@@ -145,9 +146,10 @@ def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh, n, race):
     Evaluations: a round re-centres every sphere twice (cluster update and
     shrink), each a compass search of at most 1 + 6 COMPASS_ITERATIONS
     evaluations, plus 2 for the profiles and the estimate; the final shrink
-    and each of the COVER_PASSES surface-cover passes run SHRINK_ROUNDS such
-    re-centrings and an estimate of every sphere after each (the shrink keeps
-    its round of least E), and so does a race's coarse stage at its end; the
+    and each surface-cover pass run the shrink rounds such re-centrings (at
+    this short budget the quick finish's, :func:`_finish_effort`) and an
+    estimate of every sphere after each (the shrink keeps its round of least
+    E), and so does a race's coarse stage at its end; the
     surface-bounding candidates (the grown search result and each pass's
     result) are compared by one inner-loop estimate of every sphere each.  A
     change that makes rounds costlier or spends more rounds trips it.
@@ -168,11 +170,33 @@ def test_work_budget_in_outside_volume_evaluations(capsule_union_mesh, n, race):
     assert ("start" in fit.info) == races
     assert 0 < fit.info["work"] <= (rounds + (race_overhead(rounds) if races else 0)) * n
     per_recentre = 1 + 6 * COMPASS_ITERATIONS
+    shrink_rounds, passes = _finish_effort(rounds)
     bound = (fit.info["work"] * (2 * per_recentre + 2)
-             + (1 + COVER_PASSES + races) * (SHRINK_ROUNDS * (per_recentre + 1) + 1) * n)
+             + (1 + passes + races) * (shrink_rounds * (per_recentre + 1) + 1) * n)
     assert 0 < fit.info["evaluations"] <= bound
     share = fit.info["flux_samples"] / n
     assert 0 < fit.info["sample_terms"] <= 3.0 * share * fit.info["evaluations"]
+
+
+def test_a_short_budget_buys_a_short_finish(capsule_union_mesh, monkeypatch):
+    """A fit of fewer rounds than SHRINK_ROUNDS finishes with fewer shrink
+    rounds and one cover pass (otherwise the finish, not the search, sets the
+    time of a short fit), and still bounds the whole surface: checked on fresh
+    surface points the fit never saw, by exact sphere membership."""
+    import shtools.geometry.sphere_fit as sphere_fit
+
+    assert _finish_effort(sphere_fit.ROUNDS) == (SHRINK_ROUNDS, COVER_PASSES)
+    kwargs = dict(seed=0, max_iterations=2, samples=400)
+    quick = fit_spheres(capsule_union_mesh, 12, **kwargs)
+    monkeypatch.setattr(sphere_fit, "_finish_effort",
+                        lambda rounds: (SHRINK_ROUNDS, COVER_PASSES))
+    full = fit_spheres(capsule_union_mesh, 12, **kwargs)
+    assert quick.info["evaluations"] < full.info["evaluations"]
+    surface = trimesh.sample.sample_surface_even(capsule_union_mesh, 5000, seed=11)[0]
+    for fit in (quick, full):
+        d = np.linalg.norm(surface[:, None, :] - fit.centers[None], axis=-1)
+        # 1e-9 of the diagonal: the fit's own slack on a sphere's boundary
+        assert np.all(np.any(d <= fit.radii + 1e-9 * capsule_union_mesh.scale, axis=1))
 
 
 def test_shrink_keeps_its_round_of_least_outside_volume(capsule_union_mesh, monkeypatch):
