@@ -50,14 +50,9 @@ def spheres():
 @click.option("--restarts", type=option_type("restarts"), default=1, show_default=True,
               help="Independent starts (seeds SEED, SEED+1, ...); the lowest E is kept.  "
                    "The fit is a non-convex search: a few starts buy a few percent of E.")
-@click.option("--race", is_flag=True, default=False,
-              help="From N = 32 to 63 (no effect at other N): race a coarse start (N/2 "
-                   "spheres, split) against the random one and go on with the one ahead: much "
-                   "lower E on shapes of many thin parts (characters, limbs), the same fit on "
-                   "compact ones, for up to 1.4x the CPU (docs/sphere-fits.md).")
 @scheduler_options("meshes (several MESH)")
 @json_option
-def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts, race,
+def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts,
         scheduler, workers, as_json):
     """Fit N spheres bounding the solid of MESH with minimal outside volume.
 
@@ -77,7 +72,7 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
         with progress(total=len(mesh_paths), desc="fit", unit="mesh") as bar:
             for row in fit_many(mesh_paths, output, count, method=method, seed=seed,
                                 thickness=thickness, iterations=iterations,
-                                restarts=restarts, race=race, scheduler=scheduler,
+                                restarts=restarts, scheduler=scheduler,
                                 workers=workers, pool_summary=pool):
                 rows.append(row)
                 bar.update(1)
@@ -89,7 +84,7 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
     guard_outputs({"-o": output}, [mesh_path])
     result = fit_to_file(mesh_path, count, output, method=method, seed=seed,
                          thickness=thickness, iterations=iterations, restarts=restarts,
-                         race=race, progress=progress)
+                         progress=progress)
     summary = {
         "output": output,
         "spheres": len(result),
@@ -99,7 +94,7 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
         "seconds": round(result.info.get("seconds", 0.0), 3),
         "volume": result.info.get("volume"),
         **{k: v for k, v in result.info.items()
-           if k in ("iterations", "teleports_tried", "teleports_accepted", "points", "start")},
+           if k in ("iterations", "teleports_tried", "teleports_accepted", "points")},
     }
     report(summary, as_json,
            f"wrote {output}: {len(result)} spheres ({method}), "

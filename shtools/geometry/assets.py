@@ -16,8 +16,7 @@ from shtools.errors import InputError
 
 def fit_to_file(mesh_path: str | os.PathLike, count: int, output: str | os.PathLike, *,
                 method: str = "variational", seed: int = 0, thickness: float | None = None,
-                iterations: int | None = None, restarts: int = 1, race: bool = False,
-                progress=None):
+                iterations: int | None = None, restarts: int = 1, progress=None):
     """Fit ``count`` spheres to the mesh file and write a ``spheres`` asset.
 
     Parameters are those of :func:`shtools.geometry.sphere_fit.fit_spheres`
@@ -39,9 +38,9 @@ def fit_to_file(mesh_path: str | os.PathLike, count: int, output: str | os.PathL
     mesh = load_mesh(mesh_path)
     result = fit_spheres(mesh, count, method=method, seed=seed, thickness=thickness,
                          max_iterations=iterations, path=mesh_path, progress=progress,
-                         restarts=restarts, race=race)
+                         restarts=restarts)
     parameters = {"n": count, "method": method, "seed": seed, "thickness": thickness,
-                  "iterations": iterations, "restarts": restarts, "race": race}
+                  "iterations": iterations, "restarts": restarts}
     write_spheres(output, result, inputs={"mesh": mesh_path}, parameters=parameters)
     return result
 
@@ -75,8 +74,7 @@ def _fit_task(options: dict, item: tuple):
     mesh_path, output = item
     result = fit_to_file(mesh_path, options["count"], output, method=options["method"],
                          seed=options["seed"], thickness=options["thickness"],
-                         iterations=options["iterations"], restarts=options["restarts"],
-                         race=options["race"])
+                         iterations=options["iterations"], restarts=options["restarts"])
     return {"mesh": str(mesh_path), "output": str(output), "spheres": len(result),
             "outside_volume_ratio": result.outside_volume_ratio,
             "coverage": result.coverage,
@@ -85,7 +83,7 @@ def _fit_task(options: dict, item: tuple):
 
 def fit_many(mesh_paths, out_dir: str | os.PathLike, count: int, *,
              method: str = "variational", seed: int = 0, thickness: float | None = None,
-             iterations: int | None = None, restarts: int = 1, race: bool = False,
+             iterations: int | None = None, restarts: int = 1,
              scheduler: str | None = None, workers: int | None = None,
              pool_summary: dict | None = None):
     """Fit every mesh, one task each, on local cores or a Dask cluster.
@@ -102,7 +100,7 @@ def fit_many(mesh_paths, out_dir: str | os.PathLike, count: int, *,
     mesh_paths : sequence of path-like
     out_dir : path-like
         Existing folder for the assets.
-    count, method, seed, thickness, iterations, restarts, race
+    count, method, seed, thickness, iterations, restarts
         As :func:`fit_to_file`.
     scheduler, workers
         As :func:`shtools.tasks.task_pool`.
@@ -120,7 +118,7 @@ def fit_many(mesh_paths, out_dir: str | os.PathLike, count: int, *,
 
     outputs = batch_outputs(mesh_paths, out_dir)
     options = {"count": count, "method": method, "seed": seed, "thickness": thickness,
-               "iterations": iterations, "restarts": restarts, "race": race}
+               "iterations": iterations, "restarts": restarts}
     with task_pool(scheduler, workers, n_tasks=len(outputs)) as pool:
         yield from pool.map_ordered(_fit_task, list(zip(mesh_paths, outputs, strict=True)),
                                     shared=options, window=pool.workers)

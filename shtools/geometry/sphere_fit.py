@@ -34,11 +34,9 @@ SHEXP (Ren et al. 2006, section 6.2):
    fit of ceil(N/2) spheres (itself fitted the same way) whose clusters with
    the largest gain are split in two, so that E keeps falling as N grows;
    Lloyd steps and teleports then refine at N.  Each stage spends part of one
-   work budget (rounds x spheres).  On request (``race=True``), from
-   RACE_MIN to COARSE_TO_FINE_MIN spheres the random and the coarse start
-   race: each runs a few rounds, and the one whose estimated E is lower
-   then spends its whole budget (the coarse start wins on shapes of many
-   thin parts, the random one on compact shapes; :func:`_race`).
+   work budget (rounds x spheres).  From SPLIT_START_MIN to
+   COARSE_TO_FINE_MIN spheres the search starts from k-means clusters split
+   in two twice (:func:`_split_start`), below that from random centres.
 
 The shrink-and-re-centre step is iterated to a fixed point at the end.  The
 spheres then must hold the whole surface, not only its samples
@@ -61,6 +59,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -155,58 +154,35 @@ TELEPORT_CANDIDATES = 3
 #: 0.5 % drop of E is 64 % of an average sphere's outside volume).
 STALL_SHARE = 0.08
 
+#: From this N on (below COARSE_TO_FINE_MIN) the variational fit starts from
+#: k-means clusters of the points, ceil(N / 2**SPLIT_LEVELS) of them, split in
+#: two SPLIT_LEVELS times (:func:`_split_start`) instead of random centres:
+#: spheres go to the parts of a shape as a coarse fit sends them, for the
+#: price of a round or two.  Measured (wave 7, seeds 0-2, means against the
+#: random start): the tests' character at N = 32 -20 %, capsules -27 %,
+#: CesiumMan -11 %, armadillo -9 %, spot N = 32 / 40 / 48 -6 / -2 / -12 %,
+#: teapot -2 %, the bunny +2 %.  On the geometric mean of those ten cases
+#: one level gave -4 % and two -10 %; three lost badly on compact shapes
+#: (seed 0: the bunny 0.565, spot N = 32 0.443, against 0.412 and 0.286).
+#: It replaced wave 6's race of a random and a coarse start (``race=True``):
+#: raced against the split start, the coarse start changed the mean E by
+#: -11 % to +7 % over those cases for 1.1-1.35x the CPU.  Below N = 32 the
+#: start is random: there the coarse starts predicted little (wave 6: the
+#: race lost as often as it won at N = 16 and 24).
+SPLIT_START_MIN = 32
+SPLIT_LEVELS = 2
+
 #: From this N on, the variational fit starts from a fit of ceil(N/2) spheres
 #: whose clusters are split in two (recursively), instead of random centres:
 #: Lloyd steps and one-sphere teleports relocate spheres one at a time, which
 #: does not converge within the round budget once N is large (E at N = 128 was
-#: no better than at N = 64).  Below 64 it depends on the shape (the random
-#: start is the default; the two starts can race, RACE_MIN).  The coarse fit
+#: no better than at N = 64).  Below 64 a coarse fit costs more than it
+#: gains on compact shapes, and the split start serves (SPLIT_START_MIN).
+#: The coarse fit
 #: gets COARSE_SHARE of the work budget (rounds x spheres).
 COARSE_TO_FINE_MIN = 64
 COARSE_SHARE = 0.5
 
-#: From RACE_MIN up to COARSE_TO_FINE_MIN spheres neither start wins
-#: everywhere.  A coarse start (a fit of ceil(N/2) spheres, split) wins on
-#: shapes of many thin parts, where random centres and one-sphere teleports
-#: leave limbs under-served; random centres win on compact shapes (final E,
-#: seeds 0-2, random -> coarse: the tests' character at N = 32 0.175 /
-#: 0.160 / 0.180 -> 0.124 / 0.121 / 0.127, CesiumMan 1.155 / 1.243 / 1.193
-#: -> 1.022 / 1.097 / 0.979; spot at N = 40 0.231 / 0.243 / 0.246 -> 0.294 /
-#: 0.317 / 0.275, teapot at N = 32 0.211 / 0.258 / 0.221 -> 0.336 / 0.273 /
-#: 0.315).  So the two race (:func:`_race`): the coarse start spends
-#: RACE_COARSE_SHARE of the work budget on its coarse stage and then
-#: RACE_FINE_ROUNDS rounds at N, the random start RACE_ROUNDS rounds (or
-#: only RACE_EARLY_ROUNDS when its best E is then above RACE_LEAD times the
-#: coarse start's); the coarse start goes on when its best estimated E is
-#: below the random start's by the factor RACE_MARGIN, the random start
-#: otherwise, each to its own round budget.  Measured on 10 meshes at N =
-#: 32-48, 3 seeds (wave 6, docs/sphere-fits.md): the lead at 15 random rounds
-#: picked the start of the lower final E in all 30 cases where the coarse
-#: stage had its full share (ties within 1 % either way); with the short
-#: stage below, in 28 of 30 with RACE_MARGIN, and the two others stay with
-#: the random start, as without the race (the tests' capsules at seed 2:
-#: 0.106 where the coarse start gives 0.075; spot at N = 32, seed 0: 0.286
-#: vs 0.283); without the margin the bunny at seed 1 went coarse (0.515
-#: instead of 0.427), worse than without the race, and so did CesiumMan at
-#: seed 0 in the race as built (a lead of 1.085; 1.208 coarse, 1.145
-#: random).  A coarse stage of 1/6 of the budget instead of 1/2 gave as low
-#: an E (mean over seeds 0-2: character 0.120 vs 0.124, CesiumMan 1.026 vs
-#: 1.033, armadillo 0.671 vs 0.687, the capsules and the torus equal) for
-#: less CPU.  The race costs the losing start's work on top of the winner's
-#: budget, at most :func:`race_overhead` rounds at N: 1.2-1.4x the CPU of
-#: one start on CesiumMan at N = 32 (side by side, wave 6), which would break
-#: its 6x speed target, so the race is on request (``fit_spheres(race=True)``,
-#: ``spheres fit --race``, the scene's ``race = true``).  Below N = 32 the
-#: coarse stage (< 16 spheres) predicts little: at N = 16 and 24 the race
-#: lost as often as it won (the character at N = 16, seed 1: 0.440 raced vs
-#: 0.392 random; at N = 24, seed 0: 0.197 vs 0.179, seed 1: 0.177 vs 0.218).
-RACE_MIN = 32
-RACE_ROUNDS = 15
-RACE_FINE_ROUNDS = 2
-RACE_EARLY_ROUNDS = 8
-RACE_LEAD = 1.25
-RACE_MARGIN = 1.1
-RACE_COARSE_SHARE = 1 / 6
 
 #: Radius (fraction of the diagonal) below which a sphere counts as redundant.
 DEAD_RADIUS = 1e-9
@@ -414,7 +390,6 @@ def fit_spheres(
     path=None,
     progress=None,
     restarts: int = 1,
-    race: bool = False,
     _desc: str = "fit",
 ) -> SphereSet:
     """Fit ``n`` spheres bounding the solid of ``mesh`` with minimal outside volume.
@@ -436,14 +411,9 @@ def fit_spheres(
         Budget of clustering + centre-update rounds (variational), counted
         in rounds at ``n`` spheres: the coarse stages (ceil(n/2), ... spheres)
         spend their share of it in proportionally cheaper rounds, so the total
-        round count reported in ``info`` can exceed it.  With ``race``,
-        between ``RACE_MIN`` and ``COARSE_TO_FINE_MIN`` spheres two starts
-        race and the one behind stops early: the work adds at most
-        :func:`race_overhead` rounds at ``n`` (``info["start"]`` names the
-        start that went on, ``info["race_energies"]`` their estimated E at
-        the comparison).  Below SHRINK_ROUNDS the finish shortens with the
-        budget too (:func:`_finish_effort`): spot at N = 40 in 2 s for
-        1 round, 3 s for 5.
+        round count reported in ``info`` can exceed it.  Below SHRINK_ROUNDS
+        the finish shortens with the budget too (:func:`_finish_effort`):
+        spot at N = 40 in 2 s for 1 round, 3 s for 5.
         Default ``ROUNDS``.
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).
@@ -459,15 +429,8 @@ def fit_spheres(
         Independent starts with seeds ``seed, seed + 1, ...``; the fit with the
         lowest E is returned (the search is non-convex: on spot at N = 40,
         seeds 0-5 gave E = 0.168, 0.185, 0.164, 0.185, 0.169, 0.197).
-        ``info["restart_E"]`` lists every start's E.
-    race : bool
-        Variational fits of RACE_MIN to COARSE_TO_FINE_MIN - 1 spheres (no
-        effect at other N): race a coarse start (a fit of ceil(n/2) spheres,
-        split) against the random one and go on with the one ahead
-        (:func:`_race`).  Far lower E on shapes of many thin parts (the
-        tests' character at N = 32: -29 %), the same fit on compact ones, for
-        up to 1.4x the CPU (1.2-1.4x on CesiumMan at N = 32); off by default
-        so that a fit's cost stays that of one start.
+        ``info["restart_E"]`` lists every start's E.  The knob for spending
+        more CPU on a lower E.
 
     Returns
     -------
@@ -492,7 +455,7 @@ def fit_spheres(
         fits = [fit_spheres(mesh, n, method=method, seed=seed + k, thickness=thickness,
                             max_iterations=max_iterations,
                             max_teleport_failures=max_teleport_failures, samples=samples,
-                            path=path, progress=progress, race=race,
+                            path=path, progress=progress,
                             _desc=f"fit {k + 1}/{restarts}")
                 for k in range(int(restarts))]
         best = min(fits, key=lambda f: f.outside_volume_ratio)  # first of equals
@@ -505,11 +468,11 @@ def fit_spheres(
         return _fit_once(mesh, n, method=method, seed=seed, thickness=thickness,
                          max_iterations=max_iterations,
                          max_teleport_failures=max_teleport_failures, samples=samples,
-                         path=path, race=race, bar=bar)
+                         path=path, bar=bar)
 
 
 def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_failures,
-              samples, path, race, bar) -> SphereSet:
+              samples, path, bar) -> SphereSet:
     """One start of :func:`fit_spheres`, reporting to the progress object ``bar``."""
     start = time.perf_counter()
     if thickness is not None:
@@ -532,9 +495,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
             "use fewer spheres", path)
     if max_iterations is None:
         max_iterations = ROUNDS
-    # known once the solid is sampled; shown at the next update
-    races = race and method == "variational" and _races(n)
-    bar.total = max_iterations + (race_overhead(max_iterations) if races else 0)
+    bar.total = max_iterations  # known once the solid is sampled; shown at the next update
 
     def progress(rounds: float, energy: float) -> None:
         bar.set_postfix(E=f"{energy:.3f}", refresh=False)
@@ -546,7 +507,7 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
     if method == "variational":
         centers, radii, _, extra = _variational(
             solid, n, rng, max_iterations=max_iterations,
-            max_teleport_failures=max_teleport_failures, progress=progress, race=races)
+            max_teleport_failures=max_teleport_failures, progress=progress)
         info.update(extra)
         centers, radii, info["revived"] = _revive(solid, centers, radii)
         shrink_rounds, passes = _finish_effort(max_iterations)
@@ -1262,6 +1223,32 @@ def _initial_centers(points: np.ndarray, n: int, rng: np.random.Generator) -> np
     return points[chosen].copy()
 
 
+def _split_start(solid: Solid, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Centres ``(n, 3)`` of k-means clusters split in two SPLIT_LEVELS times.
+
+    k-means (:func:`_kmeans`) cuts the points into ceil(n / 2**SPLIT_LEVELS)
+    clusters, each bounded by its minimal sphere; the spheres grow to hold
+    the cover points (:func:`_cover`) and :func:`_split_clusters` splits the
+    ones whose split gains most, doubling the count at each level up to
+    ``n``.  Every part of the shape gets spheres in proportion to what it
+    costs, as a coarse fit's split does, where random centres crowd some parts
+    and starve others (thin limbs); the Lloyd steps then start from these
+    centres.
+    """
+    sizes = [n]
+    for _ in range(SPLIT_LEVELS):
+        sizes.append((sizes[-1] + 1) // 2)
+    with warnings.catch_warnings():
+        # an empty k-means cluster is dropped; the splits make up the count
+        warnings.simplefilter("ignore", UserWarning)
+        centers, radii, _ = _kmeans(solid, sizes[-1], rng)
+    for size in reversed(sizes[:-1]):
+        state = _split_clusters(solid, centers, _cover(solid, centers, radii),
+                                size - len(centers))
+        centers, radii = state.centers, state.radii
+    return centers
+
+
 def _box_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
     """The sphere about the bounding box's centre that holds ``points (P, 3)``."""
     c = 0.5 * (points.min(axis=0) + points.max(axis=0))
@@ -1409,14 +1396,15 @@ def _split_clusters(solid: Solid, centers: np.ndarray, radii: np.ndarray, splits
 
 
 def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iterations: int,
-                 max_teleport_failures: int, progress=None, race: bool = False):
+                 max_teleport_failures: int, progress=None, split: bool = True):
     """The search of :func:`fit_spheres` at ``n`` spheres: its start, its rounds and
     the final shrink.
 
     From COARSE_TO_FINE_MIN spheres on the search starts from a coarse fit
-    (:func:`_coarse_search`); with ``race``, from RACE_MIN on below that,
-    the random and the coarse start race (:func:`_race`); otherwise the
-    start is random.
+    (:func:`_coarse_search`); below that the start is :func:`_first_centers`
+    (split from SPLIT_START_MIN on, random below), or random without
+    ``split`` (the coarse stages, which keep the starts their figures were
+    measured with).
 
     Returns
     -------
@@ -1427,40 +1415,31 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
     info : dict
         Rounds, teleports and work (rounds x spheres) spent, over every stage.
     """
-    search_args = dict(max_iterations=max_iterations, max_teleport_failures=max_teleport_failures,
-                       progress=progress)
     if n >= COARSE_TO_FINE_MIN:
-        search = _coarse_search(solid, n, rng, **search_args)
-    elif race:
-        search = _race(solid, n, rng, **search_args)
+        search = _coarse_search(solid, n, rng, max_iterations=max_iterations,
+                                max_teleport_failures=max_teleport_failures, progress=progress)
     else:
-        search = _LloydSearch(solid, _initial_centers(solid.points, n, rng), budget=max_iterations,
+        start = _first_centers(solid, n, rng) if split else _initial_centers(solid.points, n, rng)
+        search = _LloydSearch(solid, start, budget=max_iterations,
                               max_teleport_failures=max_teleport_failures, progress=progress)
     search.run(search.budget)
     return search.finish(_finish_effort(max_iterations)[0])
 
 
-def _races(n: int) -> bool:
-    """Whether a variational fit of ``n`` spheres races two starts when asked
-    (``race=True``; :func:`_race`)."""
-    return RACE_MIN <= n < COARSE_TO_FINE_MIN
-
-
-def race_overhead(max_iterations: int) -> int:
-    """Most work the race of two starts adds to a budget of ``max_iterations``
-    rounds at N, in rounds at N: the random start's rounds (coarse start
-    ahead) or the coarse start's stage and its rounds at N (random ahead)."""
-    return max(min(RACE_ROUNDS, max_iterations),
-               int(np.ceil(RACE_COARSE_SHARE * max_iterations))
-               + min(RACE_FINE_ROUNDS, max_iterations))
+def _first_centers(solid: Solid, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Start centres ``(n, 3)`` of a search below COARSE_TO_FINE_MIN: split
+    k-means clusters from SPLIT_START_MIN on (:func:`_split_start`), random
+    ones (:func:`_initial_centers`) below."""
+    if n >= SPLIT_START_MIN:
+        return _split_start(solid, n, rng)
+    return _initial_centers(solid.points, n, rng)
 
 
 def _coarse_search(solid: Solid, n: int, rng: np.random.Generator, *, max_iterations: int,
-                   max_teleport_failures: int, progress=None,
-                   share: float = COARSE_SHARE) -> _LloydSearch:
+                   max_teleport_failures: int, progress=None) -> _LloydSearch:
     """A search at ``n`` that starts from a fit of ceil(n/2) spheres split in two.
 
-    The coarse fit has already spent ``share`` of the work budget
+    The coarse fit has already spent COARSE_SHARE of the work budget
     (max_iterations rounds at ``n``); the returned search holds the rest as
     its ``budget`` of rounds at ``n`` and has not run yet.
     """
@@ -1470,57 +1449,14 @@ def _coarse_search(solid: Solid, n: int, rng: np.random.Generator, *, max_iterat
     work = max_iterations * n
     # progress counts rounds at n: a coarse round is half a round
     c, r, _, coarse = _variational(
-        solid, half, rng, max_iterations=max(1, int(share * work / half)),
-        max_teleport_failures=max_teleport_failures, race=False,
+        solid, half, rng, max_iterations=max(1, int(COARSE_SHARE * work / half)),
+        max_teleport_failures=max_teleport_failures, split=False,
         progress=None if progress is None else (lambda i, e: progress(i * half / n, e)))
     start = _split_clusters(solid, c, r, n - half)
     return _LloydSearch(
         solid, start, budget=max(1, int((work - coarse["work"]) / n)),
         max_teleport_failures=max_teleport_failures, spent=coarse,
         progress=None if progress is None else (lambda i, e: progress(coarse["work"] / n + i, e)))
-
-
-def _race(solid: Solid, n: int, rng: np.random.Generator, *, max_iterations: int,
-          max_teleport_failures: int, progress=None) -> _LloydSearch:
-    """The coarse and the random start, each run a little; the one ahead goes on.
-
-    The coarse start (:func:`_coarse_search` with RACE_COARSE_SHARE of the
-    budget for its coarse stage) runs RACE_FINE_ROUNDS rounds at ``n``, the
-    random start RACE_ROUNDS rounds, or RACE_EARLY_ROUNDS when it is then
-    behind by more than RACE_LEAD.  The coarse start goes on when its best
-    estimated E is below the random start's by the factor RACE_MARGIN, the
-    random start otherwise; the other stops, its work counted in ``info``
-    (``info["start"]``, ``info["race_energies"]``).
-
-    Returns
-    -------
-    _LloydSearch
-        The start that goes on, to run to its ``budget``.
-    """
-    def shifted(offset: float):
-        return None if progress is None else (lambda i, e: progress(offset + i, e))
-
-    # the random centres are drawn first, as a fit without the race draws
-    # them: where the random start wins, the fit is the one it would have been
-    random_start = _initial_centers(solid.points, n, rng)
-    coarse = _coarse_search(solid, n, rng, max_iterations=max_iterations,
-                            max_teleport_failures=max_teleport_failures, progress=progress,
-                            share=RACE_COARSE_SHARE)
-    coarse.run(min(RACE_FINE_ROUNDS, coarse.budget))
-    random = _LloydSearch(solid, random_start, budget=max_iterations,
-                          max_teleport_failures=max_teleport_failures,
-                          progress=shifted(coarse.work / n))
-    random.run(min(RACE_EARLY_ROUNDS, max_iterations))
-    if random.best.energy <= RACE_LEAD * coarse.best.energy:
-        random.run(min(RACE_ROUNDS, max_iterations))
-    coarse_ahead = RACE_MARGIN * coarse.best.energy < random.best.energy
-    winner, loser = (coarse, random) if coarse_ahead else (random, coarse)
-    if coarse_ahead:  # the random start's progress already counts the coarse one's
-        coarse.progress = shifted(random.work / n + coarse.spent["work"] / n)
-    winner.spent = _add_spent(winner.spent, loser.counters())
-    winner.spent["start"] = "coarse" if coarse_ahead else "random"
-    winner.spent["race_energies"] = {"random": random.best.energy, "coarse": coarse.best.energy}
-    return winner
 
 
 #: The counters a search's info sums over its stages.
@@ -1537,8 +1473,8 @@ class _LloydSearch:
 
     :meth:`run` advances the search to a number of rounds (it stops earlier
     when teleports keep failing); :meth:`finish` shrinks the best state.
-    ``spent`` holds the counters of earlier stages (a coarse fit, a race's
-    other start), added to this search's in :meth:`finish`.
+    ``spent`` holds the counters of earlier stages (a coarse fit), added to
+    this search's in :meth:`finish`.
     """
 
     def __init__(self, solid: Solid, start: np.ndarray | _State, *, budget: int,
@@ -1615,7 +1551,7 @@ class _LloydSearch:
             trials.append(trial)
         if not trials:
             # no teleport left to try, unless the round budget cut the stage
-            # short (a race's comparison): then the search may go on later
+            # short (a run to fewer rounds): then the search may go on later
             self.stopped = self.iterations < rounds
             return
         trial = min(trials, key=lambda t: t.energy)

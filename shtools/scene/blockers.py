@@ -240,7 +240,6 @@ def _fit_options() -> dict[str, tuple[Any, Any]]:
         "method": (choice(tuple(m.value for m in FitMethod)), "variational"),
         "seed": (Annotated[int, Field(strict=True, ge=0)], 0),
         "branching": (Annotated[int, Field(strict=True, ge=2)], 4),
-        "race": (Annotated[bool, Field(strict=True)], False),
     }
 
 
@@ -258,8 +257,7 @@ class FitSpheres(SphereSetKind):
 
         mesh = trimesh.Trimesh(prep.vertices, prep.faces, process=False)
         s = fit_spheres(mesh, spec.count, method=spec.options["method"],
-                        seed=spec.options["seed"], race=spec.options["race"],
-                        progress=ctx.progress,
+                        seed=spec.options["seed"], progress=ctx.progress,
                         _desc=f"fit {prep.spec.name}")
         prep.centers, prep.radii = s.centers, s.radii
 

@@ -113,23 +113,3 @@ def test_import_rejects_bad_sph(run_cli, tmp_path):
     code, _, stderr = run_cli("spheres", "import", bad, "-o", out)
     assert code != 0 and "truncated" in stderr
     assert not out.exists()
-
-
-def test_race_flag_races_and_is_recorded(run_cli, write_mesh, small_torus, tmp_path):
-    """``--race`` (N = 32 here, a short budget) races the two starts, says which
-    went on in the JSON summary and records ``race`` among the asset's
-    parameters; without it the fit has one start and records ``race = False``."""
-    mesh_path = write_mesh(small_torus, "torus.obj")
-    summaries, spheres = [], []
-    for flag in (["--race"], []):
-        out = tmp_path / f"spheres{len(flag)}.h5"
-        code, stdout, stderr = run_cli("spheres", "fit", mesh_path, "-n", 32, "-o", out,
-                                       "--iterations", 4, "--json", *flag)
-        assert code == 0, stderr
-        summaries.append(json.loads(stdout))
-        spheres.append(read_spheres(out))
-    assert summaries[0]["start"] in ("random", "coarse")
-    assert "start" not in summaries[1]
-    assert spheres[0].info["parameters"]["race"] is True
-    assert spheres[1].info["parameters"]["race"] is False
-    assert spheres[0].coverage == spheres[1].coverage == 1.0
