@@ -124,8 +124,9 @@ SHRINK_TOLERANCE = 1e-5
 #: A fit of fewer rounds than SHRINK_ROUNDS is a quick fit: its finish scales
 #: with its budget (:func:`_finish_effort`), at least this many shrink rounds.
 #: With the full finish a 1-round fit of spot at N = 40 took 5.4 s, 4.2 s of
-#: it finishing; a quick finish takes 2.0 s there (E 0.67 instead of 0.54) and
-#: 5 rounds 3.2 s (E 0.333 instead of 0.326).
+#: it finishing; a quick finish took 2.0 s there (E 0.67 instead of 0.54) and
+#: 5 rounds 3.2 s (E 0.333 instead of 0.326), both from random centres; with
+#: the split start 3.0 s (E 0.376) and 3.8 s (E 0.292).
 QUICK_SHRINK_ROUNDS = 4
 
 #: Distance (fraction of the diagonal) within which a point counts as on a
@@ -413,7 +414,8 @@ def fit_spheres(
         spend their share of it in proportionally cheaper rounds, so the total
         round count reported in ``info`` can exceed it.  Below SHRINK_ROUNDS
         the finish shortens with the budget too (:func:`_finish_effort`):
-        spot at N = 40 in 2 s for 1 round, 3 s for 5.
+        spot at N = 40 in 3.0 s CPU for 1 round, 3.8 s for 5 (12.6 s for
+        the default).
         Default ``ROUNDS``.
     max_teleport_failures : int
         Consecutive rejected teleportations before stopping (variational).

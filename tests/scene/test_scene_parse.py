@@ -215,6 +215,10 @@ role = "blocker"
          "objects[1] ('ball').blocker.fit: must be >= 1, got 0"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, sed = 1 }'),
          "objects[1] ('ball').blocker: unknown key 'sed'; did you mean 'seed'?"),
+        # wave 6's race of two starts is gone (the split start replaced it)
+        (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, race = true }'),
+         "objects[1] ('ball').blocker: unknown key 'race'; allowed: spheres, tree, bound, fit, "
+         "method, seed, branching, exact, deformable, alpha_deg, samples, rays, log, field"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { exact = true, '
                       'seed = 1 }'),
          "objects[1] ('ball').blocker.seed: only applies with 'fit = ...'"),
