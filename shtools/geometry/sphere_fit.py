@@ -158,18 +158,19 @@ STALL_SHARE = 0.08
 #: From this N on (below COARSE_TO_FINE_MIN) the variational fit starts from
 #: k-means clusters of the points, ceil(N / 2**SPLIT_LEVELS) of them, split in
 #: two SPLIT_LEVELS times (:func:`_split_start`) instead of random centres:
-#: spheres go to the parts of a shape as a coarse fit sends them, for the
-#: price of a round or two.  Measured (wave 7, seeds 0-2, means against the
-#: random start): the tests' character at N = 32 -20 %, capsules -27 %,
-#: CesiumMan -11 %, armadillo -9 %, spot N = 32 / 40 / 48 -6 / -2 / -12 %,
-#: teapot -2 %, the bunny +2 %.  On the geometric mean of those ten cases
-#: one level gave -4 % and two -10 %; three lost badly on compact shapes
-#: (seed 0: the bunny 0.565, spot N = 32 0.443, against 0.412 and 0.286).
-#: It replaced wave 6's race of a random and a coarse start (``race=True``):
-#: raced against the split start, the coarse start changed the mean E by
-#: -11 % to +7 % over those cases for 1.1-1.35x the CPU.  Below N = 32 the
-#: start is random: there the coarse starts predicted little (wave 6: the
-#: race lost as often as it won at N = 16 and 24).
+#: spheres go to the parts of a shape as a coarse fit sends them, for a
+#: fraction of its cost (0.95 s on spot at N = 40, 8 % of the fit).
+#: Measured (wave 7, seeds 0-2, means against the random start): the tests'
+#: character at N = 32 -20 %, capsules -27 %, CesiumMan -11 %, armadillo
+#: -9 %, spot N = 32 / 40 / 48 -6 / -2 / -12 %, teapot -2 %, the bunny +2 %.
+#: On the geometric mean of those ten cases one level gave -4 % and two
+#: -10 %; three lost badly on compact shapes (seed 0: the bunny 0.565, spot
+#: N = 32 0.443, against 0.412 and 0.286).  It replaced wave 6's race of a
+#: random and a coarse start (``race=True``): raced against the split start,
+#: the coarse start changed the mean E by -11 % to +7 % over those cases for
+#: 1.1-1.35x the CPU.  Below N = 32 the start is random: there the coarse
+#: starts predicted little (wave 6: the race lost as often as it won at
+#: N = 16 and 24).
 SPLIT_START_MIN = 32
 SPLIT_LEVELS = 2
 
