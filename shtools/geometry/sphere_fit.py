@@ -180,11 +180,9 @@ SPLIT_LEVELS = 2
 #: does not converge within the round budget once N is large (E at N = 128 was
 #: no better than at N = 64).  Below 64 a coarse fit costs more than it
 #: gains on compact shapes, and the split start serves (SPLIT_START_MIN).
-#: The coarse fit
-#: gets COARSE_SHARE of the work budget (rounds x spheres).
+#: The coarse fit gets COARSE_SHARE of the work budget (rounds x spheres).
 COARSE_TO_FINE_MIN = 64
 COARSE_SHARE = 0.5
-
 
 #: Radius (fraction of the diagonal) below which a sphere counts as redundant.
 DEAD_RADIUS = 1e-9
@@ -1403,11 +1401,12 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
     """The search of :func:`fit_spheres` at ``n`` spheres: its start, its rounds and
     the final shrink.
 
-    From COARSE_TO_FINE_MIN spheres on the search starts from a coarse fit
-    (:func:`_coarse_search`); below that the start is :func:`_first_centers`
-    (split from SPLIT_START_MIN on, random below), or random without
-    ``split`` (the coarse stages, which keep the starts their figures were
-    measured with).
+    From COARSE_TO_FINE_MIN spheres on the search starts from a fit of
+    ceil(n/2) spheres split in two, which spends COARSE_SHARE of the work
+    budget (max_iterations rounds at ``n``); below that the start is
+    :func:`_first_centers` (split from SPLIT_START_MIN on, random below), or
+    random without ``split`` (the coarse stages, which keep the starts their
+    figures were measured with).
 
     Returns
     -------
@@ -1418,15 +1417,30 @@ def _variational(solid: Solid, n: int, rng: np.random.Generator, *, max_iteratio
     info : dict
         Rounds, teleports and work (rounds x spheres) spent, over every stage.
     """
+    shrink_rounds = _finish_effort(max_iterations)[0]
     if n >= COARSE_TO_FINE_MIN:
-        search = _coarse_search(solid, n, rng, max_iterations=max_iterations,
-                                max_teleport_failures=max_teleport_failures, progress=progress)
-    else:
-        start = _first_centers(solid, n, rng) if split else _initial_centers(solid.points, n, rng)
-        search = _LloydSearch(solid, start, budget=max_iterations,
-                              max_teleport_failures=max_teleport_failures, progress=progress)
-    search.run(search.budget)
-    return search.finish(_finish_effort(max_iterations)[0])
+        # a round costs about (points x spheres), so the coarse stage's share
+        # buys rounds at ``half`` spheres at a proportionally higher count
+        half = (n + 1) // 2
+        work = max_iterations * n
+        # progress counts rounds at n: a coarse round is half a round
+        c, r, _, coarse = _variational(
+            solid, half, rng, max_iterations=max(1, int(COARSE_SHARE * work / half)),
+            max_teleport_failures=max_teleport_failures, split=False,
+            progress=None if progress is None else (lambda i, e: progress(i * half / n, e)))
+        start = _split_clusters(solid, c, r, n - half)
+        centers, radii, labels, info = _lloyd_search(
+            solid, start, max_iterations=max(1, int((work - coarse["work"]) / n)),
+            max_teleport_failures=max_teleport_failures, shrink_rounds=shrink_rounds,
+            progress=None if progress is None else (
+                lambda i, e: progress(coarse["work"] / n + i, e)))
+        for key in ("iterations", "teleports_tried", "teleports_accepted", "work"):
+            info[key] += coarse[key]
+        return centers, radii, labels, info
+    start = _first_centers(solid, n, rng) if split else _initial_centers(solid.points, n, rng)
+    return _lloyd_search(solid, start, max_iterations=max_iterations,
+                         max_teleport_failures=max_teleport_failures,
+                         shrink_rounds=shrink_rounds, progress=progress)
 
 
 def _first_centers(solid: Solid, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -1438,151 +1452,92 @@ def _first_centers(solid: Solid, n: int, rng: np.random.Generator) -> np.ndarray
     return _initial_centers(solid.points, n, rng)
 
 
-def _coarse_search(solid: Solid, n: int, rng: np.random.Generator, *, max_iterations: int,
-                   max_teleport_failures: int, progress=None) -> _LloydSearch:
-    """A search at ``n`` that starts from a fit of ceil(n/2) spheres split in two.
+def _lloyd_search(solid: Solid, start: np.ndarray | _State, *, max_iterations: int,
+                  max_teleport_failures: int, shrink_rounds: int, progress=None):
+    """Lloyd steps with teleportation from the centres ``start (N, 3)`` or a state,
+    then the best state shrunk to a fixed point (``shrink_rounds`` rounds at most).
 
-    The coarse fit has already spent COARSE_SHARE of the work budget
-    (max_iterations rounds at ``n``); the returned search holds the rest as
-    its ``budget`` of rounds at ``n`` and has not run yet.
+    Returns
+    -------
+    centers : ndarray, shape (N, 3)
+    radii : ndarray, shape (N,)
+    labels : ndarray, shape (P,)
+    info : dict
+        Rounds, teleports, work (rounds x spheres) and the estimated E.
     """
-    # a round costs about (points x spheres), so the coarse stage's share
-    # buys rounds at ``half`` spheres at a proportionally higher count
-    half = (n + 1) // 2
-    work = max_iterations * n
-    # progress counts rounds at n: a coarse round is half a round
-    c, r, _, coarse = _variational(
-        solid, half, rng, max_iterations=max(1, int(COARSE_SHARE * work / half)),
-        max_teleport_failures=max_teleport_failures, split=False,
-        progress=None if progress is None else (lambda i, e: progress(i * half / n, e)))
-    start = _split_clusters(solid, c, r, n - half)
-    return _LloydSearch(
-        solid, start, budget=max(1, int((work - coarse["work"]) / n)),
-        max_teleport_failures=max_teleport_failures, spent=coarse,
-        progress=None if progress is None else (lambda i, e: progress(coarse["work"] / n + i, e)))
+    n = len(start.centers) if isinstance(start, _State) else len(start)
+    # Lloyd steps are deterministic: after a rejected teleport the search
+    # resumes from the best state, whose successor is often already known
+    memo: dict[bytes, _State] = {}
 
-
-#: The counters a search's info sums over its stages.
-_COUNTERS = ("iterations", "teleports_tried", "teleports_accepted", "work")
-
-
-def _add_spent(a: dict, b: dict) -> dict:
-    """``a`` with the counters of ``b`` added (rounds, teleports, work)."""
-    return {**a, **{key: a.get(key, 0) + b[key] for key in _COUNTERS}}
-
-
-class _LloydSearch:
-    """Lloyd steps with teleportation from centres ``(N, 3)`` or a state, resumable.
-
-    :meth:`run` advances the search to a number of rounds (it stops earlier
-    when teleports keep failing); :meth:`finish` shrinks the best state.
-    ``spent`` holds the counters of earlier stages (a coarse fit), added to
-    this search's in :meth:`finish`.
-    """
-
-    def __init__(self, solid: Solid, start: np.ndarray | _State, *, budget: int,
-                 max_teleport_failures: int, progress=None, spent: dict | None = None):
-        self.solid, self.budget, self.progress = solid, budget, progress
-        self.max_teleport_failures = max_teleport_failures
-        self.spent = _add_spent({}, spent or dict.fromkeys(_COUNTERS, 0))
-        self.n = len(start.centers) if isinstance(start, _State) else len(start)
-        # Lloyd steps are deterministic: after a rejected teleport the search
-        # resumes from the best state, whose successor is often already known
-        self.memo: dict[bytes, _State] = {}
-        self.best = start if isinstance(start, _State) else self._lloyd(start)[0]
-        self.current = self.best
-        self.iterations, self.teleports, self.accepted, self.failures = 1, 0, 0, 0
-        self.stopped = False
-
-    @property
-    def work(self) -> int:
-        """Work spent by this search and its earlier stages, in rounds x spheres."""
-        return self.iterations * self.n + self.spent["work"]
-
-    def counters(self) -> dict:
-        """This search's counters plus those of its earlier stages."""
-        own = {"iterations": self.iterations, "teleports_tried": self.teleports,
-               "teleports_accepted": self.accepted, "work": self.iterations * self.n}
-        return _add_spent(self.spent, own)
-
-    def _lloyd(self, centers: np.ndarray) -> tuple[_State, int]:
+    def lloyd(centers: np.ndarray) -> tuple[_State, int]:
         key = centers.tobytes()
-        if key in self.memo:
-            return self.memo[key], 0
-        self.memo[key] = _lloyd_step(self.solid, centers)
-        return self.memo[key], 1
+        if key in memo:
+            return memo[key], 0
+        memo[key] = _lloyd_step(solid, centers)
+        return memo[key], 1
 
-    def _progress_step(self, state: _State) -> float:
-        return STALL_SHARE * state.energy / self.n
+    def progress_step(state: _State) -> float:
+        return STALL_SHARE * state.energy / n
 
-    def run(self, rounds: int) -> None:
-        """Advance to ``rounds`` Lloyd steps in all (or until the search stops)."""
-        while not self.stopped and self.iterations < rounds:
-            self._step(rounds)
-
-    def _step(self, rounds: int) -> None:
-        """One Lloyd step and, when it stalls, one teleportation stage."""
-        nxt, cost = self._lloyd(self.current.centers)
-        self.iterations += cost
-        if self.progress is not None:
-            self.progress(self.iterations, nxt.energy)
-        best = self.best
-        improved = nxt.energy < best.energy - self._progress_step(best)
+    if isinstance(start, _State):
+        best = start
+    else:
+        best, _ = lloyd(start)
+    iterations, teleports, accepted, failures = 1, 0, 0, 0
+    current = best
+    while iterations < max_iterations:
+        nxt, cost = lloyd(current.centers)
+        iterations += cost
+        if progress is not None:
+            progress(iterations, nxt.energy)
+        improved = nxt.energy < best.energy - progress_step(best)
         if nxt.energy < best.energy:
-            self.best = nxt
-        self.current = nxt
+            best = nxt
+        current = nxt
         if improved:
-            return
+            continue
         # Lloyd has stalled: teleport
-        if self.failures >= self.max_teleport_failures:
-            self.stopped = True
-            return
+        if failures >= max_teleport_failures:
+            break
         # several split candidates, one Lloyd step each; the best goes on
         trials = []
         # (attempt // TELEPORT_CANDIDATES picks the split cluster, the rest
         # the deleted sphere)
-        for attempt in range(TELEPORT_CANDIDATES * self.failures,
-                             TELEPORT_CANDIDATES * (self.failures + 1)):
-            if self.iterations >= rounds:
+        for attempt in range(TELEPORT_CANDIDATES * failures,
+                             TELEPORT_CANDIDATES * (failures + 1)):
+            if iterations >= max_iterations:
                 break
-            trial_centers = _teleport(self.solid, self.best, attempt)
+            trial_centers = _teleport(solid, best, attempt)
             if trial_centers is None:
                 continue
-            self.teleports += 1
-            trial, cost = self._lloyd(trial_centers)
-            self.iterations += cost
+            teleports += 1
+            trial, cost = lloyd(trial_centers)
+            iterations += cost
             trials.append(trial)
         if not trials:
-            # no teleport left to try, unless the round budget cut the stage
-            # short (a run to fewer rounds): then the search may go on later
-            self.stopped = self.iterations < rounds
-            return
+            break
         trial = min(trials, key=lambda t: t.energy)
         for _ in range(2):
-            if self.iterations >= rounds:
+            if iterations >= max_iterations:
                 break
-            again, cost = self._lloyd(trial.centers)
-            self.iterations += cost
+            again, cost = lloyd(trial.centers)
+            iterations += cost
             if again.energy >= trial.energy:
                 break
             trial = again
-        if trial.energy < self.best.energy - self._progress_step(self.best):
-            self.best = self.current = trial
-            self.accepted += 1
-            self.failures = 0
+        if trial.energy < best.energy - progress_step(best):
+            best = current = trial
+            accepted += 1
+            failures = 0
         else:
-            self.current = self.best
-            self.failures += 1
-
-    def finish(self, shrink_rounds: int = SHRINK_ROUNDS):
-        """The best state shrunk to a fixed point (``shrink_rounds`` rounds at
-        most): centers (N, 3), radii (N,), labels (P,) and info (counters over
-        every stage, the estimated E)."""
-        centers, radii = _shrink(self.solid, self.best.centers, self.best.radii,
-                                 rounds=shrink_rounds)
-        info = {k: v for k, v in self.spent.items() if k not in _COUNTERS}
-        info.update(self.counters(), energy_estimate=self.best.energy)
-        return centers, radii, self.best.labels, info
+            current = best
+            failures += 1
+    centers, radii = _shrink(solid, best.centers, best.radii, rounds=shrink_rounds)
+    info = {"iterations": iterations, "teleports_tried": teleports,
+            "teleports_accepted": accepted, "energy_estimate": best.energy,
+            "work": iterations * n}
+    return centers, radii, best.labels, info
 
 
 def _shrink(solid: Solid, centers: np.ndarray, radii: np.ndarray, rounds: int,
