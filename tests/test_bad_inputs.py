@@ -509,19 +509,28 @@ def test_injected_disk_full_is_one_line_and_keeps_the_old_output(command, kit, t
 
 
 @pytest.fixture
-def tiny_disk(tmp_path):
-    """A 64 KiB tmpfs (needs mount rights; skipped with the reason otherwise)."""
-    mount = tmp_path / "disk"
-    mount.mkdir()
+def tiny_disk():
+    """A 64 KiB tmpfs (needs mount rights; skipped with the reason otherwise).
+
+    Mounted outside pytest's numbered temporary folders: a mount left behind
+    (a run killed before this teardown) made every later session fail while
+    pytest removed its old folders (EBUSY).  A mount still busy at teardown
+    is detached lazily rather than left."""
+    import tempfile
+
+    mount = Path(tempfile.mkdtemp(prefix="shtools-tiny-disk-"))
     done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mount)],
                           capture_output=True)
     if done.returncode != 0:
+        mount.rmdir()
         pytest.skip("cannot mount a tmpfs here (no privileges); the injected ENOSPC test "
                     "covers the same paths")
     try:
         yield mount
     finally:
-        subprocess.run(["umount", str(mount)], check=False)
+        if subprocess.run(["umount", str(mount)], capture_output=True).returncode != 0:
+            subprocess.run(["umount", "-l", str(mount)], check=True)
+        mount.rmdir()
 
 
 def _shtools(*args, **kwargs):
@@ -530,9 +539,9 @@ def _shtools(*args, **kwargs):
                           capture_output=True, text=True, env=env, timeout=300, **kwargs)
 
 
-def test_disk_full_on_a_real_tiny_disk(kit, tiny_disk):
+def test_disk_full_on_a_real_tiny_disk(kit, tiny_disk, tmp_path):
     """A real full disk (HDF5 used to segfault at exit after __dealloc__ tracebacks)."""
-    big = tiny_disk.parent / "big.hdr"
+    big = tmp_path / "big.hdr"
     import cv2
 
     cv2.imwrite(str(big), np.ones((64, 128, 3), np.float32))
