@@ -224,7 +224,8 @@ def made_bounding(mesh, centers, radii) -> float:
     the surface outside is compared at the property the fit must have."""
     import trimesh
 
-    from shtools.geometry.sphere_fit import _cover, discretize
+    from shtools.geometry.sphere_fit import discretize
+    from shtools.geometry.sphere_fit.cover import _cover
 
     v = np.asarray(mesh.vertices, dtype=np.float64)
     origin = 0.5 * (v.min(axis=0) + v.max(axis=0))

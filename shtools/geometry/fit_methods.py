@@ -20,8 +20,9 @@ class FitMethod(StrEnum):
 
 FIT_METHODS = tuple(m.value for m in FitMethod)
 
-#: default round budget of the variational fit, in rounds at N spheres (why 60:
-#: the measurements beside :data:`shtools.geometry.sphere_fit.ROUNDS`)
+#: default round budget of the variational fit, in rounds at N spheres: half the
+#: budget of 30 rounds leaves E well above its settled value, while more rounds
+#: lower it little for their CPU (the fits of docs/sphere-fits.md)
 DEFAULT_ROUNDS = 60
 
 #: spaces a sphere set to bind may be given in: "bind" (the rig's POSITION data),

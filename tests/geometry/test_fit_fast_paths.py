@@ -14,7 +14,7 @@ from shtools.geometry.outside_volume import (
     OutsideVolume,
     solid_angle,
 )
-from shtools.geometry.sphere_fit import _unique_rows
+from shtools.geometry.sphere_fit.cover import _unique_rows
 
 
 def test_winding_number_is_the_sum_of_solid_angles(torus_mesh):

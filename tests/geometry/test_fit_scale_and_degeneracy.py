@@ -15,12 +15,12 @@ from shtools.geometry.sphere_fit import (
     COVER_PASSES,
     SHRINK_ROUNDS,
     SPLIT_START_MIN,
-    _finish_effort,
-    _revive,
     discretize,
     distinct_spheres,
     fit_spheres,
 )
+from shtools.geometry.sphere_fit.fit import _finish_effort
+from shtools.geometry.sphere_fit.starts import _revive
 
 SCALES = [1e-9, 1e-6, 1e-3, 1.0, 1e3, 1e9]
 
@@ -183,12 +183,12 @@ def test_a_short_budget_buys_a_short_finish(capsule_union_mesh, monkeypatch):
     rounds and one cover pass (otherwise the finish, not the search, sets the
     time of a short fit), and still bounds the whole surface: checked on fresh
     surface points the fit never saw, by exact sphere membership."""
-    import shtools.geometry.sphere_fit as sphere_fit
+    import shtools.geometry.sphere_fit.fit as fit_module
 
-    assert _finish_effort(sphere_fit.ROUNDS) == (SHRINK_ROUNDS, COVER_PASSES)
+    assert _finish_effort(fit_module.ROUNDS) == (SHRINK_ROUNDS, COVER_PASSES)
     kwargs = dict(seed=0, max_iterations=2, samples=400)
     quick = fit_spheres(capsule_union_mesh, 12, **kwargs)
-    monkeypatch.setattr(sphere_fit, "_finish_effort",
+    monkeypatch.setattr(fit_module, "_finish_effort",
                         lambda rounds: (SHRINK_ROUNDS, COVER_PASSES))
     full = fit_spheres(capsule_union_mesh, 12, **kwargs)
     assert quick.info["evaluations"] < full.info["evaluations"]
@@ -206,14 +206,16 @@ def test_shrink_keeps_its_round_of_least_outside_volume(capsule_union_mesh, monk
     the second round's re-centring is made to throw one sphere far off (the
     compass search claiming it improved): the result must be the first
     round's set, not the blown-up one, and must still hold every cover point."""
-    import shtools.geometry.sphere_fit as sphere_fit
+    from shtools.geometry.sphere_fit import shrink
+    from shtools.geometry.sphere_fit.lloyd import _lloyd_step
+    from shtools.geometry.sphere_fit.starts import _initial_centers
 
     solid = discretize(capsule_union_mesh, 8, seed=0, samples=400)
     rng = np.random.default_rng(0)
-    state = sphere_fit._lloyd_step(solid, sphere_fit._initial_centers(solid.points, 8, rng))
-    first = sphere_fit._shrink(solid, state.centers, state.radii, rounds=1)
+    state = _lloyd_step(solid, _initial_centers(solid.points, 8, rng))
+    first = shrink._shrink(solid, state.centers, state.radii, rounds=1)
     calls = []
-    honest = sphere_fit._recenter
+    honest = shrink._recenter
 
     def sabotaged(solid_, hulls, p0, delta):
         p, fp, f0 = honest(solid_, hulls, p0, delta)
@@ -224,8 +226,8 @@ def test_shrink_keeps_its_round_of_least_outside_volume(capsule_union_mesh, monk
             fp = np.minimum(fp, f0 - 1.0)
         return p, fp, f0
 
-    monkeypatch.setattr(sphere_fit, "_recenter", sabotaged)
-    centers, radii = sphere_fit._shrink(solid, state.centers, state.radii, rounds=3)
+    monkeypatch.setattr(shrink, "_recenter", sabotaged)
+    centers, radii = shrink._shrink(solid, state.centers, state.radii, rounds=3)
     assert len(calls) >= 2  # the sabotaged round ran
     estimate = solid.flux.outside_volumes(centers, radii).sum()
     assert estimate <= solid.flux.outside_volumes(*first).sum()

@@ -80,7 +80,7 @@ def test_pair_held_triangles_lie_in_the_union_of_two_spheres():
     may have a sample outside the union (the test is exact, so no tolerance);
     and a thin triangle across the seam of two overlapping spheres, in neither
     alone, must be accepted."""
-    from shtools.geometry.sphere_fit import _pair_held
+    from shtools.geometry.sphere_fit.cover import _pair_held
 
     rng = np.random.default_rng(3)
     centers = np.array([[0.0, 0.0, 0.0], [1.2, 0.0, 0.0], [0.5, 1.1, 0.2]])
@@ -141,7 +141,8 @@ def test_outside_volume_decreases_with_more_spheres(torus_fits):
 def test_split_keeps_every_point_covered(torus_fits):
     """Splitting spheres (the coarse-to-fine step) keeps the union a cover and
     does not raise the summed outside volume of the split spheres."""
-    from shtools.geometry.sphere_fit import _split_clusters, discretize
+    from shtools.geometry.sphere_fit import discretize
+    from shtools.geometry.sphere_fit.starts import _split_clusters
 
     mesh, fits = torus_fits
     coarse = fits[8]
@@ -220,14 +221,15 @@ def test_unknown_method(small_torus):
 def test_split_start_serves_thin_parts(character_mesh, monkeypatch):
     """From SPLIT_START_MIN spheres the search starts from k-means clusters
     split in two twice, not from random centres: on the character (a body, a
-    head and four thin limbs) at N = 32, the case of issue 17, it must end
+    head and four thin limbs) at N = 32, a shape with thin parts, it must end
     well below the same fit from random centres, whose one-sphere teleports
     leave limbs under-served (default samples and budget, seed 0)."""
-    import shtools.geometry.sphere_fit as sphere_fit
+    from shtools.geometry.sphere_fit import fit as fit_module
+    from shtools.geometry.sphere_fit.starts import _initial_centers
 
     split = fit_spheres(character_mesh, 32, seed=0)
-    monkeypatch.setattr(sphere_fit, "_first_centers",
-                        lambda solid, n, rng: sphere_fit._initial_centers(solid.points, n, rng))
+    monkeypatch.setattr(fit_module, "_first_centers",
+                        lambda solid, n, rng: _initial_centers(solid.points, n, rng))
     random = fit_spheres(character_mesh, 32, seed=0)
     # 10 %: well above the flux evaluator's error (< 0.5 % here), below the
     # gap measured over seeds 0-2 (20 % on the mean, 25 % at seed 0)
