@@ -8,13 +8,11 @@ e.g. the generated unrolled kernel of ``benchmarks/unrolled_kernel.py``):
 ``(n_out - 1) + 2(n - 1)`` factors Γ as :math:`\Gamma_{ijk} = \sum_q w_q
 y_i(s_q) y_j(s_q) y_k(s_q)`, a canonical-polyadic decomposition of rank ``Q``,
 so the product is three small matrix products: reconstruct ``f`` and ``g`` at
-the nodes, multiply, project.  BLAS runs these near peak: in
-``benchmarks/bench_sh.py`` runs on the 2-core build machine (65,536 vectors,
-one BLAS thread) it was 1.4x (order 4) to 2.4x (order 6) faster than the
-sparse kernel in float64.
+the nodes, multiply, project.  BLAS runs these near peak, which makes it faster
+than the sparse kernel (``benchmarks/bench_sh.py`` measures both).
 
 *Sparse tensor kernel* (``"sparse"``): the nonzeros of Γ grouped by the
-unordered input pair ``j <= k`` (:class:`shtools.sh.triple.TripleTensor`): one
+unordered input pair ``j <= k`` (:class:`shtools.sh.gamma.TripleTensor`): one
 gathered product ``f_j g_k + f_k g_j`` per pair, then one matrix product with
 the ``(P, n_out^2)`` pair coefficients.
 """
@@ -27,6 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from shtools.sh.basis import basis
+from shtools.sh.gamma import triple_tensor
 from shtools.sh.quadrature import sphere_quadrature
 
 CP_CHUNK = 4096
@@ -64,8 +63,6 @@ def _cp_kernel(f, g, order, out_order):
 
 @functools.lru_cache(maxsize=64)
 def _sparse_factors(order: int, out_order: int, dtype: str):
-    from shtools.sh.triple import triple_tensor
-
     t = triple_tensor(order, out_order)
     off = np.flatnonzero(t.pair_j != t.pair_k)
     arrays = (t.pair_coef.astype(dtype), t.square_coef.astype(dtype), off)
@@ -92,8 +89,6 @@ def _sparse_kernel(f, g, order, out_order):
 
 #: name -> kernel; "cp" is the default of every product in shtools
 PRODUCT_KERNELS: dict[str, ProductKernel] = {"cp": _cp_kernel, "sparse": _sparse_kernel}
-#: kept for callers of the first name
-KERNELS = tuple(PRODUCT_KERNELS)
 
 
 def register_product_kernel(name: str, kernel: ProductKernel) -> None:
