@@ -90,7 +90,7 @@ def log_cmd(order, output, samples, plot_path, as_json):
               "(environment on a sphere of radius R, k = d/R).")
 @click.option("--alpha", "alpha_deg", type=option_type("alpha_deg"), default=45.0,
               show_default=True,
-              help="Cone half-angle in degrees, in (0, 90) (cone only; the seed prints 45).")
+              help="Cone half-angle in degrees, in (0, 90) (cone only; Wang et al. use 45).")
 @click.option("--energy-preserving", is_flag=True,
               help="Energy-preserving scaling (Lambda = sin(phi) phi', keeps the integral).")
 @click.option("--samples", type=option_type("scaling_samples"), default=40, show_default=True,

@@ -18,7 +18,8 @@ reader must use between samples), ``out_of_range`` (``"clamp"``/``"error"``),
 the nodes).  ``P = n(2n²+1)/3`` in the canonical order of
 :func:`shtools.sh.scaling.scaling_pattern`.
 
-The reader validates the structural facts of the SH scaling spec (§4.1):
+The reader validates the structural facts of SH scaling matrices
+(:mod:`shtools.sh.scaling`):
 pattern = canonical pattern of ``sh_order``, ``m`` and ``-m`` values equal,
 column 0 (plain) or row 0 (energy-preserving) equal to ``e0``, ``M = I`` at the
 identity ``k`` (cone 1, mid-range 0) within :data:`IDENTITY_TOL`, and ``k``

@@ -30,10 +30,9 @@ class RayCaster:
     faces : array_like, shape (F, 3), integer
     robust : bool
         Embree's robust (watertight) traversal, embreex's default: no ray slips
-        between two triangles sharing an edge.  Off, traversal is ~20 % faster
-        (``benchmarks/bench_fidelity.py --skinned``: CesiumMan's posed mesh traced
-        per frame, 0.14 -> 0.11 us per ray) and a ray may rarely miss through
-        an edge; the per-frame traced self-visibility turns it off (its 32 rays
+        between two triangles sharing an edge.  Off, traversal is faster
+        (``benchmarks/bench_fidelity.py --skinned`` measures it) and a ray may
+        rarely miss through an edge; the per-frame traced self-visibility turns it off (its 32 rays
         per vertex carry far more quadrature error than such misses).
 
     Examples

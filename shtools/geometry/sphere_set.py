@@ -15,7 +15,7 @@ __all__ = ["SphereSet", "hull_vertices", "minimal_bounding_sphere"]
 #: Subsets of ``s`` core points of size ``k`` (index arrays), by (s, k).
 _SUBSETS: dict = {}
 
-#: Core points at most (a safety net: measured at most 8 on the fits' clusters).
+#: Core points at most (a safety net: the fits' clusters need far fewer).
 MAX_CORE = 40
 
 
@@ -25,12 +25,11 @@ def minimal_bounding_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
     A core set: the minimal ball of a few points is the smallest ball
     circumscribed about 2-4 of them that holds them all (every subset tried at
     once, vectorised); the point farthest outside it joins them, until none is
-    outside.  The core stays small (<= 8 points on the fits' clusters), so this
-    is exact up to rounding and about 5x faster than an SLSQP solve on the
-    convex hull (which it replaced; radii equal to 1e-12, centres to 1e-8 of
-    the radius, where the radius is flat).  The radius returned is the largest
-    distance from the centre, so the sphere bounds every point whatever the
-    rounding.
+    outside.  The core stays small, so this is exact up to rounding and
+    faster than an SLSQP solve on the convex hull (the two agree: radii to
+    1e-12, centres to 1e-8 of the radius, where the radius is flat).  The
+    radius returned is the largest distance from the centre, so the sphere
+    bounds every point whatever the rounding.
 
     Parameters
     ----------

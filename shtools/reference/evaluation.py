@@ -13,7 +13,7 @@ and compared with ray tracing of the real meshes and of the sphere set (after
 the self-shadow rules), by relative RMSE of per-vertex radiance.
 
 :func:`error_split` splits a method's error per receiver object into where it
-comes from (issue 16): the **sphere approximation** (sphere union vs real mesh,
+comes from: the **sphere approximation** (sphere union vs real mesh,
 both ray traced), **SHEXP** (the method vs the sphere union it approximates),
 **truncation** (order-``n`` windowed shading of the real visibility vs the
 exact integral of the binary visibility against the same windowed order-``n``

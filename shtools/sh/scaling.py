@@ -15,16 +15,16 @@ is a linear map :math:`f_d = M(k) f_r` (eqs. 4–6) with
 eq. 2: keeps :math:`\int F\,d\omega`).  Because the warp leaves the azimuth
 alone, :math:`M` couples only equal ``m`` and the azimuthal integral is 1, so
 each entry is one 1-D integral in θ of the normalised Legendre parts
-(``docs/sh-scaling`` spec §2.2), done here by Gauss–Legendre on ``[0, π]``.
+(Wang et al. 2005, Sec. 2.2), done here by Gauss–Legendre on ``[0, π]``.
 
-Angular maps (spec §1.2–1.3; the atan2 forms are **derived**, the seed's
-printed formulas are the special cases noted):
+Angular maps (Wang et al. 2005, Secs. 3.1 and 3.2; the atan2 forms are
+**derived** here, the paper's printed formulas are the special cases noted):
 
 ``cone``
     an occluder modelled as a cone with its apex at the entity's centre and
     half-angle ``alpha`` about the radial axis, seen from ``k = d/r`` bounding
     radii: :math:`\phi_k(\theta) = \operatorname{atan2}(k\sin\theta,\
-    \cos\theta + (1-k)\cot\alpha\sin\theta)`.  The seed prints the case
+    \cos\theta + (1-k)\cot\alpha\sin\theta)`.  The paper prints the case
     ``alpha = π/4``.  :math:`\phi_1` is the identity and
     :math:`\phi_k^{-1} = \phi_{1/k}`.
 ``midrange``
@@ -35,7 +35,7 @@ printed formulas are the special cases noted):
     :math:`\phi_k(\theta) = \operatorname{atan2}(t\sin\theta,\ k + t\cos\theta)`.
     :math:`\phi_0` is the identity.
 
-Structure (spec §2.3, checked by the tests): the non-zero pattern has
+Structure (derived from the map's form, checked by the tests): the non-zero pattern has
 ``n(2n²+1)/3`` positions; the ``m`` and ``−m`` blocks are equal; a plain M has
 column 0 equal to ``e0``, an energy-preserving one row 0 equal to ``e0``; and
 :math:`M_E[\phi] = M_P[\phi^{-1}]^T` (so for the cone ``M_E(k) = M_P(1/k)^T``).
@@ -52,7 +52,7 @@ from shtools.sh.basis import basis, check_order
 
 #: Angular maps this module knows.
 FUNCTIONS = ("cone", "midrange")
-#: Default cone half-angle: the seed's printed formula is the atan2 form with cot(alpha) = 1.
+#: Default cone half-angle: the paper's printed formula is the atan2 form with cot(alpha) = 1.
 DEFAULT_ALPHA = math.pi / 4
 #: Gauss–Legendre nodes in θ.  Measured (``quadrature_error``): <= 1e-12 against
 #: twice the nodes for cone k in [1/8, 8] and midrange k <= 0.99 at n <= 6.
@@ -262,7 +262,7 @@ def identity_k(function: str) -> float:
 
 
 def k_samples(function: str, count: int, lo: float, hi: float) -> tuple[np.ndarray, str]:
-    """Sampled ``k`` of a scaling table (spec §4.2; the seed gives no range).
+    """Sampled ``k`` of a scaling table (the paper gives no range; docs/formats.md).
 
     ``cone``: geometric on ``[lo, 1]`` and on ``[1, hi]`` (steps split in
     proportion to ``log``-length), so ``k = 1`` (M = I) is a sample.
