@@ -1,4 +1,5 @@
-"""The import-layer contract of docs/architecture.md: no package imports a layer above it.
+"""The import-layer contract of docs/architecture.md: no package imports a layer above it,
+no import cycles, and the doc itself true (its layer table is this one, its paths exist).
 
 Every ``import shtools.X`` / ``from shtools.X import`` in the package's source
 (module level and inside functions) is checked against the table below.
@@ -7,6 +8,7 @@ Every ``import shtools.X`` / ``from shtools.X import`` in the package's source
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -196,3 +198,77 @@ def test_no_import_cycles_between_shtools_modules():
             unknown.append(sorted(cycle))
     assert unknown == [], ("import cycles (imports inside functions count); break them, "
                            f"or if they are known, name them in KNOWN_CYCLES: {unknown}")
+
+# --------------------------------------------------------------------------- docs/architecture.md
+
+REPO = ROOT.parent
+DOC = REPO / "docs" / "architecture.md"
+
+
+def _layer_rows() -> dict[str, set[str]]:
+    """package -> the shtools packages its row of the "Layers" table allows."""
+    text = DOC.read_text(encoding="utf-8")
+    section = text.split("## Layers", 1)[1].split("\n## ", 1)[0]
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) != 4 or not cells[0].isdigit():
+            continue
+        allowed = set(re.findall(r"`(\w+)`", cells[2]))
+        if cells[2].startswith("everything"):
+            allowed = {"*"}
+        for pkg in re.findall(r"`shtools\.(\w+)`", cells[1].split(" — ")[0]):
+            rows[pkg] = allowed
+    return rows
+
+
+def test_layer_table_matches_the_enforced_one():
+    assert _layer_rows() == {pkg: set(allowed) for pkg, allowed in ALLOWED.items()}
+
+
+def _quoted() -> list[str]:
+    return re.findall(r"`([^`\s]+)`", DOC.read_text(encoding="utf-8"))
+
+
+def test_every_path_named_exists():
+    paths = [q for q in _quoted()
+             if re.match(r"(shtools|tests|docs|benchmarks|examples)/[\w./-]*$", q)]
+    assert len(paths) >= 5  # the doc names paths; a parse that finds none is broken
+    missing = [p for p in paths if not (REPO / p).exists()]
+    assert missing == []
+
+
+def _defines(module: Path, name: str) -> bool:
+    tree = ast.parse(module.read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and node.name == name:
+            return True
+        if isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            if any(isinstance(t, ast.Name) and t.id == name for t in targets):
+                return True
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            if any((a.asname or a.name.split(".")[-1]) == name for a in node.names):
+                return True
+    return False
+
+
+def test_every_shtools_name_exists():
+    """``shtools.a.b.C`` names a module ``shtools/a/b`` (or ``.py``) defining ``C``;
+    an attribute after a class (``.method``) is not checked."""
+    missing = []
+    names = [q for q in _quoted() if re.match(r"shtools\.[\w.]+$", q)]
+    assert len(names) >= 10
+    for name in names:
+        parts = name.split(".")
+        for cut in range(len(parts), 0, -1):
+            base = REPO.joinpath(*parts[:cut])
+            module = base / "__init__.py" if base.is_dir() else base.with_suffix(".py")
+            if module.exists():
+                rest = parts[cut:]
+                if rest and not _defines(module, rest[0]):
+                    missing.append(name)
+                break
+        else:
+            missing.append(name)
+    assert missing == []
