@@ -1,4 +1,4 @@
-"""Accuracy on real meshes (issue 4 §8): `shtools eval`'s table for each shared mesh.
+"""Accuracy on real meshes: `shtools eval`'s table for each shared mesh.
 
 Each mesh of ``../shared/data/meshes`` (when present) is fitted with the
 variational sphere set (``N = 48``) and stands on a ground grid under the

@@ -1,4 +1,4 @@
-"""Fidelity against the real meshes (issue 16): the old default vs the new one.
+"""Fidelity against the real meshes: shadow settings compared with ray tracing.
 
 Scenes built from ``../shared/data`` (never committed):
 

@@ -1,4 +1,4 @@
-"""Adaptive shadow fields (issue 11): sizes, sampling speed, accuracy, a Tamura-like scene.
+"""Adaptive shadow fields: sizes, sampling speed, accuracy, a Tamura-like scene.
 
 Parts (``--part``, default all):
 

@@ -1,4 +1,4 @@
-"""SH scaling (Wang et al. 2005, issue 12): throughput, deformable fields, mid-range lighting.
+"""SH scaling (Wang et al. 2005): throughput, deformable fields, mid-range lighting.
 
 Four tables, side by side in one run:
 

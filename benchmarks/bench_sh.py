@@ -1,4 +1,4 @@
-"""SH algebra throughput (issue 2, section 6): basis, products, every exp method.
+"""SH algebra throughput: basis, products, every exp method.
 
 Measured side by side in one run:
 

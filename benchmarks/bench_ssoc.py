@@ -1,4 +1,4 @@
-"""Small spherical lights (issue 13): SSOC vs SHEXP's cap light vs ray tracing, side by side.
+"""Small spherical lights: SSOC vs SHEXP's cap light vs ray tracing, side by side.
 
 Scene: a mesh (the 69k-triangle bunny of ``../shared/data``; a procedural blob
 without the data) standing on a 256 x 256 ground grid, lit by one spherical

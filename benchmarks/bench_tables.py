@@ -1,4 +1,4 @@
-"""``shtools tables log`` wall time for SH orders 4, 6 and 8 (issue 2, section 6).
+"""``shtools tables log`` wall time for SH orders 4, 6 and 8.
 
 Measures the command as a user runs it (a fresh ``python -m shtools`` process:
 interpreter start-up, imports, cold caches), the same command in-process, and
