@@ -126,3 +126,61 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
     for name in ("character.bound.h5", "character.spheres.png", "walk.usda", "walk.png",
                  "walk_lit.glb"):
         assert (tmp_path / name).is_file(), name
+
+
+# ------------------------------------------------------------ a short README, reference docs
+
+DOCS = sorted((REPO / "docs").glob("*.md"))
+
+
+def _table_cells(text: str) -> list[str]:
+    return [cell.strip() for line in text.splitlines()
+            if line.strip().startswith("|") and line.strip().endswith("|")
+            for cell in line.strip().strip("|").split("|")]
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_readme_is_a_five_minute_read():
+    prose = re.sub(r"```.*?```", "", README, flags=re.DOTALL)
+    prose = "\n".join(line for line in prose.splitlines() if not line.strip().startswith("|"))
+    # ~240 words a minute: the README's prose stays readable in five minutes
+    assert len(prose.split()) <= 1200
+    long_cells = [c[:60] for c in _table_cells(README) if len(c) > 300]
+    assert long_cells == []  # a long explanation is prose under a heading, not a cell
+
+
+def test_doc_table_cells_stay_short():
+    long_cells = [(doc.name, c[:60]) for doc in DOCS
+                  for c in _table_cells(doc.read_text(encoding="utf-8")) if len(c) > 400]
+    assert long_cells == []
+
+
+def test_readme_and_docs_carry_no_history_or_outside_paths():
+    """Chronology lives in CHANGELOG.md, papers are cited by name (docs/references.md)."""
+    pattern = re.compile(r"\bwaves? ?\d|\bwave-\d|\bissue \d+|spec §|\bthe seed\b|\.\./shared/",
+                         re.IGNORECASE)
+    found = [(path.name, m.group(0)) for path in [REPO / "README.md", *DOCS]
+             for m in pattern.finditer(path.read_text(encoding="utf-8"))]
+    assert found == []
+
+
+def test_links_in_readme_and_docs_resolve():
+    """Every relative link names an existing file and, with #anchor, one of its headings."""
+    broken = []
+    for path in [REPO / "README.md", REPO / "CHANGELOG.md", *DOCS]:
+        for target in re.findall(r"\]\(([^)\s]+)\)", path.read_text(encoding="utf-8")):
+            if re.match(r"[a-z]+://", target):
+                continue
+            file, _, anchor = target.partition("#")
+            dest = (path.parent / file).resolve() if file else path
+            if not dest.exists():
+                broken.append(f"{path.name}: {target}")
+            elif anchor and dest.suffix == ".md":
+                headings = re.findall(r"^#+ (.+)$", dest.read_text(encoding="utf-8"), re.M)
+                if anchor not in {_slug(h) for h in headings}:
+                    broken.append(f"{path.name}: {target}")
+    assert broken == []
