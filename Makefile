@@ -56,7 +56,7 @@ test-core: ## `pip install .` (numpy + h5py only) in a fresh venv; the runtime's
 	@# -P: import the installed package, not the source tree
 	OPENBLAS_NUM_THREADS=1 $(CORE_VENV)/bin/python -P -m pytest -q -p no:cacheprovider $(CORE_TESTS)
 
-bench: $(STAMP) ## Run every benchmarks/bench_*.py and print their tables (QUICK=1: short)
+bench: $(STAMP) ## Run every benchmarks/bench_*.py, print their tables, write benchmarks/RESULTS.md (QUICK=1: short)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick)
 
 golden: $(STAMP) ## Regenerate tests/golden/golden.h5 on purpose (review with shtools diff)

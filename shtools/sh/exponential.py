@@ -127,8 +127,7 @@ def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | N
         Order (``>= n``, default ``n``) at which the products of PS and PS* and
         the squarings of PS* and HYB are accumulated before truncating back to
         ``n``.  For HYB, ``n + 2`` markedly reduces the error of the squarings
-        (order 4, 3–25 random caps: median 3.6 % -> 2.9 % relative L2 against
-        product-space accumulation; see tests/sh/test_exp_log.py).
+        against product-space accumulation (tests/sh/test_exp_log.py checks it).
     tables : dict, optional
         OL tables of order ``n`` with ``ol_norm, ol_a, ol_b`` (as from
         :func:`shtools.sh.tables.build_log_tables` or a tables asset) for
