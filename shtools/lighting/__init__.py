@@ -10,7 +10,6 @@
 """
 
 from shtools.lighting.environment import (
-    WINDOWS,
     check_latlong_shape,
     environment_rotation,
     project_environment,
@@ -22,7 +21,6 @@ from shtools.lighting.latlong import latlong_directions, pixel_solid_angles, pro
 
 __all__ = [
     "RH_NAMES",
-    "WINDOWS",
     "check_latlong_shape",
     "environment_rotation",
     "frame_transform_matrix",

@@ -14,11 +14,9 @@ from shtools.errors import InputError
 from shtools.lighting.frames import rotation_about_y
 from shtools.lighting.images import load_hdr_image
 from shtools.lighting.latlong import project_latlong
+from shtools.runtime.settings import WINDOW_CHOICES
 from shtools.sh.basis import check_order
-from shtools.sh.zonal import WINDOW_KINDS, apply_window
-
-#: Window kinds accepted by the projection (None/"none" leaves the coefficients as is).
-WINDOWS = ("none", *WINDOW_KINDS)
+from shtools.sh.zonal import apply_window
 
 #: Reflection x -> -x: the same image mirrored left-right.
 MIRROR_X = np.diag([-1.0, 1.0, 1.0])
@@ -97,8 +95,8 @@ def project_environment(
         Image size and the parameters used (recorded in the light asset).
     """
     order = check_order(order)
-    if window is not None and window not in WINDOWS:
-        raise InputError(f"unknown window '{window}'; use one of {', '.join(WINDOWS)}")
+    if window is not None and window not in WINDOW_CHOICES:
+        raise InputError(f"unknown window '{window}'; use one of {', '.join(WINDOW_CHOICES)}")
     if not np.isfinite(exposure) or not np.isfinite(rotate_y):
         raise InputError("exposure and rotation must be finite numbers")
     image = load_hdr_image(path)
