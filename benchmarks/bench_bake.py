@@ -3,7 +3,7 @@
 
     python benchmarks/bench_bake.py [--quick]
 
-Targets (issue 5): the demo runs in about a minute on this 2-core machine.
+Target: the demo runs in about a minute on this 2-core machine.
 """
 
 from __future__ import annotations

@@ -12,13 +12,13 @@ Scenes built from ``../shared/data`` (never committed):
 Every scene is baked with each variant (:data:`VARIANTS`, ``--variants``; the
 assets are shared): the **old default** (``self_visibility = false``: every
 blocker, the objects' own included, as spheres with the self-shadow rules),
-**wave2** (exact self-shadowing from a ``transfer`` asset, the objects' spheres
+**self+spheres** (exact self-shadowing from a ``transfer`` asset, the objects' spheres
 shadowing the other receivers) and **new**: every rigid object a shadow-field
 blocker (``blocker = { field = ... }``) whose asset also holds its O_v, so the
 real mesh shadows the other receivers and the object itself (skinned objects
 keep their bound spheres for the other receivers and, with ``self_visibility``
-on as in wave2 and new, trace their posed mesh on their own vertices every
-frame: wave 2's rest-pose ``g_p`` is a ``--skinned`` row).  The reference is the project's
+on as in self+spheres and new, trace their posed mesh on their own vertices every
+frame: the rest-pose ``g_p`` is a ``--skinned`` row).  The reference is the project's
 ray tracer of the posed **real meshes**
 (:func:`shtools.reference.raytrace_visibility`, >= 3,200 directions, projected
 to the same order and shaded the same way; cached per scene, it depends on no
@@ -37,10 +37,10 @@ Assets (sphere fits, trees, bound sets, transfers, fields) are cached in
 
 ``python benchmarks/bench_fidelity.py [--quick]`` (quick: the small ``spot``
 mesh on a coarse ground only, fewer directions).  ``--skinned [--scene fox]``:
-skinned characters tracing their posed mesh every frame (own vertices, and since wave 4
-the ground in the cone of their bounding sphere): the old default, the wave-3 default
-(spheres on the ground) and the ground's ray counts, accuracy and frame time (wall and
-CPU) side by side, negatives (``--skinned-variants``; ``--skinned-sections
+skinned characters tracing their posed mesh every frame (own vertices, and the ground
+in the cone of their bounding sphere): the old default, "spheres on ground"
+(the characters' spheres shade the ground) and the ground's ray counts, accuracy and
+frame time (wall and CPU) side by side, negatives (``--skinned-variants``; ``--skinned-sections
 quadrature,interpolation`` adds the own vertices' direction sets and every-k-th-frame
 tracing).
 """
@@ -193,17 +193,17 @@ def scenes(quick: bool, only=None) -> dict[str, dict]:
 
 #: Bake variants: how rigid objects cast on other receivers ("tree": their spheres,
 #: "field": their real mesh through a shadow field, which also holds their
-#: self-visibility unless "transfer" keeps the transfer asset) and the settings.  "old" is the
-#: default before issue 16, "wave2" the default of its wave 2 (exact
-#: self-shadowing, sphere shadows on the other receivers), "new" the current default.
+#: self-visibility unless "transfer" keeps the transfer asset) and the settings.  "old" has no
+#: self-visibility, "self+spheres" exact self-shadowing with sphere shadows on the
+#: other receivers, "new" the current default.
 VARIANTS = {
     "old": {"blocker": "tree", "settings": 'self_visibility = false\nlocal_visibility = false\n'
                                            'deringing = "none"\ntraced_shadows = false\n'},
-    "wave2": {"blocker": "tree", "settings": 'self_visibility = true\n'
+    "self+spheres": {"blocker": "tree", "settings": 'self_visibility = true\n'
                                                'local_visibility = true\n'
                                                'deringing = "desaturate"\n'},
     "new": {"blocker": "field", "settings": ""},  # the current defaults
-    # wave 4: the default with sphere trees (no precomputed field), before and after the
+    # the default with sphere trees (no precomputed field), without and with the
     # rigid objects' real meshes trace their shadow on the ground (``traced_shadows``)
     "tree": {"blocker": "tree", "settings": "traced_shadows = false\n"},
     "traced": {"blocker": "tree", "settings": ""},
@@ -369,7 +369,7 @@ def _markdown(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
-# -- the characters as deformable shadow fields (issue 12; the scaling engineer's) ---------
+# -- the characters as deformable shadow fields ---------------------------------------------
 
 
 #: field variants of :func:`deformable_variants`: label -> (blocker table, settings lines).
@@ -478,7 +478,7 @@ def deformable_variants(name: str, spec: dict, *, n_dirs: int, subset: int,
 # --------------------------------------------------------------------------- skinned
 #: Variants of the skinned comparison (``--skinned``): [settings] lines of each.
 #: "traced N": the character's own vertices traced with N rays (the ground traced too,
-#: the default since wave 4); "wave 3 default": own vertices traced with 32 rays, the
+#: the default); "spheres on ground": own vertices traced with 32 rays, the
 #: ground shaded by the character's bound spheres; "ground N": the defaults with N rays
 #: for a ground vertex whose hemisphere the character's bounding sphere fills (64: the
 #: default).
@@ -487,18 +487,18 @@ SKINNED_VARIANTS = {
     "g_p": 'self_visibility = false\nlocal_visibility = true\nderinging = "desaturate"\n',
     **{f"traced {q}": (f'self_visibility = true\nself_visibility_directions = {q}\n'
                        'deringing = "desaturate"\n') for q in (16, 24, 32, 48)},
-    "wave 3 default": 'traced_shadows = false\n',
+    "spheres on ground": 'traced_shadows = false\n',
     **{f"ground {q}": f"traced_shadow_directions = {q}\n"
        for q in (32, 48, 64, 96, 128)},
 }
 #: The default traced variant as the first shift built it, for the before/after figures
-#: (:func:`_previous_tracing`); same settings as the wave-3 default.
+#: (:func:`_previous_tracing`); same settings as "spheres on ground".
 PREVIOUS = "traced 32, previous"
-SKINNED_VARIANTS[PREVIOUS] = SKINNED_VARIANTS["wave 3 default"]
+SKINNED_VARIANTS[PREVIOUS] = SKINNED_VARIANTS["spheres on ground"]
 #: The variants ``--skinned`` runs unless ``--skinned-variants`` names others: the old
-#: default (the baseline), the wave-3 default and the ground's ray counts (96: the
+#: default (the baseline), "spheres on ground" and the ground's ray counts (96: the
 #: current default, ``CONE_DIRECTIONS``).
-SKINNED_RUN = ("old", "wave 3 default",
+SKINNED_RUN = ("old", "spheres on ground",
                "ground 32", "ground 48", "ground 64", "ground 96", "ground 128")
 
 
@@ -804,7 +804,7 @@ def main(argv=None) -> int:
                         help="alternating repeats of the bakes (the fastest is kept)")
     parser.add_argument("--deformable", action="store_true",
                         help="the skinned scenes with a deformable shadow field instead of "
-                             "their bound spheres (issue 12)")
+                             "their bound spheres")
     parser.add_argument("--skinned", action="store_true",
                         help="skinned objects' per-frame tracing: the variants' table")
     parser.add_argument("--skinned-variants", default=",".join(SKINNED_RUN),

@@ -3,7 +3,7 @@ frame split into part tasks.
 
     python benchmarks/bench_scaleout.py [--quick] [--frames N] [--only many|single]
 
-Part 1, many frames (issue 14): the same bake (``--frames``, default 96 of the
+Part 1, many frames: the same bake (``--frames``, default 96 of the
 48-200 the issue allows) in this process (``--workers 1``: frames one after the
 other, one process per frame), on the default forked local workers, on a Dask
 ``LocalCluster`` of 1 and 2 workers, and on a simulated larger cluster (8 Dask
@@ -39,7 +39,7 @@ with its parts as tasks of a Dask LocalCluster of 2 workers
 (``split_frames``); per-frame time over a few frames after the first, and the
 bytes compared with the in-process bake.
 
-Targets (issue 14): >= 85 % of linear speed-up on 2 cores, per-task overhead
+Targets: >= 85 % of linear speed-up on 2 cores, per-task overhead
 <= 5 % of a frame.
 """
 

@@ -6,7 +6,7 @@ Four tables, side by side in one run:
    scale, rotate back) per receiver x entity at orders 4 and 6.
 2. **Skinned character over a ground grid** (Fox, CesiumMan from
    ``../shared/data/skinned``; several frames of one clip; a 100 x 100 grid, 10k
-   receivers like the seed's Table 1 planes): relative RMSE of
+   receivers like the planes of Wang et al.'s Table 1): relative RMSE of
    per-vertex radiance against ray tracing of the posed mesh, on the ground and
    on the character itself, for (a) the deformable shadow field (re-sampled on
    the bounding sphere every frame, scaled per receiver; log space with one exp
@@ -22,12 +22,12 @@ Four tables, side by side in one run:
    half-angle alpha is swept, and the log/product commutation difference of
    the field is reported.
 3. **Mid-range lighting** -- a teapot on a plane inside an environment sphere
-   (the seed's Fig. 11 set-up, probe ``uffizi.hdr``): radiance error against
+   (the set-up of Wang et al.'s Fig. 11, probe ``uffizi.hdr``): radiance error against
    per-vertex ray-traced environment lighting (rays hit the sphere, the probe --
    band-limited to order 12 -- is seen in the hit point's direction), for the
    scaled environment and for
    the distant-light assumption; unshadowed and shadowed by the teapot.
-4. The seed's Table 1 (GPU frame rates, 2005) quoted as printed.
+4. Wang et al.'s Table 1 (GPU frame rates, 2005) quoted as printed.
 
 ``python benchmarks/bench_scaling.py [--quick]``
 """
@@ -124,7 +124,7 @@ SAMPLINGS = (("384 x 512 rays, naive log", (16, 24), (16, 32), "naive"),
              ("384 x 128 rays, naive log", (16, 24), (8, 16), "naive"),
              ("192 x 128 rays, naive log", (12, 16), (8, 16), "naive"))
 #: ray-traced per-frame self-visibility of the character's own vertices (an estimate
-#: of issue 16's per-frame self path): key "traced <directions> <log>", label
+#: of the per-frame self path): key "traced <directions> <log>", label
 SELF_TRACED = (("traced 256 eigen", "ray-traced self (256 dirs, eigen log)"),
                ("traced 96 naive", "ray-traced self (96 dirs, naive log)"))
 
@@ -232,7 +232,7 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     g = put("spheres", _timed2(lambda: rt.visibility(pts, fr.nrm, [spheres_blocker()],
                                                      clusters=clusters["all"])))
     err.setdefault("spheres", []).append(fr.errors(g))
-    # the scenes' defaults (issue 16): the character's posed mesh traced on its own
+    # the scenes' defaults: the character's posed mesh traced on its own
     # vertices every frame, multiplied in after the exp, its own blocker skipped there
     own = slice(n_g, None)
 
@@ -253,7 +253,7 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     # the scene defaults (traced own vertices), field in log and in product space;
     # one process (CPU) and the runtime's default processes (wall); "calling process":
     # the field hidden from the runtime behind a plain log blocker, evaluated in the
-    # calling process only (the runtime before wave 3's second shift)
+    # calling process only (the runtime without worker processes)
     for key, blocker, space in (("default spheres", spheres_blocker, "log"),
                                 ("default field", field_blocker, "log"),
                                 ("default field product", field_blocker, "product"),
@@ -609,7 +609,7 @@ def main() -> None:
                         help="comma-separated subset of throughput, skinned, midrange")
     args = parser.parse_args()
     sections = set(args.sections.split(","))
-    print("## SH scaling (issue 12)\n")
+    print("## SH scaling\n")
     print(_load())
     if "throughput" in sections:
         print("\n### 1. Scaling throughput (interpolate M(k), D^T M D f per receiver)\n")
@@ -630,7 +630,7 @@ def main() -> None:
     if "midrange" in sections:
         print("\n### 3. Mid-range lighting: teapot on a plane inside an environment sphere\n")
         print("\n".join(midrange(args.quick)))
-    print("\n### 4. The seed's Table 1, as printed (not comparable: GPU, 2005)\n")
+    print("\n### 4. Wang et al.'s Table 1, as printed (not comparable: GPU, 2005)\n")
     print(TABLE1)
     print("\n" + _load())
 

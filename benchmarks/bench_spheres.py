@@ -16,7 +16,7 @@ scores its spheres the same way, also after growing them until they hold the
 whole surface ("made bounding"); see docs/sphere-fits.md, "Anchors".
 ``--iterations K ...`` adds variational fits with a round budget of K (for
 comparisons at equal time).  A second table compares with the spheretree
-figures quoted in issue 3 (medial-axis method, Bradshaw & O'Sullivan).
+figures quoted by its authors (medial-axis method, Bradshaw & O'Sullivan).
 
 Usage::
 
@@ -65,10 +65,10 @@ REAL_MESHES = {"bunny": "meshes/stanford-bunny.obj", "armadillo": "meshes/armadi
                "teapot": "meshes/teapot.obj", "CesiumMan": "skinned/CesiumMan.glb"}
 
 #: Evenly spread surface points for the coverage column (independent of the
-#: fit's own samples: issue 17 found 0.19 % of them outside on the dragon).
+#: fit's own samples: sample-only covers leave slivers of surface outside).
 COVERAGE_POINTS = 100_000
 
-#: spheretree (medial axis) results quoted in issue 3: mesh, N, E, seconds.
+#: spheretree (medial axis) results as quoted by its authors: mesh, N, E, seconds.
 SPHERETREE = [("spot", 40, 0.33, 109.0), ("armadillo-9k", 60, 0.86, 191.0),
               ("70k-triangle blob", 55, 0.12, 19 * 60.0)]
 

@@ -21,7 +21,7 @@ light's SH shading; ``S`` read back as radiance / unshadowed), ray tracing at
 16 and 64 strata.  For SHEXP the time is visibility + light shading (the
 visibility is shared with the environment in a real bake; the light's own
 shading is given separately).  Then the crossover radius, the goal, the
-beyond-seed options at 0.05 rad, and the seed's Table 1 columns (CPU) on the
+options beyond the paper at 0.05 rad, and the paper's Table 1 columns (CPU) on the
 bunny and the dragon.
 
 ``python benchmarks/bench_ssoc.py [--quick]``
@@ -40,7 +40,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "meshes"
 RADII = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3)
-#: The seed's Table 1 (GeForce 8800 GTX, 512^2 screen), quoted as printed (ms).
+#: Mo et al.'s Table 1 (GeForce 8800 GTX, 512^2 screen), quoted as printed (ms).
 SEED_TABLE1 = {
     "Bunny (70k)": (8.0, 0.8, 1.7, 8.2),
     "Dragon and Sphere (270k)": (27.7, 1.8, 5.3, 16.5),
@@ -181,7 +181,7 @@ def crossover(rows) -> str:
 
 
 def stages(quick: bool):
-    """The seed's Table 1 columns, CPU, one process, on the bunny and the dragon."""
+    """Mo et al.'s Table 1 columns, CPU, one process, on the bunny and the dragon."""
     from shtools.runtime.ssoc import OcclusionCamera, SSOCSettings
 
     out = []
@@ -249,10 +249,10 @@ def main():
               f"{0.5 * e['SHEXP o6']['rad RMSE %']:.3g} % -> {'met' if ok_err else 'MISSED'}; "
               f"time {e['SSOC']['ms/light/frame']:.0f} ms vs RT64 "
               f"{e['RT 64 spp']['ms/light/frame']:.0f} ms -> {'met' if ok_t else 'MISSED'}")
-    print("\n## SSOC variants (beyond the seed and the seed's naive form)\n")
+    print("\n## SSOC variants (beyond the paper, and its naive form)\n")
     print(_markdown(extra))
     if not args.skip_stages:
-        print("\n## Per-stage CPU times (the seed's Table 1 columns)\n")
+        print("\n## Per-stage CPU times (Mo et al.'s Table 1 columns)\n")
         print(_markdown(stages(args.quick)))
         print("\nSeed (GeForce 8800 GTX, 512² screen, as printed): "
               + "; ".join(f"{k}: silhouette {v[0]} ms, shadow map {v[1]} ms, create SSOC "

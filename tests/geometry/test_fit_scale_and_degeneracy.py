@@ -48,7 +48,7 @@ def _cube_outside_mc(side, centers, radii, n=40_000, seed=0):
 @pytest.mark.parametrize("scale", SCALES)
 def test_outside_volume_ratio_is_scale_invariant(scale):
     """A fixed sphere set scaled with the cube: the evaluator's E against Monte
-    Carlo at every scale (issue 10: 1.51 instead of 2.36 at side 1e-9)."""
+    Carlo at every scale (absolute tolerances would fail at the small ones)."""
     cube = trimesh.creation.box(extents=[scale] * 3)
     rng = np.random.default_rng(4)
     centers = rng.uniform(-0.6, 0.6, (6, 3)) * scale
@@ -99,7 +99,7 @@ def test_distinct_spheres_counts_vanishing_and_duplicates():
 
 
 def test_revive_replaces_vanishing_and_duplicate_spheres(capsule_union_mesh):
-    """The defect of issue 10 (25 identical zero spheres in a 64-sphere fit):
+    """A fit must not return identical zero spheres (25 of them in one 64-sphere fit):
     such spheres are replaced by splits that keep every point covered."""
     solid = discretize(capsule_union_mesh, 8, seed=0, samples=300)
     fit = fit_spheres(capsule_union_mesh, 4, seed=0, max_iterations=3, samples=300)

@@ -1,4 +1,4 @@
-"""Cached functions hand out nothing a caller can change for the next caller (issue 9, item 8)."""
+"""Cached functions hand out nothing a caller can change for the next caller."""
 
 from __future__ import annotations
 

@@ -166,7 +166,7 @@ def test_ol_accurate_below_4_8_and_not_beyond():
 @pytest.mark.parametrize(("order", "bound"), [(2, 0.01), (3, 0.01), (4, 0.01), (6, 0.05),
                                              (8, 0.05)])
 def test_log_eigen_round_trip_for_caps_up_to_50_degrees(order, bound):
-    # exp*(log g) within 1 % of g (issue 2 §5) holds at the paper's low orders: measured
+    # exp*(log g) within 1 % of g holds at the paper's low orders: measured
     # max over 0–50 deg 1e-16 (n=2), 9e-5 (n=3), 0.85 % (n=4).  At n >= 5 the 0.02
     # eigenvalue floor clips more of the spectrum: 3.8 % (n=5), 3.2 % (n=6), 2.3 % (n=8).
     rng = np.random.default_rng(order)

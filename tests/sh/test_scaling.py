@@ -95,7 +95,7 @@ def test_pattern_count_and_m_selection(order):
 
 
 def test_seed_count_44_at_order_4():
-    assert S.pattern_size(4) == 44  # the seed's figure, "less than one-fifth" of 256
+    assert S.pattern_size(4) == 44  # Wang et al.'s figure, "less than one-fifth" of 256
 
 
 @pytest.mark.parametrize("function,k", [("cone", 0.3), ("cone", 2.5), ("midrange", 0.5),
