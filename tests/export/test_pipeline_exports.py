@@ -131,7 +131,8 @@ def _accessor(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
 
 def test_glb_sequence_keeps_objects_and_frames(run_cli, bake_file, tmp_path, khronos):
     out = tmp_path / "shot.glb"
-    summary = _export(run_cli, bake_file, out, "--frames", "5:9:2", "--quantity", "irradiance")
+    summary = _export(run_cli, bake_file, out, "--frames", "5:9:2", "--quantity", "irradiance",
+                      "--sequence")
     files = [tmp_path / "shot.0005.glb", tmp_path / "shot.0007.glb"]
     assert summary["files"] == [str(f) for f in files] and not out.exists()
     bake = read_bake(bake_file)
