@@ -11,7 +11,7 @@ QUICK  ?=
 GLTF_VALIDATOR := 2.0.0-dev.3.10
 
 .DEFAULT_GOAL := help
-.PHONY: help demo test test-slow test-core bench lint clean golden examples
+.PHONY: help demo test test-slow test-core test-extras bench lint clean golden examples
 
 help: ## Show this help
 	@echo "shtools make targets (a fresh clone needs only $(PYTHON) >= 3.11 and make):"
@@ -56,6 +56,24 @@ test-core: ## `pip install .` (numpy + h5py only) in a fresh venv; the runtime's
 	@# -P: import the installed package, not the source tree
 	OPENBLAS_NUM_THREADS=1 $(CORE_VENV)/bin/python -P -m pytest -q -p no:cacheprovider $(CORE_TESTS)
 
+# Every optional extra installed by itself (the list: .ci/extras.py --list), each in a
+# fresh venv sharing nothing but pip's cache and one built wheel of shtools.
+EXTRAS     ?= $(shell $(PYTHON) .ci/extras.py --list)
+EXTRA_VENV := .venv-extra
+
+test-extras: ## Each extra alone in a fresh venv: the modules it promises import and run
+	rm -rf $(EXTRA_VENV) build/extras-wheel
+	$(PYTHON) -m pip wheel --quiet --no-deps --wheel-dir build/extras-wheel .
+	@set -e; wheel=$$(ls $(CURDIR)/build/extras-wheel/shtools-*.whl); \
+	for extra in $(EXTRAS); do \
+	  start=$$(date +%s); \
+	  rm -rf $(EXTRA_VENV) && $(PYTHON) -m venv $(EXTRA_VENV); \
+	  $(EXTRA_VENV)/bin/python -m pip install --quiet "$$wheel[$$extra]"; \
+	  (cd $(EXTRA_VENV) && OPENBLAS_NUM_THREADS=1 bin/python -P $(CURDIR)/.ci/extras.py $$extra); \
+	  echo "  $$extra: $$(( $$(date +%s) - start )) s"; \
+	done
+	rm -rf $(EXTRA_VENV) build/extras-wheel
+
 bench: $(STAMP) ## Run every benchmarks/bench_*.py and print their tables (QUICK=1: short)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick)
 
@@ -69,5 +87,5 @@ lint: $(STAMP) ## ruff check
 	$(VENV)/bin/ruff check shtools tests benchmarks
 
 clean: ## Remove the venv, outputs and caches
-	rm -rf $(VENV) $(CORE_VENV) $(OUT) .pytest_cache build *.egg-info
+	rm -rf $(VENV) $(CORE_VENV) $(EXTRA_VENV) $(OUT) .pytest_cache build *.egg-info
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

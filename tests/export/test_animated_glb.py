@@ -55,7 +55,7 @@ def bake_file(tmp_path_factory):
     for t in range(T):
         rot = _rotation_y(0.4 * t)
         bv = np.asarray(ball.mesh.vertices) @ rot.T + [0.2 * t, 0.5, 0.1 * t]
-        fv = np.asarray(flag.mesh.vertices) + [0.0, 1.0, -0.5]
+        fv = np.asarray(flag.mesh.vertices) + np.array([0.0, 1.0, -0.5])
         fv[:, 1] += 0.05 * np.sin(3.0 * fv[:, 0] + t)  # a wave: no rigid motion fits it
         verts.append(np.concatenate([plane.mesh.vertices, bv, fv, post.mesh.vertices]))
         normals.append(np.concatenate([plane.normals, ball.normals @ rot.T, flag.normals,
