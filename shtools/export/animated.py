@@ -101,6 +101,27 @@ def rigid_motion(points: np.ndarray):
     return centroids, quats
 
 
+def colour_change(display: np.ndarray, base: np.ndarray, base_srgb: np.ndarray):
+    """A frame's colour change from the first frame, and the vertices it moves.
+
+    Parameters
+    ----------
+    display : ndarray, shape (V, 3)
+        The frame's display colours, linear [0, 1].
+    base, base_srgb : ndarray, shape (V, 3)
+        The first frame's (as stored, float32) and their sRGB encoding.
+
+    Returns
+    -------
+    delta : ndarray, shape (V, 3)
+    keep : ndarray of bool, shape (V,)
+        Changed by at least :data:`KEEP_STEP` 8-bit steps, linear or sRGB-encoded.
+    """
+    delta = display - base
+    moved = np.maximum(np.abs(delta), np.abs(srgb_encode(display) - base_srgb))
+    return delta, moved.max(axis=1) * 255.0 >= KEEP_STEP
+
+
 class _Targets:
     """The morph-target accessors of one attribute of one object, frame by frame."""
 
@@ -228,9 +249,7 @@ def write_animated_glb(path: str | os.PathLike, bake: Bake, positions: list[int]
                 base = display.astype(np.float32)
                 base_srgb = srgb_encode(base)
                 continue
-            delta = display - base
-            moved = np.maximum(np.abs(delta), np.abs(srgb_encode(display) - base_srgb))
-            keep = moved.max(axis=1) * 255.0 >= KEEP_STEP
+            delta, keep = colour_change(display, base, base_srgb)
             for obj in objects:
                 rows = slice(obj["lo"], obj["hi"])
                 obj["colour"].add_colour(delta[rows], keep[rows])

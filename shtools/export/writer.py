@@ -204,16 +204,19 @@ def export_bake(
     summary = {"output": os.fspath(output), "format": suffix[1:], "frames": frames,
                "quantity": quantity}
     if rig is not None:
-        if suffix != ".glb" or len(positions) != 1:
-            raise InputError("--rig writes one .glb of one frame (--frame F): the skin and "
-                             "clips animate it, the colours are that frame's", output)
+        if suffix != ".glb" or sequence:
+            raise InputError("--rig writes one .glb (of one --frame, or of a --frames range "
+                             "with the colours animated)", output)
         from shtools.export.rig import write_rig_glb
 
-        info = write_rig_glb(output, bake, positions[0], rig[0], rig[1], quantity=quantity,
-                             scale=scale, curve=view.curve)
+        info = write_rig_glb(output, bake, positions, rig[0], rig[1], quantity=quantity,
+                             scale=scale, curve=view.curve, progress=progress)
         summary.update(info)
+        summary["files"] = [os.fspath(output)]
+        colours = (f"colours of frame {frames[0]}" if len(frames) == 1
+                   else f"colours of {len(frames)} frames as morph targets (animation 'bake')")
         summary["detail"] = (f"'{rig[0]}' with its skin and {len(info['animations'])} "
-                             f"clip(s), colours of frame {frames[0]}")
+                             f"clip(s), {colours}")
     elif suffix == ".glb" and len(positions) > 1 and not sequence:
         from shtools.export.animated import write_animated_glb
 

@@ -1,9 +1,10 @@
 """The animated GLB of a frame range: decoded frame by frame against the single-frame exports.
 
 The file is read back with a decoder written here from the glTF 2.0 text alone
-(accessors with byte strides, normalised integers and sparse substitution;
-morph targets as ``base + sum(w_i * target_i)``; STEP samplers; node TRS), so
-the comparison does not go through the exporter's own code.
+(the ``glb`` fixture of ``conftest.py``: accessors with byte strides,
+normalised integers and sparse substitution; morph targets as
+``base + sum(w_i * target_i)``; STEP samplers; node TRS), so the comparison
+does not go through the exporter's own code.
 """
 
 from __future__ import annotations
@@ -21,9 +22,6 @@ from shtools.scene.primitives import make_primitive
 
 FRAMES = [5, 6, 7, 8, 9]
 FPS = 10.0
-_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
-               5125: np.uint32, 5126: np.float32}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 
 
 def _rotation_y(angle: float) -> np.ndarray:
@@ -88,78 +86,9 @@ def _export(run_cli, bake_file, out, *args):
     return json.loads(stdout)
 
 
-def _read(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
-    """An accessor as float64 rows (normalised integers decoded, sparse applied)."""
-    acc = gltf.accessors[index]
-    blob = gltf.binary_blob()
-    width = _WIDTH[acc.type]
-    dtype = np.dtype(_COMPONENTS[acc.componentType])
-
-    def rows(view_index, offset, count, dt, w):
-        view = gltf.bufferViews[view_index]
-        stride = view.byteStride or dt.itemsize * w
-        start = view.byteOffset + (offset or 0)
-        assert start + stride * (count - 1) + dt.itemsize * w <= view.byteOffset + view.byteLength
-        assert view.byteOffset + view.byteLength <= len(blob)
-        return np.ndarray((count, w), dtype=dt, buffer=blob, offset=start,
-                          strides=(stride, dt.itemsize))
-
-    if acc.bufferView is None:
-        data = np.zeros((acc.count, width))
-    else:
-        data = rows(acc.bufferView, acc.byteOffset, acc.count, dtype, width).astype(np.float64)
-    if acc.sparse is not None:
-        sp = acc.sparse
-        idx = rows(sp.indices.bufferView, sp.indices.byteOffset, sp.count,
-                   np.dtype(_COMPONENTS[sp.indices.componentType]), 1)[:, 0]
-        assert np.all(np.diff(idx.astype(np.int64)) > 0)  # the spec: strictly increasing
-        data[idx] = rows(sp.values.bufferView, sp.values.byteOffset, sp.count, dtype,
-                         width).astype(np.float64)
-    if acc.normalized:  # glTF 2.0, "Animations": c / (2^(b-1) - 1), clamped at -1
-        data = np.maximum(data / np.iinfo(dtype).max, -1.0)
-    return data
-
-
-def _step(gltf, sampler, time: float) -> np.ndarray:
-    """A STEP sampler's output at ``time`` (the last key at or before it)."""
-    assert sampler.interpolation == "STEP"
-    keys = _read(gltf, sampler.input)[:, 0]
-    out = _read(gltf, sampler.output).reshape(len(keys), -1)
-    return out[np.searchsorted(keys, time + 1e-6, side="right") - 1]
-
-
-def _quat_matrix(q) -> np.ndarray:
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-def _frame(gltf, node_index: int, time: float):
-    """World positions and linear colours of one node's mesh at ``time``."""
-    node = gltf.nodes[node_index]
-    prim = gltf.meshes[node.mesh].primitives[0]
-    channels = {c.target.path: gltf.animations[0].samplers[c.sampler]
-                for c in (gltf.animations[0].channels if gltf.animations else [])
-                if c.target.node == node_index}
-    pos, col = _read(gltf, prim.attributes.POSITION), _read(gltf, prim.attributes.COLOR_0)
-    if "weights" in channels:
-        weights = _step(gltf, channels["weights"], time)
-        assert len(weights) == len(prim.targets)
-        for w, target in zip(weights, prim.targets, strict=True):
-            col = col + w * _read(gltf, target["COLOR_0"])
-            if "POSITION" in target:
-                pos = pos + w * _read(gltf, target["POSITION"])
-    rot = _quat_matrix(_step(gltf, channels["rotation"], time)) if "rotation" in channels \
-        else _quat_matrix(np.array(node.rotation or [0, 0, 0, 1.0]))
-    move = _step(gltf, channels["translation"], time) if "translation" in channels \
-        else np.array(node.translation or [0.0, 0, 0])
-    return pos @ rot.T + move, col
-
-
 @pytest.mark.parametrize("frames_text", ["5:10", "5:10:2"])
 def test_frames_decode_to_the_single_frame_exports(run_cli, bake_file, tmp_path, khronos,
-                                                   frames_text):
+                                                   glb, frames_text):
     out = tmp_path / "shot.glb"
     summary = _export(run_cli, bake_file, out, "--frames", frames_text)
     assert summary["files"] == [str(out)] and sorted(tmp_path.iterdir()) == [out]
@@ -177,8 +106,8 @@ def test_frames_decode_to_the_single_frame_exports(run_cli, bake_file, tmp_path,
         time = (frame - frames[0]) / FPS
         for o in range(len(names)):
             attrs = ref.meshes[o].primitives[0].attributes
-            want_pos, want_col = _read(ref, attrs.POSITION), _read(ref, attrs.COLOR_0)
-            pos, col = _frame(gltf, o, time)
+            want_pos, want_col = glb.read(ref, attrs.POSITION), glb.read(ref, attrs.COLOR_0)
+            pos, col = glb.frame(gltf, o, time)
             # within one 8-bit step, linear and sRGB-encoded (the drop threshold is a
             # quarter step, int16 rounding 1/65534)
             assert np.abs(col - want_col).max() * 255 <= 1.0, (frame, names[o])
