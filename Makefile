@@ -62,17 +62,19 @@ EXTRAS     ?= $(shell $(PYTHON) .ci/extras.py --list)
 EXTRA_VENV := .venv-extra
 
 test-extras: ## Each extra alone in a fresh venv: the modules it promises import and run
-	rm -rf $(EXTRA_VENV) build/extras-wheel
-	$(PYTHON) -m pip wheel --quiet --no-deps --wheel-dir build/extras-wheel .
+	rm -rf $(EXTRA_VENV) build/extras-wheel build/extras-src && mkdir -p build/extras-src
+	@# the wheel from a copy of the package alone: setuptools' package search would walk the venvs
+	cp -r pyproject.toml README.md shtools build/extras-src/
+	$(PYTHON) -m pip wheel --quiet --no-deps --wheel-dir build/extras-wheel build/extras-src
 	@set -e; wheel=$$(ls $(CURDIR)/build/extras-wheel/shtools-*.whl); \
 	for extra in $(EXTRAS); do \
 	  start=$$(date +%s); \
 	  rm -rf $(EXTRA_VENV) && $(PYTHON) -m venv $(EXTRA_VENV); \
-	  $(EXTRA_VENV)/bin/python -m pip install --quiet "$$wheel[$$extra]"; \
+	  $(EXTRA_VENV)/bin/python -m pip install --quiet --no-compile "$$wheel[$$extra]"; \
 	  (cd $(EXTRA_VENV) && OPENBLAS_NUM_THREADS=1 bin/python -P $(CURDIR)/.ci/extras.py $$extra); \
 	  echo "  $$extra: $$(( $$(date +%s) - start )) s"; \
 	done
-	rm -rf $(EXTRA_VENV) build/extras-wheel
+	rm -rf $(EXTRA_VENV) build/extras-wheel build/extras-src
 
 bench: $(STAMP) ## Run every benchmarks/bench_*.py and print their tables (QUICK=1: short)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick)

@@ -3,7 +3,7 @@
 ``make test-extras`` installs ``shtools[EXTRA]`` by itself into a fresh venv for
 every extra listed here and runs ``python -P .ci/extras.py EXTRA`` there: every
 module the extra's documentation names (``pyproject.toml``'s comments, README)
-must import -- a package with all its submodules -- and a small call of what
+must import -- a package of shtools with all its submodules -- and a small call of what
 the extra is for must run.  ``python .ci/extras.py --list`` prints the extras
 (the Makefile's loop).  A new extra is one more entry in :data:`EXTRAS`.
 """
@@ -50,13 +50,19 @@ def _png() -> None:
 
 
 def _cli_help() -> None:
+    """``shtools --help`` lists every command (each imported to read its help)."""
+    import contextlib
+    import io
+
     from shtools.cli.main import main
 
-    try:
-        code = main(["--help"])
-    except SystemExit as stop:  # click's standalone mode
-        code = stop.code
-    assert code in (0, None), code
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        try:
+            code = main(["--help"])
+        except SystemExit as stop:  # click's standalone mode
+            code = stop.code
+    assert code in (0, None) and "export" in text.getvalue(), (code, text.getvalue())
 
 
 def _plot() -> None:
@@ -77,9 +83,12 @@ def _usd() -> None:
 
 
 def _dask() -> None:
-    import dask.distributed  # noqa: F401  the scheduler client shtools bake --scheduler uses
+    """An in-process Dask client runs a task (the client ``bake --scheduler`` uses)."""
+    from dask.distributed import Client
 
-    import shtools.tasks  # noqa: F401
+    with Client(processes=False, n_workers=1, threads_per_worker=1,
+                dashboard_address=None) as client:
+        assert client.submit(sum, [1, 2]).result() == 3
 
 
 #: extra -> (modules or packages it makes importable, a call that must run)
@@ -101,6 +110,8 @@ def _import_all(name: str, failed: list[str]) -> None:
         module = importlib.import_module(name)
     except Exception as exc:  # report every failure, not only the first
         failed.append(f"{name}: {type(exc).__name__}: {exc}")
+        return
+    if not name.startswith("shtools"):  # another project's package: its own extras
         return
     for sub in pkgutil.iter_modules(getattr(module, "__path__", []), name + "."):
         _import_all(sub.name, failed)

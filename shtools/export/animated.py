@@ -122,7 +122,7 @@ def colour_change(display: np.ndarray, base: np.ndarray, base_srgb: np.ndarray):
     return delta, moved.max(axis=1) * 255.0 >= KEEP_STEP
 
 
-class _Targets:
+class FrameTargets:
     """The morph-target accessors of one attribute of one object, frame by frame."""
 
     def __init__(self, buf: _Buffer, count: int, width: int, *, bounds: bool = False):
@@ -237,9 +237,9 @@ def write_animated_glb(path: str | os.PathLike, bake: Bake, positions: list[int]
                 motion = rigid_motion(pts)
                 deform = motion is None
         objects.append({"lo": lo, "hi": hi, "motion": motion, "deform": bool(deform),
-                        "colour": _Targets(buf, count, 3),
-                        "position": _Targets(buf, count, 3, bounds=True),
-                        "normal": _Targets(buf, count, 3)})
+                        "colour": FrameTargets(buf, count, 3),
+                        "position": FrameTargets(buf, count, 3, bounds=True),
+                        "normal": FrameTargets(buf, count, 3)})
 
     base = None
     with (progress or silent)(positions, desc="glb", unit="frames") as steps:

@@ -130,7 +130,7 @@ def _add_colour_animation(gltf: pygltflib.GLTF2, blob: bytearray, bake: Bake,
                           positions: list[int], model, lo: int, rig_path: Path, *,
                           quantity: str, scale: float, curve: str, progress) -> None:
     """Add the frames' colours as one-hot morph targets and a ``bake`` weights animation."""
-    from shtools.export.animated import _Targets, colour_change
+    from shtools.export.animated import FrameTargets, colour_change
     from shtools.export.gltf import _Buffer
     from shtools.export.quantity import display_linear
     from shtools.export.tonemap import srgb_encode
@@ -147,7 +147,7 @@ def _add_colour_animation(gltf: pygltflib.GLTF2, blob: bytearray, bake: Bake,
                              "be added to them (export one --frame)", rig_path)
     buf = _Buffer()  # appends to the rig's own buffer, views and accessors
     buf.blob, buf.views, buf.accessors = blob, gltf.bufferViews, gltf.accessors
-    tracks = {(m, p): _Targets(buf, count, 3) for m, p, _, count in model.primitives}
+    tracks = {(m, p): FrameTargets(buf, count, 3) for m, p, _, count in model.primitives}
     base = base_srgb = None
     with (progress or silent)(positions, desc="glb", unit="frames") as steps:
         for k, t in enumerate(steps):
