@@ -9,6 +9,7 @@ STAMP  := $(VENV)/.installed-$(shell cksum < pyproject.toml | cut -d' ' -f1)
 OUT    ?= out
 QUICK  ?=
 GLTF_VALIDATOR := 2.0.0-dev.3.10
+THREE_JS       := 0.170.0
 
 .DEFAULT_GOAL := help
 .PHONY: help demo test test-slow test-core test-extras bench lint clean golden examples
@@ -24,9 +25,9 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[all,distributed,test,bench]'
-	@# the Khronos glTF validator (npm) for the export tests, when npm is there
+	@# the Khronos glTF validator and three.js (npm) for the export tests, when npm is there
 	command -v npm >/dev/null && npm install --silent --no-audit --no-fund \
-	  --prefix $(VENV)/node gltf-validator@$(GLTF_VALIDATOR) \
+	  --prefix $(VENV)/node gltf-validator@$(GLTF_VALIDATOR) three@$(THREE_JS) \
 	  || echo "note: npm not found; the glTF export tests use a strict reader only"
 	rm -f $(VENV)/.installed-* && touch $@
 

@@ -12,7 +12,8 @@ three.js (and so model-viewer) and Babylon.js play:
   node's ``weights`` one-hot (1 on frame k's target, 0 elsewhere) with
   ``STEP`` interpolation: at the frame's time a player shows that frame's
   colours and holds them until the next.  Times are ``(frame - first) / fps``
-  seconds, the bake's fps;
+  seconds, the bake's fps, with a closing key one frame step after the last
+  (:func:`key_times`) so that the clip lasts the last frame too;
 * each target is stored whichever way is smaller:
 
   - *dense*: every vertex's change as signed 16-bit normalised integers (glTF
@@ -120,6 +121,29 @@ def colour_change(display: np.ndarray, base: np.ndarray, base_srgb: np.ndarray):
     delta = display - base
     moved = np.maximum(np.abs(delta), np.abs(srgb_encode(display) - base_srgb))
     return delta, moved.max(axis=1) * 255.0 >= KEEP_STEP
+
+
+def key_times(frames: list[int], fps: float) -> np.ndarray:
+    """Key times (seconds, float32) of exported ``frames``: one per frame from 0, plus a
+    closing key one frame step after the last.
+
+    The closing key holds the last frame for its own duration: a player's clip
+    ends at its last key, so without it a looping playback would show the last
+    frame for no time at all.
+    """
+    frames = np.asarray(frames, np.float64)
+    step = frames[-1] - frames[-2] if len(frames) > 1 else 1.0
+    return (np.append(frames, frames[-1] + step) - frames[0]).astype(np.float32) / np.float32(
+        fps)
+
+
+def one_hot_weights(n_frames: int) -> np.ndarray:
+    """Morph weights ``(n_frames + 1, n_frames - 1)`` of :func:`key_times`' keys: frame 0
+    all zeros, frame k one on target k - 1, the closing key as the last frame."""
+    weights = np.zeros((n_frames + 1, n_frames - 1), np.float32)
+    weights[np.arange(1, n_frames), np.arange(n_frames - 1)] = 1.0
+    weights[-1] = weights[-2]
+    return weights
 
 
 class FrameTargets:
@@ -261,8 +285,7 @@ def write_animated_glb(path: str | os.PathLike, bake: Bake, positions: list[int]
 
     nodes, meshes, channels, samplers = [], [], [], []
     n_targets = len(positions) - 1
-    seconds = (np.asarray(frames, np.float64) - frames[0]) / fps
-    times = buf.add(seconds.astype(np.float32), kind="SCALAR", target=None, bounds=True)
+    times = buf.add(key_times(frames, fps), kind="SCALAR", target=None, bounds=True)
     weights = None
     summary = {"objects": list(bake.object_names), "colour_animated": [], "moving": [],
                "deforming": [], "targets": {"dense": 0, "sparse": 0, "shared": 0, "empty": 0}}
@@ -278,9 +301,10 @@ def write_animated_glb(path: str | os.PathLike, bake: Bake, positions: list[int]
             node.translation = [float(x) for x in centres[0]]
             for path_name, values, kind in (("translation", centres, "VEC3"),
                                             ("rotation", quats, "VEC4")):
+                held = np.concatenate([values, values[-1:]])  # the closing key
                 samplers.append(pygltflib.AnimationSampler(
                     input=times, interpolation="STEP",
-                    output=buf.add(values.astype(np.float32), kind=kind, target=None)))
+                    output=buf.add(held.astype(np.float32), kind=kind, target=None)))
                 channels.append(pygltflib.AnimationChannel(
                     sampler=len(samplers) - 1,
                     target=pygltflib.AnimationChannelTarget(node=o, path=path_name)))
@@ -309,10 +333,9 @@ def write_animated_glb(path: str | os.PathLike, bake: Bake, positions: list[int]
             primitive.targets = [pygltflib.Attributes(**entry) for entry in per_frame]
             mesh.weights = [0.0] * n_targets
             mesh.extras = {"targetNames": [f"frame {f}" for f in frames[1:]]}
-            if weights is None:  # one-hot rows, frame 0 all zeros; shared by every mesh
-                one_hot = np.zeros((len(positions), n_targets), np.float32)
-                one_hot[np.arange(1, len(positions)), np.arange(n_targets)] = 1.0
-                weights = buf.add(one_hot.reshape(-1), kind="SCALAR", target=None)
+            if weights is None:  # shared by every mesh
+                weights = buf.add(one_hot_weights(len(positions)).reshape(-1), kind="SCALAR",
+                                  target=None)
             samplers.append(pygltflib.AnimationSampler(input=times, interpolation="STEP",
                                                        output=weights))
             channels.append(pygltflib.AnimationChannel(

@@ -130,7 +130,7 @@ def _add_colour_animation(gltf: pygltflib.GLTF2, blob: bytearray, bake: Bake,
                           positions: list[int], model, lo: int, rig_path: Path, *,
                           quantity: str, scale: float, curve: str, progress) -> None:
     """Add the frames' colours as one-hot morph targets and a ``bake`` weights animation."""
-    from shtools.export.animated import FrameTargets, colour_change
+    from shtools.export.animated import FrameTargets, colour_change, key_times, one_hot_weights
     from shtools.export.gltf import _Buffer
     from shtools.export.quantity import display_linear
     from shtools.export.tonemap import srgb_encode
@@ -166,12 +166,12 @@ def _add_colour_animation(gltf: pygltflib.GLTF2, blob: bytearray, bake: Bake,
         prim.attributes.COLOR_0 = buf.add(base[lo + start:lo + start + count], kind="VEC3",
                                           target=_ARRAY_BUFFER)
         prim.targets = [pygltflib.Attributes(COLOR_0=a) for a in tracks[m, p].resolved()]
-    seconds = np.asarray(bake.times, np.float64)[positions]
-    times = buf.add(seconds.astype(np.float32), kind="SCALAR", target=None, bounds=True)
-    one_hot = np.zeros((len(positions), n_targets), np.float32)
-    one_hot[np.arange(1, len(positions)), np.arange(n_targets)] = 1.0
-    weights = buf.add(one_hot.reshape(-1), kind="SCALAR", target=None)
+    # the keys at the frames' scene times, with the closing key of key_times
     frames = [int(bake.frame_index[t]) for t in positions]
+    fps = float(bake.attrs.get("fps", 24.0))
+    seconds = key_times(frames, fps) + np.float32(bake.times[positions[0]])
+    times = buf.add(seconds, kind="SCALAR", target=None, bounds=True)
+    weights = buf.add(one_hot_weights(len(positions)).reshape(-1), kind="SCALAR", target=None)
     samplers, channels = [], []
     for m in sorted(meshes):
         gltf.meshes[m].weights = [0.0] * n_targets

@@ -227,7 +227,7 @@ def export_bake(
         summary["detail"] = (f"{len(frames)} frames at {bake.attrs.get('fps', 24.0):g} fps, "
                              f"{len(info['objects'])} object(s), "
                              f"{len(info['colour_animated'])} with animated colours, "
-                             f"{len(info['moving'])} moving, {info['bytes'] / 1e6:.1f} MB")
+                             f"{len(info['moving'])} moving, {_size(info['bytes'])}")
     elif suffix in (".ply", ".glb"):
         paths = output_files(bake, output, frame=frame, frames_text=frames_text,
                              sequence=sequence)
@@ -289,6 +289,10 @@ def export_bake(
             save_gif(images, output, rate)
             summary["detail"] = f"{len(positions)} frames at {rate:g} fps"
     return summary
+
+
+def _size(n_bytes: int) -> str:
+    return f"{n_bytes / 1e6:.1f} MB" if n_bytes >= 100_000 else f"{n_bytes / 1e3:.0f} kB"
 
 
 def _write_mesh_frame(path, suffix, bake: Bake, t: int, quantity: str, scale: float,

@@ -16,6 +16,7 @@ _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
                5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 VALIDATOR = REPO / ".venv" / "node" / "node_modules" / "gltf-validator"
+THREE = REPO / ".venv" / "node" / "node_modules" / "three"
 
 
 @pytest.fixture
@@ -41,6 +42,31 @@ def khronos():
         return json.loads(proc.stdout)
 
     return validate
+
+
+@pytest.fixture
+def threejs():
+    """``threejs(path, times) -> frames``: what three.js shows of a GLB at ``times``.
+
+    three.js's GLTFLoader and AnimationMixer (npm package ``three``, installed by
+    ``make test`` into ``.venv/node``) run in node (``threejs_frames.mjs``); each
+    frame maps a mesh name to its ``color`` and world ``position`` arrays.
+    """
+    node = shutil.which("node")
+    if node is None or not THREE.is_dir():
+        pytest.skip("three.js not installed (make test installs it with npm)")
+    script = Path(__file__).with_name("threejs_frames.mjs")
+
+    def frames(path: Path, times) -> list[dict]:
+        proc = subprocess.run([node, str(script), str(THREE), str(path),
+                               *(f"{t:.9g}" for t in times)],
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        return [{"time": f["time"], "meshes": {
+            name: {k: np.asarray(v) for k, v in m.items()} for name, m in f["meshes"].items()}}
+            for f in json.loads(proc.stdout)]
+
+    return frames
 
 
 # ------------------------------------------------------------------ a glTF decoder

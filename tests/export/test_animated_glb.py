@@ -119,6 +119,29 @@ def test_frames_decode_to_the_single_frame_exports(run_cli, bake_file, tmp_path,
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
 
 
+def test_three_js_plays_the_frames_of_the_single_frame_exports(run_cli, bake_file, tmp_path,
+                                                              glb, threejs):
+    """three.js's own loader and animation mixer, at each frame's time, show the colours
+    and positions of ``--frame F`` (three.js r170, as the Makefile pins it)."""
+    out = tmp_path / "shot.glb"
+    _export(run_cli, bake_file, out, "--frames", "5:10")
+    # half-way through each frame's interval (STEP holds a frame until the next key;
+    # a key's own time, stored as float32, may round just past the double asked for)
+    shown = threejs(out, [(f - FRAMES[0] + 0.5) / FPS for f in FRAMES])
+    for frame, view in zip(FRAMES, shown, strict=True):
+        single = tmp_path / f"single{frame}.glb"
+        _export(run_cli, bake_file, single, "--frame", frame)
+        ref = pygltflib.GLTF2().load(str(single))
+        for mesh in ref.meshes:
+            attrs = mesh.primitives[0].attributes
+            got = view["meshes"][mesh.name]
+            # one 8-bit step, as the decoder's test
+            assert np.abs(got["color"] - glb.read(ref, attrs.COLOR_0)).max() * 255 <= 1.0, (
+                frame, mesh.name)
+            np.testing.assert_allclose(got["position"], glb.read(ref, attrs.POSITION),
+                                       atol=2e-5, err_msg=f"{frame} {mesh.name}")
+
+
 def test_targets_are_sparse_shared_or_dense_as_their_content_asks(run_cli, bake_file,
                                                                   tmp_path):
     out = tmp_path / "shot.glb"
