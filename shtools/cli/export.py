@@ -33,8 +33,9 @@ MAX_PIXELS = 8192 * 8192
 @click.option("--target", metavar="OBJECT", default=None,
               help="Frame this receiver object in a .png/.gif preview.")
 @click.option("--rig", metavar="OBJECT=RIG.glb", default=None,
-              help="With .glb and --frame: write skinned OBJECT as its source glTF with skin "
-                   "and clips kept and this frame's baked colours.")
+              help="With .glb: write skinned OBJECT as its source glTF with skin and clips "
+                   "kept and the baked colours of --frame (static) or of --frames (morph "
+                   "targets in an added 'bake' animation).")
 @click.option("--distance", type=option_type("distance"), default=None,
               help="Camera distance from the framed centre, scene units (default: fitted).")
 @click.option("--exposure", type=option_type("exposure"), default=0.0, show_default=True,
