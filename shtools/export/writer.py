@@ -175,8 +175,9 @@ def export_bake(
     target : str, optional
         Frame this receiver object with the preview camera (``.png``/``.gif``).
     rig : (object name, glTF path), optional
-        ``.glb`` of one frame: write that skinned object's source glTF with
-        its skin and clips and this frame's colours (:mod:`shtools.export.rig`).
+        ``.glb``: write that skinned object's source glTF with its skin and
+        clips and the colours of the frame, or of the range as morph targets
+        (:mod:`shtools.export.rig`).
     sequence : bool
         ``.glb`` of a frame range: a numbered sequence of single-frame files
         instead of one animated file.
