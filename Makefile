@@ -9,9 +9,10 @@ STAMP  := $(VENV)/.installed-$(shell cksum < pyproject.toml | cut -d' ' -f1)
 OUT    ?= out
 QUICK  ?=
 GLTF_VALIDATOR := 2.0.0-dev.3.10
+THREE_JS       := 0.170.0
 
 .DEFAULT_GOAL := help
-.PHONY: help demo test test-slow test-core bench lint clean golden examples
+.PHONY: help demo test test-slow test-core test-extras bench lint clean golden examples
 
 help: ## Show this help
 	@echo "shtools make targets (a fresh clone needs only $(PYTHON) >= 3.11 and make):"
@@ -24,9 +25,9 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[all,distributed,test,bench]'
-	@# the Khronos glTF validator (npm) for the export tests, when npm is there
+	@# the Khronos glTF validator and three.js (npm) for the export tests, when npm is there
 	command -v npm >/dev/null && npm install --silent --no-audit --no-fund \
-	  --prefix $(VENV)/node gltf-validator@$(GLTF_VALIDATOR) \
+	  --prefix $(VENV)/node gltf-validator@$(GLTF_VALIDATOR) three@$(THREE_JS) \
 	  || echo "note: npm not found; the glTF export tests use a strict reader only"
 	rm -f $(VENV)/.installed-* && touch $@
 
@@ -56,6 +57,26 @@ test-core: ## `pip install .` (numpy + h5py only) in a fresh venv; the runtime's
 	@# -P: import the installed package, not the source tree
 	OPENBLAS_NUM_THREADS=1 $(CORE_VENV)/bin/python -P -m pytest -q -p no:cacheprovider $(CORE_TESTS)
 
+# Every optional extra installed by itself (the list: .ci/extras.py --list), each in a
+# fresh venv sharing nothing but pip's cache and one built wheel of shtools.
+EXTRAS     ?= $(shell $(PYTHON) .ci/extras.py --list)
+EXTRA_VENV := .venv-extra
+
+test-extras: ## Each extra alone in a fresh venv: the modules it promises import and run
+	rm -rf $(EXTRA_VENV) build/extras-wheel build/extras-src && mkdir -p build/extras-src
+	@# the wheel from a copy of the package alone: setuptools' package search would walk the venvs
+	cp -r pyproject.toml README.md shtools build/extras-src/
+	$(PYTHON) -m pip wheel --quiet --no-deps --wheel-dir build/extras-wheel build/extras-src
+	@set -e; wheel=$$(ls $(CURDIR)/build/extras-wheel/shtools-*.whl); \
+	for extra in $(EXTRAS); do \
+	  start=$$(date +%s); \
+	  rm -rf $(EXTRA_VENV) && $(PYTHON) -m venv $(EXTRA_VENV); \
+	  $(EXTRA_VENV)/bin/python -m pip install --quiet --no-compile "$$wheel[$$extra]"; \
+	  (cd $(EXTRA_VENV) && OPENBLAS_NUM_THREADS=1 bin/python -P $(CURDIR)/.ci/extras.py $$extra); \
+	  echo "  $$extra: $$(( $$(date +%s) - start )) s"; \
+	done
+	rm -rf $(EXTRA_VENV) build/extras-wheel build/extras-src
+
 bench: $(STAMP) ## Run every benchmarks/bench_*.py, print their tables, write benchmarks/RESULTS.md (QUICK=1: short)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick)
 
@@ -69,5 +90,5 @@ lint: $(STAMP) ## ruff check
 	$(VENV)/bin/ruff check shtools tests benchmarks
 
 clean: ## Remove the venv, outputs and caches
-	rm -rf $(VENV) $(CORE_VENV) $(OUT) .pytest_cache build *.egg-info
+	rm -rf $(VENV) $(CORE_VENV) $(EXTRA_VENV) $(OUT) .pytest_cache build *.egg-info
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

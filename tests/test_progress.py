@@ -85,3 +85,33 @@ def test_short_stages_stay_silent_at_the_default_interval(tmp_path):
     lines = _run(["bake", "scene.toml", "-o", "b.h5", "--frames", "0:1", "--processes", 1],
                  tmp_path, interval="10")
     assert not any(LINE.match(line) for line in lines), lines
+
+
+def test_library_stages_run_without_tqdm():
+    """`pip install 'shtools[geometry]'` has no tqdm (the cli extra's): a sphere fit with
+    the library's default progress runs in a process where importing tqdm fails."""
+    code = (
+        "import sys\n"
+        "sys.modules['tqdm'] = None  # import tqdm -> ImportError, as when not installed\n"
+        "import trimesh\n"
+        "from shtools.geometry.sphere_fit import fit_spheres\n"
+        "fit = fit_spheres(trimesh.creation.box(extents=[1, .5, .5]), 2, max_iterations=2)\n"
+        "assert 'tqdm' not in sys.modules or sys.modules['tqdm'] is None\n"
+        "print(len(fit.radii))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, env=dict(os.environ, OPENBLAS_NUM_THREADS="1"))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["2"]
+
+
+def test_silent_progress_counts_like_tqdm():
+    from shtools.progress import silent
+
+    with silent(range(3), desc="x") as bar:
+        assert list(bar) == [0, 1, 2] and bar.n == 3 and bar.total == 3
+    bar = silent(total=5)
+    bar.update(2)
+    bar.set_postfix(E=1.0)
+    bar.update(min(4, bar.total) - bar.n)  # the sphere fit's idiom
+    assert bar.n == 4
+    bar.close()

@@ -21,7 +21,11 @@ MAX_PIXELS = 8192 * 8192
               help="Scene frame number to export (default the bake's first).")
 @click.option("--frames", "frames_text", metavar="A:B[:S]",
               help="Frame range, half-open with step S: a contact sheet (.png), the frames of "
-                   "a .gif/USD/.exr, or a numbered .glb/.ply sequence NAME.<frame>.glb.")
+                   "a .gif/USD/.exr, one animated .glb, or a numbered .ply sequence "
+                   "NAME.<frame>.ply.")
+@click.option("--sequence", is_flag=True,
+              help="With .glb and --frames: one file per frame, NAME.<frame>.glb, instead "
+                   "of one animated file.")
 @click.option("--quantity", type=click.Choice(["radiance", "irradiance", "visibility"]),
               default="radiance", show_default=True,
               help="Per-vertex value exported, before albedo (visibility: cosine-weighted, "
@@ -29,8 +33,9 @@ MAX_PIXELS = 8192 * 8192
 @click.option("--target", metavar="OBJECT", default=None,
               help="Frame this receiver object in a .png/.gif preview.")
 @click.option("--rig", metavar="OBJECT=RIG.glb", default=None,
-              help="With .glb and --frame: write skinned OBJECT as its source glTF with skin "
-                   "and clips kept and this frame's baked colours.")
+              help="With .glb: write skinned OBJECT as its source glTF with skin and clips "
+                   "kept and the baked colours of --frame (static) or of --frames (morph "
+                   "targets in an added 'bake' animation).")
 @click.option("--distance", type=option_type("distance"), default=None,
               help="Camera distance from the framed centre, scene units (default: fitted).")
 @click.option("--exposure", type=option_type("exposure"), default=0.0, show_default=True,
@@ -52,17 +57,17 @@ MAX_PIXELS = 8192 * 8192
 @click.option("--fps", type=option_type("fps"), default=None,
               help="GIF frame rate (default the bake's).")
 @json_option
-def export(baked, output, frame, frames_text, quantity, target, rig, distance, exposure,
+def export(baked, output, frame, frames_text, sequence, quantity, target, rig, distance, exposure,
            fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, as_json):
-    """Export a bake: PLY/GLB frames (one named mesh per object), a time-sampled USD
-    stage, a vertex animation texture (.exr + .glb), PNG previews, a contact
-    sheet or an animated GIF.
+    """Export a bake: a GLB (one named mesh per object; a frame range plays as one
+    animated file), PLY frames, a time-sampled USD stage, a vertex animation
+    texture (.exr + .glb), PNG previews, a contact sheet or an animated GIF.
     """
     from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.bake import read_bake
     from shtools.errors import InputError
     from shtools.export.png import View
-    from shtools.export.writer import FORMATS, export_bake
+    from shtools.export.writer import FORMATS, export_bake, output_files
 
     if rig is not None:
         name, sep, rig_path = rig.partition("=")
@@ -79,11 +84,15 @@ def export(baked, output, frame, frames_text, quantity, target, rig, distance, e
                          f"({size[0] * size[1] * 16 / 2**30:.1f} GiB of raster buffers), above "
                          f"the limit of {MAX_PIXELS:,}; use a smaller image", output)
     bake_asset = read_bake(baked)
+    inputs = [baked, rig[1] if rig else None]
+    for path in output_files(bake_asset, output, frame=frame, frames_text=frames_text,
+                             sequence=sequence, rig=rig):
+        guard_outputs({"-o": path}, inputs)
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
                 auto_exposure=not fixed_exposure, curve=curve, distance=distance)
     summary = export_bake(bake_asset, output, frame=frame, frames_text=frames_text, view=view,
                           size=size, columns=columns, fps=fps, quantity=quantity,
-                          target=target, rig=rig, progress=progress)
+                          target=target, rig=rig, sequence=sequence, progress=progress)
     files = summary.get("files", [output])
     written = files[0] if len(files) == 1 else f"{len(files)} files"
     report(summary, as_json, f"wrote {written} ({summary['detail']})")

@@ -32,6 +32,10 @@ from shtools.data_formats import atomic_path
 _FLOAT, _UINT32 = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 UNLIT = "KHR_materials_unlit"
+#: glTF accessor component types of the NumPy dtypes the exports write
+COMPONENT_TYPES = {np.dtype(np.int16): 5122, np.dtype(np.uint16): 5123,
+                   np.dtype(np.uint32): _UINT32, np.dtype(np.float32): _FLOAT}
+_KINDS = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
 
 
 @dataclass
@@ -72,20 +76,67 @@ class _Buffer:
         self.views: list = []
         self.accessors: list = []
 
-    def add(self, arr: np.ndarray, *, kind: str, target: int, bounds: bool = False) -> int:
-        data = np.ascontiguousarray(arr).tobytes()
+    def view(self, data: bytes, target: int | None = None, stride: int | None = None) -> int:
+        """Append ``data`` as a buffer view (4-byte aligned); returns its index."""
         self.views.append(pygltflib.BufferView(buffer=0, byteOffset=len(self.blob),
-                                               byteLength=len(data), target=target))
-        self.blob += data + b"\0" * (-len(data) % 4)  # 4-byte alignment
-        comp = _UINT32 if arr.dtype == np.uint32 else _FLOAT
-        acc = pygltflib.Accessor(bufferView=len(self.views) - 1, componentType=comp,
-                                 count=len(arr), type=kind)
+                                               byteLength=len(data), target=target,
+                                               byteStride=stride))
+        self.blob += data + b"\0" * (-len(data) % 4)
+        return len(self.views) - 1
+
+    def add(self, arr: np.ndarray, *, kind: str, target: int | None, bounds: bool = False,
+            normalized: bool = False) -> int:
+        """Append ``arr`` (rows = elements) as a tightly packed accessor; returns its index.
+
+        Rows of 2-byte components whose size is not a multiple of 4 are padded
+        to the next one (a byte stride): glTF aligns every vertex attribute
+        element to 4 bytes.
+        """
+        arr = np.ascontiguousarray(arr)
+        flat = arr.reshape(len(arr), -1)
+        stride = None
+        if target == _ARRAY_BUFFER and flat.shape[1] * arr.itemsize % 4:
+            width = -(-flat.shape[1] * arr.itemsize // 4) * 4 // arr.itemsize
+            padded = np.zeros((len(flat), width), arr.dtype)
+            padded[:, :flat.shape[1]] = flat
+            flat, stride = padded, width * arr.itemsize
+        comp = COMPONENT_TYPES[arr.dtype]
+        acc = pygltflib.Accessor(bufferView=self.view(flat.tobytes(), target, stride),
+                                 componentType=comp, count=len(arr), type=kind,
+                                 normalized=normalized)
         if bounds and len(arr):
-            flat = arr.reshape(len(arr), -1)
-            lo, hi = flat.min(axis=0), flat.max(axis=0)
-            cast = int if comp == _UINT32 else float
-            acc.min = [cast(x) for x in lo]
-            acc.max = [cast(x) for x in hi]
+            values = arr.reshape(len(arr), -1)
+            cast = float if comp == _FLOAT else int
+            acc.min = [cast(x) for x in values.min(axis=0)]
+            acc.max = [cast(x) for x in values.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+    def add_sparse(self, count: int, indices: np.ndarray, values: np.ndarray, *,
+                   bounds: bool = False) -> int:
+        """A float32 accessor of ``count`` rows, zero except ``values`` at ``indices``.
+
+        No ``indices`` (an empty array): an accessor without data, all zeros.
+        ``values`` has shape ``(n, C)``; ``indices`` (n,) strictly increasing.
+        """
+        values = np.ascontiguousarray(values, dtype=np.float32)
+        # no byteOffset either: it needs a bufferView
+        acc = pygltflib.Accessor(componentType=_FLOAT, count=count, byteOffset=None,
+                                 type=_KINDS[values.shape[1]])
+        if len(indices):
+            index_type = np.uint16 if count <= 65535 else np.uint32
+            acc.sparse = pygltflib.Sparse(
+                count=len(indices),
+                indices=pygltflib.AccessorSparseIndices(
+                    bufferView=self.view(np.asarray(indices, index_type).tobytes()),
+                    componentType=COMPONENT_TYPES[np.dtype(index_type)]),
+                values=pygltflib.AccessorSparseValues(bufferView=self.view(values.tobytes())))
+        if bounds:
+            lo = values.min(axis=0) if len(indices) else np.zeros(values.shape[1])
+            hi = values.max(axis=0) if len(indices) else np.zeros(values.shape[1])
+            if len(indices) < count:  # the rows not listed are zeros
+                lo, hi = np.minimum(lo, 0.0), np.maximum(hi, 0.0)
+            acc.min, acc.max = [float(x) for x in lo], [float(x) for x in hi]
         self.accessors.append(acc)
         return len(self.accessors) - 1
 
@@ -119,6 +170,12 @@ def write_glb_objects(path: str | os.PathLike, objects: list[GlbObject],
         meshes.append(pygltflib.Mesh(name=obj.name, primitives=[pygltflib.Primitive(
             attributes=attrs, indices=indices, material=0)]))
         nodes.append(pygltflib.Node(mesh=k, name=obj.name))
+    save_glb(path, buf, nodes, meshes, extras)
+
+
+def save_glb(path: str | os.PathLike, buf: _Buffer, nodes: list, meshes: list,
+             extras: dict | None = None, animations: list | None = None) -> None:
+    """Assemble one scene of ``nodes`` (all roots) with the unlit material; write atomically."""
     gltf = pygltflib.GLTF2(
         asset=pygltflib.Asset(generator="shtools export", version="2.0", extras=extras or {}),
         scene=0,
@@ -131,6 +188,8 @@ def write_glb_objects(path: str | os.PathLike, objects: list[GlbObject],
         bufferViews=buf.views,
         buffers=[pygltflib.Buffer(byteLength=len(buf.blob))],
     )
+    if animations:
+        gltf.animations = animations
     gltf.set_binary_blob(bytes(buf.blob))
     with atomic_path(path) as tmp:
         gltf.save_binary(str(tmp))

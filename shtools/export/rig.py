@@ -10,12 +10,19 @@ and adds to each skinned triangle primitive
   ``visibility`` the rig's own textures stay the albedo;
 * ``_RADIANCE`` / ``_IRRADIANCE`` / ``_VISIBILITY``: the raw value of frame F.
 
-The colours are **static** (one frame's): glTF animates the skin and the node
-transforms but has no per-frame vertex colours (see docs/scenes.md).  The rig
-keeps its own placement; the scene's transform and keyframes of the object are
-not applied.  Vertex ``i`` of the baked object is vertex ``i`` of the rig's
-skinned primitives in the order :func:`shtools.geometry.skin.load_skinned_gltf`
-reads them (``SkinnedModel.primitives``), which is how the baker loaded it.
+With one frame the colours are **static** (that frame's).  With a frame range
+(``--frames A:B --rig ...``) they play as in :mod:`shtools.export.animated`:
+``COLOR_0`` is the first frame's, each later frame a morph target of the colour
+change, and an added animation ``bake`` sets the skinned nodes' ``weights``
+one-hot (STEP) at each frame's **scene time** -- with the scene's default skin
+timing (``speed = 1``, ``offset = 0``) that is the clip's own time, so playing
+the clip and ``bake`` together keeps colours and pose in step (three.js plays
+both; a viewer that plays one animation at a time shows one or the other).
+The raw attribute is written for a single frame only.  The rig keeps its own
+placement; the scene's transform and keyframes of the object are not applied.
+Vertex ``i`` of the baked object is vertex ``i`` of the rig's skinned
+primitives in the order :func:`shtools.geometry.skin.load_skinned_gltf` reads
+them (``SkinnedModel.primitives``), which is how the baker loaded it.
 """
 
 from __future__ import annotations
@@ -60,10 +67,13 @@ def _check_rig(bake: Bake, name: str, rig_path: Path):
     return model, o
 
 
-def write_rig_glb(path: str | os.PathLike, bake: Bake, t: int, name: str,
+def write_rig_glb(path: str | os.PathLike, bake: Bake, t: int | list[int], name: str,
                   rig_path: str | os.PathLike, *, quantity: str = "radiance",
-                  scale: float = 1.0, curve: str = "aces") -> dict:
-    """Write the rig of object ``name`` with the colours of asset frame ``t``, atomically.
+                  scale: float = 1.0, curve: str = "aces", progress=None) -> dict:
+    """Write the rig of object ``name`` with the colours of asset frame(s) ``t``, atomically.
+
+    ``t`` is one asset frame position (static colours) or a list of them (the
+    colours animated as morph targets, see the module doc).
 
     Returns
     -------
@@ -75,13 +85,18 @@ def write_rig_glb(path: str | os.PathLike, bake: Bake, t: int, name: str,
     rig_path = Path(rig_path)
     model, o = _check_rig(bake, name, rig_path)
     lo = int(bake.object_offsets[o])
-    display = display_linear(bake, t, quantity, scale, curve).astype(np.float32)
-    raw = raw_values(bake, t, quantity).astype(np.float32)
     gltf = pygltflib.GLTF2().load(str(rig_path))
     if len(gltf.buffers) != 1:
         raise InputError("has several buffers; re-export it as a single-buffer .glb", rig_path)
     blob = bytearray(gltf.binary_blob() or b"")
     blob += b"\0" * (-len(blob) % 4)
+    if isinstance(t, list) and len(t) > 1:
+        _add_colour_animation(gltf, blob, bake, t, model, lo, rig_path, quantity=quantity,
+                              scale=scale, curve=curve, progress=progress)
+        return _save(path, gltf, blob, model)
+    t = t[0] if isinstance(t, list) else t
+    display = display_linear(bake, t, quantity, scale, curve).astype(np.float32)
+    raw = raw_values(bake, t, quantity).astype(np.float32)
 
     def add(arr: np.ndarray) -> int:
         data = np.ascontiguousarray(arr).tobytes()
@@ -99,9 +114,75 @@ def write_rig_glb(path: str | os.PathLike, bake: Bake, t: int, name: str,
         rows = slice(lo + start, lo + start + count)
         prim.attributes.COLOR_0 = add(display[rows])
         setattr(prim.attributes, f"_{quantity.upper()}", add(raw[rows]))
+    return _save(path, gltf, blob, model)
+
+
+def _save(path, gltf: pygltflib.GLTF2, blob: bytearray, model) -> dict:
     gltf.buffers[0].byteLength = len(blob)
     gltf.set_binary_blob(bytes(blob))
     with atomic_path(path) as tmp:
         gltf.save_binary(str(tmp))
     return {"skins": len(gltf.skins or []), "animations": list(model.animations),
             "primitives": len(model.primitives)}
+
+
+def _add_colour_animation(gltf: pygltflib.GLTF2, blob: bytearray, bake: Bake,
+                          positions: list[int], model, lo: int, rig_path: Path, *,
+                          quantity: str, scale: float, curve: str, progress) -> None:
+    """Add the frames' colours as one-hot morph targets and a ``bake`` weights animation."""
+    from shtools.export.animated import FrameTargets, colour_change, key_times, one_hot_weights
+    from shtools.export.gltf import _Buffer
+    from shtools.export.quantity import display_linear
+    from shtools.export.tonemap import srgb_encode
+    from shtools.progress import silent
+
+    meshes = {m for m, _, _, _ in model.primitives}
+    for m in sorted(meshes):
+        prims = gltf.meshes[m].primitives
+        if len(prims) != sum(1 for mm, *_ in model.primitives if mm == m):
+            raise InputError(f"mesh {m} mixes skinned and unskinned primitives; the frame "
+                             "colours cannot animate it (export one --frame)", rig_path)
+        if any(p.targets for p in prims):
+            raise InputError(f"mesh {m} already has morph targets; the frame colours cannot "
+                             "be added to them (export one --frame)", rig_path)
+    buf = _Buffer()  # appends to the rig's own buffer, views and accessors
+    buf.blob, buf.views, buf.accessors = blob, gltf.bufferViews, gltf.accessors
+    tracks = {(m, p): FrameTargets(buf, count, 3) for m, p, _, count in model.primitives}
+    base = base_srgb = None
+    with (progress or silent)(positions, desc="glb", unit="frames") as steps:
+        for k, t in enumerate(steps):
+            display = np.clip(display_linear(bake, t, quantity, scale, curve), 0.0, 1.0)
+            if k == 0:
+                base = display.astype(np.float32)
+                base_srgb = srgb_encode(base)
+                continue
+            delta, keep = colour_change(display, base, base_srgb)
+            for m, p, start, count in model.primitives:
+                rows = slice(lo + start, lo + start + count)
+                tracks[m, p].add_colour(delta[rows], keep[rows])
+    n_targets = len(positions) - 1
+    for m, p, start, count in model.primitives:
+        prim = gltf.meshes[m].primitives[p]
+        prim.attributes.COLOR_0 = buf.add(base[lo + start:lo + start + count], kind="VEC3",
+                                          target=_ARRAY_BUFFER)
+        prim.targets = [pygltflib.Attributes(COLOR_0=a) for a in tracks[m, p].resolved()]
+    # the keys at the frames' scene times, with the closing key of key_times
+    frames = [int(bake.frame_index[t]) for t in positions]
+    fps = float(bake.attrs.get("fps", 24.0))
+    seconds = key_times(frames, fps) + np.float32(bake.times[positions[0]])
+    times = buf.add(seconds, kind="SCALAR", target=None, bounds=True)
+    weights = buf.add(one_hot_weights(len(positions)).reshape(-1), kind="SCALAR", target=None)
+    samplers, channels = [], []
+    for m in sorted(meshes):
+        gltf.meshes[m].weights = [0.0] * n_targets
+        gltf.meshes[m].extras = {**(gltf.meshes[m].extras or {}),
+                                 "targetNames": [f"frame {f}" for f in frames[1:]]}
+        for n, node in enumerate(gltf.nodes):
+            if node.mesh == m:
+                samplers.append(pygltflib.AnimationSampler(input=times, output=weights,
+                                                           interpolation="STEP"))
+                channels.append(pygltflib.AnimationChannel(
+                    sampler=len(samplers) - 1,
+                    target=pygltflib.AnimationChannelTarget(node=n, path="weights")))
+    gltf.animations = [*(gltf.animations or []),
+                       pygltflib.Animation(name="bake", samplers=samplers, channels=channels)]

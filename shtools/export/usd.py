@@ -13,7 +13,14 @@ Layout of the stage (Y up, ``metersPerUnit = 1``: scene units are taken as metre
   colours are linear; :func:`shtools.export.quantity.display_linear`);
 * ``primvars:<quantity>`` (``vertex``): the raw radiance / irradiance
   (``float3[]``) or visibility (``float[]``), before albedo;
-* ``primvars:albedo`` (``vertex``, ``color3f[]``) when the bake has one.
+* ``primvars:albedo`` (``color3f[]``) when the bake has one: ``constant``
+  interpolation (one element) for an object of one albedo -- the usual case,
+  a scene object has one -- ``vertex`` otherwise.
+
+A value uniform over an object is written once as a ``constant`` primvar, in
+general: ``displayColor`` and the raw quantity too when every vertex of the
+object has the same value in every exported frame.  How Blender and usdview
+read the time samples: ``docs/usd.md``.
 
 Time codes are the scene's frame numbers; ``timeCodesPerSecond`` and
 ``framesPerSecond`` are the bake's fps, ``startTimeCode``/``endTimeCode`` the
@@ -131,17 +138,34 @@ def write_usd(
         mesh.CreateNormalsAttr()
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         primvars = UsdGeom.PrimvarsAPI(mesh)
-        color = mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex)
-        raw = primvars.CreatePrimvar(quantity, raw_type, UsdGeom.Tokens.vertex)
-        if bake.albedo is not None:
-            primvars.CreatePrimvar("albedo", Sdf.ValueTypeNames.Color3fArray,
-                                   UsdGeom.Tokens.vertex).Set(
-                Vt.Vec3fArray.FromNumpy(np.asarray(bake.albedo[lo:hi], dtype=np.float32)))
+        # uniform over the object in every frame: one constant element
+        if quantity == "visibility":
+            normals = (bake.normals[lo:hi] if bake.normals.ndim == 2
+                       else bake.normals[positions, lo:hi])
+            lit_uniform = (_uniform(bake.visibility[positions, lo:hi], axis=1)
+                           and _uniform(normals, axis=normals.ndim - 2))
+        else:
+            lit_uniform = _uniform(bake.radiance[positions, lo:hi], axis=1)
+        albedo = None if bake.albedo is None else np.asarray(bake.albedo[lo:hi], np.float32)
+        albedo_uniform = albedo is None or _uniform(albedo, axis=0)
+        raw_mode = UsdGeom.Tokens.constant if lit_uniform else UsdGeom.Tokens.vertex
+        # only radiance's display colour multiplies the albedo
+        color_mode = (UsdGeom.Tokens.constant
+                      if lit_uniform and (quantity != "radiance" or albedo_uniform)
+                      else UsdGeom.Tokens.vertex)
+        color = mesh.CreateDisplayColorPrimvar(color_mode)
+        raw = primvars.CreatePrimvar(quantity, raw_type, raw_mode)
+        if albedo is not None:
+            primvars.CreatePrimvar(
+                "albedo", Sdf.ValueTypeNames.Color3fArray,
+                UsdGeom.Tokens.constant if albedo_uniform else UsdGeom.Tokens.vertex).Set(
+                Vt.Vec3fArray.FromNumpy(albedo[:1] if albedo_uniform else albedo))
         moves = sampled and bake.vertices.ndim == 3 and bool(
             np.any(bake.vertices[positions, lo:hi] != bake.vertices[positions[0], lo:hi]))
         if moves:
             animated.append(mesh.GetPath().pathString)
-        meshes.append((mesh, color, raw, lo, hi, moves))
+        meshes.append((mesh, color, raw, lo, hi, moves, color_mode == UsdGeom.Tokens.constant,
+                       raw_mode == UsdGeom.Tokens.constant))
         if not moves:  # geometry once, as defaults
             _set_geometry(mesh, bake, positions[0], lo, hi, None)
 
@@ -150,10 +174,10 @@ def write_usd(
             time_code = Usd.TimeCode(frame) if sampled else Usd.TimeCode.Default()
             display = display_linear(bake, t, quantity, scale, curve).astype(np.float32)
             values = raw_values(bake, t, quantity).astype(np.float32)
-            for mesh, color, raw, lo, hi, moves in meshes:
-                color.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(display[lo:hi])),
-                          time_code)
-                part = np.ascontiguousarray(values[lo:hi])
+            for mesh, color, raw, lo, hi, moves, color_one, raw_one in meshes:
+                color.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(
+                    display[lo:lo + 1] if color_one else display[lo:hi])), time_code)
+                part = np.ascontiguousarray(values[lo:lo + 1] if raw_one else values[lo:hi])
                 raw.Set((Vt.Vec3fArray if part.ndim == 2 else Vt.FloatArray).FromNumpy(part),
                         time_code)
                 if moves:
@@ -171,6 +195,15 @@ def write_usd(
             if named.exists():
                 named.unlink()
     return {"prims": [m.GetPath().pathString for m, *_ in meshes], "animated": animated}
+
+
+def _uniform(values: np.ndarray, axis: int) -> bool:
+    """True when ``values`` is the same along ``axis`` (and not empty there)."""
+    values = np.asarray(values)
+    if values.shape[axis] == 0:
+        return False
+    first = np.take(values, [0], axis=axis)
+    return bool(np.all(values == first))
 
 
 def _set_geometry(mesh, bake: Bake, t: int, lo: int, hi: int, time_code) -> None:

@@ -70,6 +70,19 @@ def _write_exr(path, image: np.ndarray) -> None:
         f.write(str(path))
 
 
+def _moving(bake: Bake, positions: list[int]) -> bool:
+    return bake.vertices.ndim == 3 and bool(
+        np.any(bake.vertices[positions] != bake.vertices[positions[0]]))
+
+
+def vat_files(path: str | os.PathLike, bake: Bake, positions: list[int]) -> list[Path]:
+    """The files :func:`write_vat` writes: ``NAME.exr``, ``NAME.pos.exr`` if some
+    vertex moves, ``NAME.glb``."""
+    out = Path(path)
+    pos = [out.with_name(out.stem + ".pos.exr")] if _moving(bake, positions) else []
+    return [out, *pos, out.with_suffix(".glb")]
+
+
 def write_vat(
     path: str | os.PathLike,
     bake: Bake,
@@ -97,8 +110,7 @@ def write_vat(
     V, T = bake.n_vertices, len(positions)
     lay = layout(V, T)
     values = np.empty((T, V, 3), dtype=np.float32)
-    moving = bake.vertices.ndim == 3 and bool(
-        np.any(bake.vertices[positions] != bake.vertices[positions[0]]))
+    moving = _moving(bake, positions)
     points = np.empty((T, V, 3), dtype=np.float32) if moving else None
     with (progress or silent)(total=T, desc="vat", unit="frames") as bar:
         for k, t in enumerate(positions):
@@ -107,8 +119,8 @@ def write_vat(
             if moving:
                 points[k] = bake.frame_vertices(t)
             bar.update(1)
-    glb = out.with_suffix(".glb")
-    pos_path = out.with_name(out.stem + ".pos.exr") if moving else None
+    files = vat_files(out, bake, positions)
+    glb, pos_path = files[-1], (files[1] if moving else None)
     extras = {"shtools_vat": {
         **lay, "frames": [int(bake.frame_index[t]) for t in positions],
         "fps": float(bake.attrs.get("fps", 24.0)), "quantity": quantity,

@@ -1,9 +1,10 @@
 """Export a bake asset to the format its output suffix names.
 
-``.ply``/``.glb`` hold one frame each; with a frame range they are written as a
-numbered sequence ``NAME.<frame>.glb`` (four digits, the scene frame number) --
-see :func:`sequence_paths`.  ``.usda``/``.usdc``/``.usd`` hold every exported
-frame in one time-sampled stage.  ``.png`` is one frame or a contact sheet,
+``.glb`` of a frame range is one animated file (:mod:`shtools.export.animated`);
+with ``sequence=True`` (``--sequence``), and always for ``.ply``, a range is
+a numbered sequence ``NAME.<frame>.glb`` of single frames (four digits, the
+scene frame number) -- see :func:`output_files`.  ``.usda``/``.usdc``/``.usd``
+hold every exported frame in one time-sampled stage.  ``.png`` is one frame or a contact sheet,
 ``.gif`` an animation.  ``.exr`` is a vertex animation texture
 (:mod:`shtools.export.vat`).
 """
@@ -96,6 +97,32 @@ def sequence_paths(output: str | os.PathLike, frames: list[int]) -> list[Path]:
     return [out.with_name(f"{out.stem}.{f:04d}{out.suffix}") for f in frames]
 
 
+def output_files(bake: Bake, output: str | os.PathLike, *, frame: int | None = None,
+                 frames_text: str | None = None, sequence: bool = False,
+                 rig: tuple[str, str] | None = None) -> list[Path]:
+    """Every file :func:`export_bake` writes for these arguments, in order.
+
+    One file, except a ``.ply`` range and a ``.glb`` range with ``sequence``
+    (:func:`sequence_paths`) and a ``.exr`` vertex animation texture with its
+    position texture and mesh (:func:`shtools.export.vat.vat_files`).
+
+    Raises
+    ------
+    InputError
+        A bad frame selection (:func:`parse_frame_range`).
+    """
+    out = Path(output)
+    suffix = out.suffix.lower()
+    positions = _positions(bake, suffix, frame, frames_text)
+    if rig is None and (suffix == ".ply" or (suffix == ".glb" and sequence)):
+        return sequence_paths(out, [int(bake.frame_index[t]) for t in positions])
+    if suffix == ".exr":
+        from shtools.export.vat import vat_files
+
+        return vat_files(out, bake, positions)
+    return [out]
+
+
 def mesh_objects(bake: Bake, t: int, quantity: str, scale: float, curve: str, uv1=None):
     """The bake's receiver objects at asset frame ``t`` as :class:`GlbObject` s."""
     from shtools.export.gltf import GlbObject
@@ -127,6 +154,7 @@ def export_bake(
     quantity: str = "radiance",
     target: str | None = None,
     rig: tuple[str, str] | None = None,
+    sequence: bool = False,
     progress=None,
 ) -> dict:
     """Write ``bake`` to ``output`` (format from the suffix); returns a summary dict.
@@ -138,7 +166,7 @@ def export_bake(
         animated formats ``.gif``, USD and ``.exr``).
     frames_text : str, optional
         ``"A:B[:S]"``: a contact sheet (``.png``), the frames of an animated
-        format, or a numbered sequence of ``.glb``/``.ply`` files.
+        format (``.glb`` among them), or a numbered sequence of ``.ply`` files.
     view : View
         Camera, exposure and tone curve.
     quantity : {"radiance", "irradiance", "visibility"}
@@ -147,8 +175,12 @@ def export_bake(
     target : str, optional
         Frame this receiver object with the preview camera (``.png``/``.gif``).
     rig : (object name, glTF path), optional
-        ``.glb`` of one frame: write that skinned object's source glTF with
-        its skin and clips and this frame's colours (:mod:`shtools.export.rig`).
+        ``.glb``: write that skinned object's source glTF with its skin and
+        clips and the colours of the frame, or of the range as morph targets
+        (:mod:`shtools.export.rig`).
+    sequence : bool
+        ``.glb`` of a frame range: a numbered sequence of single-frame files
+        instead of one animated file.
     progress : callable, optional
         Progress factory (:mod:`shtools.progress`) for frame sequences.
     """
@@ -164,24 +196,42 @@ def export_bake(
     check_quantity(bake, quantity)
     if target is not None and suffix not in (".png", ".gif"):
         raise InputError("--target frames the preview camera; it applies to .png and .gif")
+    if sequence and suffix not in (".glb", ".ply"):
+        raise InputError("--sequence writes one .glb per frame; it applies to .glb (a .ply "
+                         "range is always a sequence)", output)
     positions = _positions(bake, suffix, frame, frames_text)
     frames = [int(bake.frame_index[t]) for t in positions]
     scale = display_scale(bake, positions, quantity, view.exposure, view.auto_exposure)
     summary = {"output": os.fspath(output), "format": suffix[1:], "frames": frames,
                "quantity": quantity}
     if rig is not None:
-        if suffix != ".glb" or len(positions) != 1:
-            raise InputError("--rig writes one .glb of one frame (--frame F): the skin and "
-                             "clips animate it, the colours are that frame's", output)
+        if suffix != ".glb" or sequence:
+            raise InputError("--rig writes one .glb (of one --frame, or of a --frames range "
+                             "with the colours animated)", output)
         from shtools.export.rig import write_rig_glb
 
-        info = write_rig_glb(output, bake, positions[0], rig[0], rig[1], quantity=quantity,
-                             scale=scale, curve=view.curve)
+        info = write_rig_glb(output, bake, positions, rig[0], rig[1], quantity=quantity,
+                             scale=scale, curve=view.curve, progress=progress)
         summary.update(info)
+        summary["files"] = [os.fspath(output)]
+        colours = (f"colours of frame {frames[0]}" if len(frames) == 1
+                   else f"colours of {len(frames)} frames as morph targets (animation 'bake')")
         summary["detail"] = (f"'{rig[0]}' with its skin and {len(info['animations'])} "
-                             f"clip(s), colours of frame {frames[0]}")
+                             f"clip(s), {colours}")
+    elif suffix == ".glb" and len(positions) > 1 and not sequence:
+        from shtools.export.animated import write_animated_glb
+
+        info = write_animated_glb(output, bake, positions, quantity=quantity, scale=scale,
+                                  curve=view.curve, progress=progress)
+        summary.update(info)
+        summary["files"] = [os.fspath(output)]
+        summary["detail"] = (f"{len(frames)} frames at {bake.attrs.get('fps', 24.0):g} fps, "
+                             f"{len(info['objects'])} object(s), "
+                             f"{len(info['colour_animated'])} with animated colours, "
+                             f"{len(info['moving'])} moving, {_size(info['bytes'])}")
     elif suffix in (".ply", ".glb"):
-        paths = sequence_paths(output, frames)
+        paths = output_files(bake, output, frame=frame, frames_text=frames_text,
+                             sequence=sequence)
         steps = positions if len(positions) == 1 else (progress or silent)(
             positions, desc=suffix[1:], unit="frames")
         with contextlib.ExitStack() as stack:  # every file appears only if all were written
@@ -240,6 +290,10 @@ def export_bake(
             save_gif(images, output, rate)
             summary["detail"] = f"{len(positions)} frames at {rate:g} fps"
     return summary
+
+
+def _size(n_bytes: int) -> str:
+    return f"{n_bytes / 1e6:.1f} MB" if n_bytes >= 100_000 else f"{n_bytes / 1e3:.0f} kB"
 
 
 def _write_mesh_frame(path, suffix, bake: Bake, t: int, quantity: str, scale: float,

@@ -131,7 +131,8 @@ def _accessor(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
 
 def test_glb_sequence_keeps_objects_and_frames(run_cli, bake_file, tmp_path, khronos):
     out = tmp_path / "shot.glb"
-    summary = _export(run_cli, bake_file, out, "--frames", "5:9:2", "--quantity", "irradiance")
+    summary = _export(run_cli, bake_file, out, "--frames", "5:9:2", "--quantity", "irradiance",
+                      "--sequence")
     files = [tmp_path / "shot.0005.glb", tmp_path / "shot.0007.glb"]
     assert summary["files"] == [str(f) for f in files] and not out.exists()
     bake = read_bake(bake_file)
@@ -258,3 +259,53 @@ def test_export_range_and_target_errors(run_cli, bake_file, tmp_path):
         code, _, stderr = run_cli("export", bake_file, *args)
         assert code == 1 and message in stderr and stderr.count("\n") == 1, stderr
     assert list(tmp_path.glob("x*")) == []
+
+
+def test_usd_writes_uniform_values_once_as_constant_primvars(run_cli, bake_file, tmp_path):
+    """An object of one albedo (every scene object) gets one constant element; a value
+    that varies over the vertices stays per vertex; an object lit the same at every
+    vertex in every frame gets constant colour and radiance too."""
+    from pxr import Usd, UsdGeom
+
+    out = tmp_path / "baked.usda"
+    _export(run_cli, bake_file, out)
+    stage = Usd.Stage.Open(str(out))
+    for path, albedo in (("/World/ground", [0.5] * 3), ("/World/my_ball", [0.9, 0.2, 0.1])):
+        primvars = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(path))
+        pv = primvars.GetPrimvar("albedo")
+        assert pv.GetInterpolation() == "constant"
+        np.testing.assert_allclose(np.asarray(pv.Get()), [albedo], rtol=1e-7)  # float32
+        # the fixture's random radiance varies per vertex
+        assert primvars.GetPrimvar("radiance").GetInterpolation() == "vertex"
+        assert primvars.GetPrimvar("displayColor").GetInterpolation() == "vertex"
+
+    # a second bake: 'flat' lit uniformly in every frame with a two-tone albedo, 'dot'
+    # uniformly lit and of one albedo
+    plane = make_primitive("plane", {"size": [1.0, 1.0], "subdivisions": 2})
+    V = len(plane.mesh.vertices)
+    verts = np.concatenate([plane.mesh.vertices, plane.mesh.vertices + np.array([0, 1.0, 0])])
+    radiance = np.empty((2, 2 * V, 3))
+    radiance[0], radiance[1] = [0.2, 0.3, 0.4], [0.5, 0.5, 0.5]
+    albedo = np.concatenate([np.where(np.arange(V)[:, None] % 2, 0.2, 0.9) * np.ones(3),
+                             np.full((V, 3), 0.7)])
+    path = tmp_path / "uniform.h5"
+    write_bake(path, vertices=verts, normals=np.tile([0.0, 1.0, 0.0], (2 * V, 1)),
+               faces=np.concatenate([plane.mesh.faces, plane.mesh.faces + V]),
+               radiance=radiance, sh_order=2, frame_index=[0, 1], times=[0.0, 1.0],
+               albedo=albedo, object_offsets=[0, V, 2 * V], object_names=["flat", "dot"],
+               fps=1.0)
+    out = tmp_path / "uniform.usda"
+    _export(run_cli, path, out)
+    stage = Usd.Stage.Open(str(out))
+    flat = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/flat"))
+    dot = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/dot"))
+    assert flat.GetPrimvar("albedo").GetInterpolation() == "vertex"
+    assert flat.GetPrimvar("radiance").GetInterpolation() == "constant"
+    assert flat.GetPrimvar("displayColor").GetInterpolation() == "vertex"  # x two albedos
+    for name in ("albedo", "radiance", "displayColor"):
+        assert dot.GetPrimvar(name).GetInterpolation() == "constant", name
+    np.testing.assert_array_equal(np.asarray(dot.GetPrimvar("radiance").Get(1)),
+                                  np.float32([[0.5, 0.5, 0.5]]))
+    # constant colour: ACES of albedo x radiance (fixed exposure), one element per frame
+    np.testing.assert_allclose(np.asarray(dot.GetPrimvar("displayColor").Get(0)),
+                               aces(np.array([[0.2, 0.3, 0.4]]) * 0.7), atol=1e-6)

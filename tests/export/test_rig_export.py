@@ -101,8 +101,43 @@ def test_rig_must_be_the_baked_one(run_cli, tmp_path):
         (("--rig", f"tube={other}"), "hash differs"),
         (("--rig", "nope=x.glb"), "no receiver object 'nope'"),
         (("--rig", "tube"), "is not OBJECT=RIG.glb"),
-        (("--frames", "0:2", "--rig", f"tube={tmp_path / 'tube.glb'}"), "one .glb of one frame"),
+        (("--frames", "0:2", "--sequence", "--rig", f"tube={tmp_path / 'tube.glb'}"),
+         "--rig writes one .glb"),
     ):
         code, _, stderr = run_cli("export", tmp_path / "b.h5", "-o", tmp_path / "x.glb", *args)
         assert code == 1 and message in stderr and stderr.count("\n") == 1, stderr
     assert not (tmp_path / "x.glb").exists()
+
+
+def test_rig_with_a_frame_range_plays_every_frame_colours(run_cli, tmp_path, khronos, glb):
+    """--frames with --rig: the skin and clip kept, each frame's colours decode to that
+    frame's single-frame rig export (one-hot STEP weights at the frames' scene times)."""
+    _rig(tmp_path / "tube.glb")
+    (tmp_path / "scene.toml").write_text(SCENE)
+    assert run_cli("bake", tmp_path / "scene.toml", "-o", tmp_path / "b.h5",
+                   "--processes", 1)[0] == 0
+    rig = f"tube={tmp_path / 'tube.glb'}"
+    out = tmp_path / "anim.glb"
+    code, _, stderr = run_cli("export", tmp_path / "b.h5", "--frames", "0:3", "--rig", rig,
+                              "--fixed-exposure", "-o", out)
+    assert code == 0, stderr
+    got = pygltflib.GLTF2().load(str(out))
+    assert [a.name for a in got.animations] == ["bend", "bake"] and len(got.skins) == 1
+    sampler = got.animations[1].samplers[0]
+    bake = read_bake(tmp_path / "b.h5")
+    prim = got.meshes[0].primitives[0]
+    assert len(prim.targets) == 2
+    for t in range(3):
+        single = tmp_path / f"one{t}.glb"
+        assert run_cli("export", tmp_path / "b.h5", "--frame", t, "--rig", rig,
+                       "--fixed-exposure", "-o", single)[0] == 0
+        ref = pygltflib.GLTF2().load(str(single))
+        want = glb.read(ref, ref.meshes[0].primitives[0].attributes.COLOR_0)
+        weights = glb.step(got, sampler, float(bake.times[t]))
+        colour = glb.read(got, prim.attributes.COLOR_0) + sum(
+            w * glb.read(got, target["COLOR_0"]) for w, target in zip(weights, prim.targets,
+                                                                   strict=True))
+        # one 8-bit step (a quarter for dropped changes, int16 rounding)
+        assert np.abs(colour - want).max() * 255 <= 1.0, t
+    issues = khronos(out)
+    assert issues["numErrors"] == 0, issues["messages"]
