@@ -401,6 +401,8 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
 
     if (lights := light_parameters(scene.lights)) is not None:  # absent: all shexp, as before
         parameters["light_shadows"] = lights
+    if st.deringing != "desaturate":  # absent: the default (relighting shades the same way)
+        parameters["deringing"] = st.deringing
     inputs = {"scene": scene.path, **prepared.inputs}
     return BakeWriter(
         output,
