@@ -412,6 +412,9 @@ class BakeWriter:
             Required when the receivers move.
         visibility : ndarray, shape (V, n*n), optional
             Required when the writer stores visibility.
+
+        ``vertices``, ``normals`` and ``visibility`` may also be another bake's
+        per-frame dataset ``(T, V, k)`` (h5py): its frame ``t`` is copied.
         """
         f = self._file
         if f is None or self._stack is None:
@@ -424,12 +427,31 @@ class BakeWriter:
             raise AssetError(f"frame {int(self.frame_index[t])} produced NaN/inf radiance",
                              self.path)
         f["radiance"][t] = radiance
-        if not self.static:
-            f["vertices"][t] = np.asarray(vertices, dtype=np.float32)
-            f["normals"][t] = np.asarray(normals, dtype=np.float32)
+        per_frame = {"vertices": vertices, "normals": normals} if not self.static else {}
         if self.visibility_size:
-            f["visibility"][t] = np.asarray(visibility, dtype=np.float32)
+            per_frame["visibility"] = visibility
+        for name, values in per_frame.items():
+            if isinstance(values, h5py.Dataset):
+                _copy_chunk(values, f[name], t)
+            else:
+                f[name][t] = np.asarray(values, dtype=np.float32)
         self._written[t] = True
+
+
+def _copy_chunk(source: h5py.Dataset, target: h5py.Dataset, t: int) -> None:
+    """Frame ``t`` of a per-frame dataset of another bake, its stored bytes copied as they
+    are when both store frames alike (one frame a chunk, the same filters): no
+    decompression and compression again, the same values either way."""
+    same = (source.shape == target.shape and source.dtype == target.dtype
+            and source.chunks == target.chunks == (1, *target.shape[1:])
+            and source.compression == target.compression
+            and source.compression_opts == target.compression_opts
+            and source.shuffle == target.shuffle)
+    if same:
+        mask, chunk = source.id.read_direct_chunk((t, 0, 0))
+        target.id.write_direct_chunk((t, 0, 0), chunk, mask)
+    else:
+        target[t] = np.asarray(source[t], dtype=np.float32)
 
 
 def write_bake(

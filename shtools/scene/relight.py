@@ -210,6 +210,8 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         One line naming the file: no stored visibility, a light of another
         SH order, an output that is an input.
     """
+    import h5py
+
     from shtools.data_formats.bake import BakeWriter, read_bake
     from shtools.progress import silent
 
@@ -240,11 +242,13 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         visibility_size=b.visibility.shape[2], times=b.times, frame_index=b.frame_index,
         albedo=b.albedo, object_offsets=b.object_offsets, object_names=b.object_names,
         parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"))
-    with writer as w, (progress or silent)(total=b.n_frames, desc="relight",
-                                           unit="frames") as bar:
+    with (h5py.File(bake, "r") as source, writer as w,
+          (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
         for t, radiance in enumerate(relight_frames(b, env, scene, settings)):
-            w.write_frame(t, radiance, vertices=None if static else b.vertices[t],
-                          normals=None if static else b.normals[t], visibility=b.visibility[t])
+            # geometry and visibility are copied as stored (compressed bytes), not compressed again
+            w.write_frame(t, radiance, vertices=None if static else source["vertices"],
+                          normals=None if static else source["normals"],
+                          visibility=source["visibility"])
             bar.update(1)
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),
