@@ -252,6 +252,21 @@ async function main() {
   $("spheres-row").hidden = !b.spheres;
   state.center = b.center.slice();
   state.distance = 2.4 * b.radius;
+  // the starting view from the address: ?frame=T&quantity=Q&exposure=E&spheres=1&yaw=&pitch=&zoom=&ui=0
+  const opts = new URLSearchParams(location.search);
+  if (opts.has("frame")) state.frame = Math.max(0, Math.min(b.frames.length - 1, +opts.get("frame") || 0));
+  if (b.quantities.includes(opts.get("quantity"))) state.quantity = opts.get("quantity");
+  if (opts.has("exposure")) state.exposure = +opts.get("exposure") || 0;
+  if (opts.has("yaw")) state.yaw = +opts.get("yaw") || 0;
+  if (opts.has("pitch")) state.pitch = +opts.get("pitch") || 0;
+  if (opts.has("zoom")) state.distance /= +opts.get("zoom") || 1;
+  state.spheres = b.spheres && opts.get("spheres") === "1";
+  if (opts.get("ui") === "0") $("panel").hidden = true;
+  $("frame").value = state.frame;
+  $("quantity").value = state.quantity;
+  $("exposure").value = state.exposure;
+  $("exposure-label").textContent = state.exposure.toFixed(2);
+  $("spheres").checked = state.spheres;
 
   vao = gl.createVertexArray();
   gl.bindVertexArray(vao);
