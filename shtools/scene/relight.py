@@ -138,6 +138,14 @@ def scene_lights(scene) -> object:
 def relight_frames(bake, env_sh, scene=None, settings=None):
     """Radiance of every frame of ``bake`` under ``env_sh`` (and ``scene``'s lights).
 
+    Shading is linear in the visibility ``g`` before de-ringing: a vertex whose
+    position, normal and lights do not change over the bake has radiance
+    ``K g`` with a fixed ``K (3, n*n)``.  ``K`` is made once by the baker's own
+    :func:`~shtools.scene.shadows.shade_frame` (without de-ringing) of the unit
+    visibility vectors, so these vertices cost one small product per frame; the
+    others are shaded frame by frame with ``shade_frame`` as the baker does.
+    De-ringing (``settings.deringing``) follows, as in the runtime's ``shade``.
+
     Parameters
     ----------
     bake : shtools.data_formats.bake.Bake
@@ -155,22 +163,81 @@ def relight_frames(bake, env_sh, scene=None, settings=None):
     ndarray, shape (V, 3) float32
         Frame by frame, in the bake's order.
     """
+    from dataclasses import replace
+
     from shtools.runtime import ShadowRuntime
-    from shtools.scene.pose import FrameState, pose_lights
+    from shtools.runtime.shading import desaturate_negative
+    from shtools.scene.pose import pose_lights
     from shtools.scene.shadows import BakeRun, shade_frame
 
     if bake.visibility is None:
         raise InputError("has no stored visibility; rebake it with 'shtools bake "
                          "--store-visibility' to relight it", bake.path)
     settings = settings or relight_settings(bake)
-    with ShadowRuntime(settings) as runtime:
-        run = BakeRun(_RelightSource(env_sh), runtime, "relight")
+    times = [float(t) for t in bake.times]
+    lights = [[] if scene is None else pose_lights(scene, t) for t in times]
+    still = _fixed_rows(bake) if _same_lights(lights) else np.zeros(bake.n_vertices, bool)
+    fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
+    source = _RelightSource(env_sh)
+    # one runtime without de-ringing: it is applied below to each whole frame
+    with ShadowRuntime(replace(settings, deringing="none")) as runtime:
+        run = BakeRun(source, runtime, "relight")
+        K = None
+        if fixed.size:
+            K = _linear_shading(run, _state(bake, 0, fixed, lights[0]), bake.sh_order ** 2)
         for t in range(bake.n_frames):
-            lights = [] if scene is None else pose_lights(scene, float(bake.times[t]))
-            state = FrameState(np.asarray(bake.frame_vertices(t), np.float64),
-                               np.asarray(bake.frame_normals(t), np.float64), [], lights, [],
-                               ["shexp"] * len(lights))
-            yield np.asarray(shade_frame(run, state, bake.visibility[t]), dtype=np.float32)
+            out = np.empty((bake.n_vertices, 3))
+            g = bake.visibility[t]
+            if K is not None:
+                out[fixed] = np.einsum("vcj,vj->vc", K, g[fixed].astype(np.float64))
+            if moving.size:
+                out[moving] = shade_frame(run, _state(bake, t, moving, lights[t]), g[moving])
+            if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
+                # colours without a negative channel are left as they are by it
+                neg = np.flatnonzero(np.minimum(np.minimum(out[:, 0], out[:, 1]), out[:, 2])
+                                     < 0.0)
+                out[neg] = desaturate_negative(out[neg])
+            yield out.astype(np.float32)
+
+
+def _state(bake, t: int, rows, lights):
+    """The FrameState that shading reads: rows ``rows`` of asset frame ``t``, and ``lights``."""
+    from shtools.scene.pose import FrameState
+
+    return FrameState(np.asarray(bake.frame_vertices(t)[rows], np.float64),
+                      np.asarray(bake.frame_normals(t)[rows], np.float64), [], lights, [],
+                      ["shexp"] * len(lights))
+
+
+def _linear_shading(run, state, size: int) -> np.ndarray:
+    """``K (R, 3, n*n)``: the radiance of each unit visibility vector, before de-ringing."""
+    from shtools.scene.shadows import shade_frame
+
+    rows = len(state.vertices)
+    K = np.empty((rows, 3, size))
+    unit = np.zeros((rows, size), np.float32)
+    for j in range(size):
+        unit[:, j] = 1.0
+        K[:, :, j] = shade_frame(run, state, unit)
+        unit[:, j] = 0.0
+    return K
+
+
+def _fixed_rows(bake) -> np.ndarray:
+    """Vertices whose position and normal are the same in every frame, ``(V,)`` bool."""
+    if bake.vertices.ndim == 2:
+        return np.ones(bake.n_vertices, bool)
+    return (np.all(bake.vertices == bake.vertices[:1], axis=(0, 2))
+            & np.all(bake.normals == bake.normals[:1], axis=(0, 2)))
+
+
+def _same_lights(lights: list) -> bool:
+    """True when the posed lights of every frame equal the first frame's."""
+    first = lights[0]
+    return all(len(frame) == len(first) and all(
+        np.array_equal(a.position, b.position) and a.radius == b.radius
+        and np.array_equal(a.color, b.color) for a, b in zip(frame, first, strict=True))
+        for frame in lights)
 
 
 def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
@@ -244,11 +311,12 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"))
     with (h5py.File(bake, "r") as source, writer as w,
           (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
+        # geometry and visibility are copied as stored (compressed bytes), not compressed again
+        vertices, normals = (None, None) if static else (source["vertices"], source["normals"])
+        visibility = source["visibility"]
         for t, radiance in enumerate(relight_frames(b, env, scene, settings)):
-            # geometry and visibility are copied as stored (compressed bytes), not compressed again
-            w.write_frame(t, radiance, vertices=None if static else source["vertices"],
-                          normals=None if static else source["normals"],
-                          visibility=source["visibility"])
+            w.write_frame(t, radiance, vertices=vertices, normals=normals,
+                          visibility=visibility)
             bar.update(1)
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),

@@ -29,12 +29,7 @@ rotate_deg = {rotate}
 name = "ground"
 primitive = {{ type = "plane", size = [4, 4], subdivisions = 12 }}
 role = "receiver"
-[[objects.keyframes]]
-time = 0
-[[objects.keyframes]]
-time = 0.5
-translate = [0.2, 0, 0.1]
-
+{ground_keys}
 [[objects]]
 name = "ball"
 primitive = {{ type = "sphere", radius = 0.5, subdivisions = 2 }}
@@ -54,7 +49,16 @@ shadows = "{shadows}"
 position = [1.0, 2.5, 0.5]
 radius = 0.3
 color = [6.0, 5.0, 4.0]
-[[lights.keyframes]]
+{lamp_keys}"""
+
+#: keyframes that move the ground and the lamp (else only the ball moves)
+GROUND_KEYS = """[[objects.keyframes]]
+time = 0
+[[objects.keyframes]]
+time = 0.5
+translate = [0.2, 0, 0.1]
+"""
+LAMP_KEYS = """[[lights.keyframes]]
 time = 0
 [[lights.keyframes]]
 time = 0.5
@@ -73,27 +77,35 @@ def _sky(path, seed, order=ORDER):
     return path
 
 
-def _scene(tmp_path, name, light, rotate=0.0, lamp=True, shadows="shexp"):
+def _scene(tmp_path, name, light, rotate=0.0, lamp=True, shadows="shexp", moving=True):
     path = tmp_path / name
-    path.write_text(SCENE.format(order=ORDER, light=light, rotate=rotate,
-                                 lamp=LAMP.format(shadows=shadows) if lamp else ""))
+    lamp = LAMP.format(shadows=shadows, lamp_keys=LAMP_KEYS if moving else "") if lamp else ""
+    path.write_text(SCENE.format(order=ORDER, light=light, rotate=rotate, lamp=lamp,
+                                 ground_keys=GROUND_KEYS if moving else ""))
     return path
 
 
+@pytest.fixture(params=[True, False], ids=["all-moving", "static-ground"])
+def moving(request):
+    """Ground and lamp keyframed (every vertex shaded per frame), or still (the ground's
+    radiance from its fixed linear shading, only the ball's shaded per frame)."""
+    return request.param
+
+
 @pytest.fixture
-def baked_a(tmp_path):
+def baked_a(tmp_path, moving):
     """Light A, the lamp, visibility stored; and light B beside it."""
     _sky(tmp_path / "a.h5", 1)
     _sky(tmp_path / "b.h5", 2)
-    scene = _scene(tmp_path, "a.toml", "a.h5")
+    scene = _scene(tmp_path, "a.toml", "a.h5", moving=moving)
     bake_to_file(load_scene(scene), tmp_path / "a_baked.h5", store_visibility=True,
                  processes=1, workers=1)
     return scene, tmp_path / "a_baked.h5"
 
 
-def test_relight_equals_a_fresh_bake_under_the_new_light(baked_a, tmp_path):
+def test_relight_equals_a_fresh_bake_under_the_new_light(baked_a, tmp_path, moving):
     scene_a, bake_a = baked_a
-    scene_b = _scene(tmp_path, "b.toml", "b.h5", rotate=35.0)
+    scene_b = _scene(tmp_path, "b.toml", "b.h5", rotate=35.0, moving=moving)
     bake_to_file(load_scene(scene_b), tmp_path / "b_baked.h5", processes=1, workers=1)
     summary = relight(bake_a, tmp_path / "b.h5", tmp_path / "relit.h5", rotate=35.0,
                       scene=scene_a)
@@ -113,9 +125,9 @@ def test_relight_equals_a_fresh_bake_under_the_new_light(baked_a, tmp_path):
     assert relit.object_names == old.object_names and relit.attrs["fps"] == old.attrs["fps"]
 
 
-def test_relight_without_lights_is_the_environment_alone(baked_a, tmp_path):
+def test_relight_without_lights_is_the_environment_alone(baked_a, tmp_path, moving):
     _, bake_a = baked_a
-    scene_b = _scene(tmp_path, "b.toml", "b.h5", lamp=False)
+    scene_b = _scene(tmp_path, "b.toml", "b.h5", lamp=False, moving=moving)
     bake_to_file(load_scene(scene_b), tmp_path / "b_baked.h5", processes=1, workers=1)
     relight(bake_a, tmp_path / "b.h5", tmp_path / "relit.h5")
     top = float(np.max(read_bake(tmp_path / "b_baked.h5").radiance))
@@ -150,7 +162,7 @@ def test_relight_refuses_bad_input_in_one_line(baked_a, tmp_path, run_cli):
     err = _one_line_error(run_cli, "relight", tmp_path / "b.h5", "--light", tmp_path / "b.h5",
                           "-o", out)
     # a light the stored visibility cannot shadow
-    ssoc = _scene(tmp_path, "ssoc.toml", "a.h5", shadows="ssoc")
+    ssoc = _scene(tmp_path, "ssoc.toml", "a.h5", shadows="ssoc", moving=False)
     err = _one_line_error(run_cli, "relight", bake_a, "--light", tmp_path / "b.h5",
                           "--lights", ssoc, "-o", out)
     assert "ssoc" in err
