@@ -29,7 +29,14 @@ def view(baked, port, scene, no_browser):
 
     data = BakeView(baked)
     if scene is not None:
-        data.spheres = scene_spheres(scene, data.bake)
+        try:
+            data.spheres = scene_spheres(scene, data.bake)
+        except ImportError as exc:  # preparing a scene loads its meshes
+            from shtools.errors import InputError
+
+            raise InputError(f"--scene needs the 'geometry' extra ({exc.name} is missing); "
+                             "pip install 'shtools[geometry]' or leave --scene out",
+                             scene) from None
 
     def ready(url: str) -> None:
         click.echo(f"shtools view: {url}  (Ctrl-C to stop)")

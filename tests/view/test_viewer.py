@@ -227,3 +227,43 @@ def test_headless_chromium_shows_the_scene(bake_path, tmp_path):
     assert drawn.mean() > 0.05, drawn.mean()
     assert img[drawn].std(axis=0).max() > 20
     assert len(np.unique((img[drawn] // 16).astype(int), axis=0)) > 8
+
+
+SCENE = """
+[settings]
+order = 2
+frames = 3
+fps = 4
+[environment]
+coeffs = [[3.5, 3.5, 3.5], [0, 0, 0], [1, 1, 1], [0, 0, 0]]
+[[objects]]
+name = "ground"
+primitive = { type = "plane", size = [3, 3], subdivisions = 4 }
+role = "receiver"
+[[objects]]
+name = "ball"
+primitive = { type = "sphere", radius = 0.5, subdivisions = 1 }
+role = "blocker"
+[[objects.keyframes]]
+time = 0
+translate = [-0.5, 0.7, 0]
+[[objects.keyframes]]
+time = 0.5
+translate = [0.5, 0.9, 0.2]
+"""
+
+
+def test_sphere_overlay_follows_the_scenes_keyframes(tmp_path):
+    from shtools.scene.bake import bake_to_file
+    from shtools.scene.scene import load_scene
+    from shtools.view import scene_spheres
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE)
+    bake_to_file(load_scene(scene), tmp_path / "b.h5", processes=1, workers=1)
+    view = BakeView(tmp_path / "b.h5")
+    view.spheres = scene_spheres(scene, view.bake)
+    # the ball is one exact sphere: at t = 0.25 s (frame 1) halfway between its keys
+    spheres = np.frombuffer(view.sphere_bytes(1), "<f4").reshape(-1, 4)
+    np.testing.assert_allclose(spheres, [[0.0, 0.8, 0.1, 0.5]], atol=1e-6)
+    assert view.summary()["spheres"] is True
