@@ -17,9 +17,12 @@ from shtools.cli._common import json_option, option_type, output_option, progres
               metavar="SCENE.toml",
               help="Add this scene's [[lights]] (posed at each frame's time), shadowed "
                    "through the stored visibility (SHEXP).")
+@click.option("--compress", is_flag=True,
+              help="gzip the output's geometry and radiance as a bake does (smaller, slower "
+                   "to write); default plain.")
 @output_option
 @json_option
-def relight(baked, light, rotate, scene, output, as_json):
+def relight(baked, light, rotate, scene, compress, output, as_json):
     """Re-shade every frame of BAKED (made with --store-visibility) under LIGHT.
 
     The radiance is what a fresh bake of the same scene under that light gives
@@ -31,7 +34,8 @@ def relight(baked, light, rotate, scene, output, as_json):
     from shtools.scene.relight import relight as relight_bake
 
     guard_outputs({"-o": output}, [baked, light, scene])
-    summary = relight_bake(baked, light, output, rotate=rotate, scene=scene, progress=progress)
+    summary = relight_bake(baked, light, output, rotate=rotate, scene=scene,
+                           compression="gzip" if compress else None, progress=progress)
     lights = f" + {summary['lights']} spherical light(s)" if summary["lights"] else ""
     report(summary, as_json,
            f"relit {summary['frames']} frame(s) x {summary['vertices']} vertices{lights} "

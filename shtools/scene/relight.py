@@ -241,7 +241,8 @@ def _same_lights(lights: list) -> bool:
 
 
 def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
-            rotate: float = 0.0, scene=None, progress=None) -> dict:
+            rotate: float = 0.0, scene=None, compression: str | None = None,
+            progress=None) -> dict:
     """Re-shade every frame of a bake under another light; write a new bake asset.
 
     One call from Python; ``shtools relight`` runs it.  The output is a bake
@@ -263,6 +264,11 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         Turn the light this many degrees about +Y (SH rotation).
     scene : path-like or Scene, optional
         Add this scene's ``[[lights]]`` (``shexp`` shadows from the stored visibility).
+    compression : str or None
+        h5py filter of the output's per-frame geometry and radiance: None (the
+        default) stores them plain, so writing costs no more than the shading
+        (gzip at HDF5's flush took longer than shading every frame); ``"gzip"``
+        as a bake stores them, for a smaller file.
     progress : callable, optional
         A progress factory (:mod:`shtools.progress`).
 
@@ -308,15 +314,19 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         static_normals=b.normals if static else None, n_vertices=b.n_vertices,
         visibility_size=b.visibility.shape[2], times=b.times, frame_index=b.frame_index,
         albedo=b.albedo, object_offsets=b.object_offsets, object_names=b.object_names,
-        parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"))
+        parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"), compression=compression)
     with (h5py.File(bake, "r") as source, writer as w,
           (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
-        # geometry and visibility are copied as stored (compressed bytes), not compressed again
-        vertices, normals = (None, None) if static else (source["vertices"], source["normals"])
-        visibility = source["visibility"]
+        # per-frame datasets stored as the output stores them are copied as stored
+        # (compressed bytes), not compressed again; the others come from memory
+        kept = {name: source[name] for name in ("vertices", "normals", "visibility")
+                if source[name].ndim == 3 and source[name].compression
+                == (None if name == "visibility" else compression)}
         for t, radiance in enumerate(relight_frames(b, env, scene, settings)):
-            w.write_frame(t, radiance, vertices=vertices, normals=normals,
-                          visibility=visibility)
+            frame = {name: kept.get(name, getattr(b, name)[t])
+                     for name in ("vertices", "normals") if not static}
+            w.write_frame(t, radiance, visibility=kept.get("visibility", b.visibility[t]),
+                          **frame)
             bar.update(1)
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),

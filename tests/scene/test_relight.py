@@ -173,10 +173,19 @@ def test_relight_refuses_bad_input_in_one_line(baked_a, tmp_path, run_cli):
 def test_relight_cli_writes_the_asset(baked_a, tmp_path, run_cli):
     scene_a, bake_a = baked_a
     code, stdout, stderr = run_cli("relight", bake_a, "--light", tmp_path / "b.h5",
-                                   "--rotate", "90", "--lights", scene_a,
+                                   "--rotate", "90", "--lights", scene_a, "--compress",
                                    "-o", tmp_path / "relit.h5")
     assert code == 0, stderr
     assert "relit 3 frame(s)" in stdout
     relit = read_bake(tmp_path / "relit.h5")
     assert relit.parameters["relight"] == {"light": "b.h5", "rotate_deg": 90.0,
                                            "lights": "a.toml"}
+    # --compress stores geometry and radiance as a bake does, the same values as plain
+    relight(bake_a, tmp_path / "b.h5", tmp_path / "plain.h5", rotate=90.0, scene=scene_a)
+    plain = read_bake(tmp_path / "plain.h5")
+    np.testing.assert_array_equal(plain.radiance, relit.radiance)
+    np.testing.assert_array_equal(plain.vertices, relit.vertices)
+    import h5py
+
+    with h5py.File(tmp_path / "relit.h5") as f, h5py.File(tmp_path / "plain.h5") as g:
+        assert f["radiance"].compression == "gzip" and g["radiance"].compression is None
