@@ -21,11 +21,11 @@ def view(baked, port, scene, no_browser):
     """
     try:
         from shtools.view import BakeView, scene_spheres, serve
-    except ImportError as exc:  # pragma: no cover - depends on the installed extras
+    except ImportError as exc:  # an install without the extra's modules
         from shtools.errors import InputError
 
-        raise InputError(f"the viewer needs the 'view' extra ({exc.name} is missing); "
-                         "pip install 'shtools[view]'") from None
+        raise InputError(f"the viewer cannot start ({exc.name or exc} is missing); install "
+                         "the 'view' extra: pip install 'shtools[view]'") from None
 
     data = BakeView(baked)
     if scene is not None:

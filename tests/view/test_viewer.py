@@ -267,3 +267,21 @@ def test_sphere_overlay_follows_the_scenes_keyframes(tmp_path):
     spheres = np.frombuffer(view.sphere_bytes(1), "<f4").reshape(-1, 4)
     np.testing.assert_allclose(spheres, [[0.0, 0.8, 0.1, 0.5]], atol=1e-6)
     assert view.summary()["spheres"] is True
+
+
+def test_missing_modules_are_one_line(bake_path, tmp_path, run_cli, monkeypatch):
+    import shtools.view
+
+    # the scene overlay without the geometry extra (its mesh loading)
+    def no_trimesh(*args):
+        raise ModuleNotFoundError("No module named 'trimesh'", name="trimesh")
+
+    monkeypatch.setattr(shtools.view, "scene_spheres", no_trimesh)
+    (tmp_path / "scene.toml").write_text(SCENE)
+    code, _, err = run_cli("view", bake_path, "--scene", tmp_path / "scene.toml",
+                           "--no-browser")
+    assert code == 1 and err.count("\n") == 1 and "'geometry' extra" in err, err
+    # the viewer itself missing from the install
+    monkeypatch.setitem(sys.modules, "shtools.view", None)
+    code, _, err = run_cli("view", bake_path, "--no-browser")
+    assert code == 1 and err.count("\n") == 1 and "shtools[view]" in err, err
