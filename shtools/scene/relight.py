@@ -23,6 +23,7 @@ From Python::
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import time
@@ -135,7 +136,7 @@ def scene_lights(scene) -> object:
     return scene
 
 
-def relight_frames(bake, env_sh, scene=None, settings=None):
+def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None = None):
     """Radiance of every frame of ``bake`` under ``env_sh`` (and ``scene``'s lights).
 
     Shading is linear in the visibility ``g`` before de-ringing: a vertex whose
@@ -143,8 +144,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None):
     ``K g`` with a fixed ``K (3, n*n)``.  ``K`` is made once by the baker's own
     :func:`~shtools.scene.shadows.shade_frame` (without de-ringing) of the unit
     visibility vectors, so these vertices cost one small product per frame; the
-    others are shaded frame by frame with ``shade_frame`` as the baker does.
-    De-ringing (``settings.deringing``) follows, as in the runtime's ``shade``.
+    others are shaded frame by frame with ``shade_frame`` as the baker does
+    (several frames in one call while the lights do not change).  De-ringing
+    (``settings.deringing``) follows, as in the runtime's ``shade``.
 
     Parameters
     ----------
@@ -157,70 +159,134 @@ def relight_frames(bake, env_sh, scene=None, settings=None):
         the stored visibility (:func:`scene_lights`).
     settings : shtools.runtime.ShadowSettings, optional
         Default :func:`relight_settings` of the bake.
+    threads : int, optional
+        Threads sharing the work (NumPy releases the GIL in its array loops),
+        each with its own runtime; default one per usable core.
 
     Yields
     ------
     ndarray, shape (V, 3) float32
         Frame by frame, in the bake's order.
     """
-    from dataclasses import replace
+    from concurrent.futures import ThreadPoolExecutor
 
-    from shtools.runtime import ShadowRuntime
     from shtools.runtime.shading import desaturate_negative
     from shtools.scene.pose import pose_lights
-    from shtools.scene.shadows import BakeRun, shade_frame
+    from shtools.tasks import default_workers
 
     if bake.visibility is None:
         raise InputError("has no stored visibility; rebake it with 'shtools bake "
                          "--store-visibility' to relight it", bake.path)
     settings = settings or relight_settings(bake)
+    threads = max(1, threads or default_workers())
     times = [float(t) for t in bake.times]
     lights = [[] if scene is None else pose_lights(scene, t) for t in times]
-    still = _fixed_rows(bake) if _same_lights(lights) else np.zeros(bake.n_vertices, bool)
+    same = _same_lights(lights)
+    still = _fixed_rows(bake) if same else np.zeros(bake.n_vertices, bool)
     fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
-    source = _RelightSource(env_sh)
-    # one runtime without de-ringing: it is applied below to each whole frame
-    with ShadowRuntime(replace(settings, deringing="none")) as runtime:
-        run = BakeRun(source, runtime, "relight")
+    # under the same lights, the moving rows of several frames are shaded in one call
+    batch = max(1, BATCH_ROWS // max(1, moving.size)) if same else 1
+    batches = [list(range(a, min(a + batch, bake.n_frames)))
+               for a in range(0, bake.n_frames, batch)]
+    shaders = _Shaders(env_sh, settings)
+
+    def linear_part(rows):
+        return shaders.linear(_state(bake, [0], rows, lights[0]), bake.sh_order ** 2)
+
+    def moving_part(frames):
+        if not moving.size:
+            return None
+        g = np.concatenate([bake.visibility[t][moving] for t in frames])
+        shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
+        return shaded.reshape(len(frames), moving.size, 3)
+
+    with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
         K = None
         if fixed.size:
-            K = _linear_shading(run, _state(bake, 0, fixed, lights[0]), bake.sh_order ** 2)
-        for t in range(bake.n_frames):
-            out = np.empty((bake.n_vertices, 3))
-            g = bake.visibility[t]
-            if K is not None:
-                out[fixed] = np.einsum("vcj,vj->vc", K, g[fixed].astype(np.float64))
-            if moving.size:
-                out[moving] = shade_frame(run, _state(bake, t, moving, lights[t]), g[moving])
-            if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
-                # colours without a negative channel are left as they are by it
-                neg = np.flatnonzero(np.minimum(np.minimum(out[:, 0], out[:, 1]), out[:, 2])
-                                     < 0.0)
-                out[neg] = desaturate_negative(out[neg])
-            yield out.astype(np.float32)
+            parts = [p for p in np.array_split(fixed, threads) if p.size]
+            K = np.concatenate(list(pool.map(linear_part, parts)))
+        pending = [pool.submit(moving_part, frames) for frames in batches[:2 * threads]]
+        for i, frames in enumerate(batches):
+            shaded = pending.pop(0).result()
+            if i + 2 * threads < len(batches):
+                pending.append(pool.submit(moving_part, batches[i + 2 * threads]))
+            for k, t in enumerate(frames):
+                out = np.empty((bake.n_vertices, 3))
+                if K is not None:
+                    g = bake.visibility[t][fixed].astype(np.float64)
+                    out[fixed] = np.einsum("vcj,vj->vc", K, g)
+                if shaded is not None:
+                    out[moving] = shaded[k]
+                if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
+                    # colours without a negative channel are left as they are by it
+                    low = np.minimum(np.minimum(out[:, 0], out[:, 1]), out[:, 2])
+                    neg = np.flatnonzero(low < 0.0)
+                    out[neg] = desaturate_negative(out[neg])
+                yield out.astype(np.float32)
 
 
-def _state(bake, t: int, rows, lights):
-    """The FrameState that shading reads: rows ``rows`` of asset frame ``t``, and ``lights``."""
+#: Most receiver rows shaded in one call (frames batched under unchanging lights).
+BATCH_ROWS = 1 << 15
+
+
+class _Shaders:
+    """One runtime per thread, without de-ringing (applied to each whole frame after)."""
+
+    def __init__(self, env_sh, settings):
+        import threading
+        from dataclasses import replace
+
+        self.source = _RelightSource(env_sh)
+        self.settings = replace(settings, deringing="none")
+        self.local = threading.local()
+        self.runtimes: list = []
+        self.lock = threading.Lock()
+
+    def _run(self):
+        from shtools.runtime import ShadowRuntime
+        from shtools.scene.shadows import BakeRun
+
+        run = getattr(self.local, "run", None)
+        if run is None:
+            runtime = ShadowRuntime(self.settings)
+            with self.lock:
+                self.runtimes.append(runtime)
+            run = self.local.run = BakeRun(self.source, runtime, "relight")
+        return run
+
+    def shade(self, state, visibility) -> np.ndarray:
+        """:func:`~shtools.scene.shadows.shade_frame` of ``state`` (before de-ringing)."""
+        from shtools.scene.shadows import shade_frame
+
+        return shade_frame(self._run(), state, visibility)
+
+    def linear(self, state, size: int) -> np.ndarray:
+        """``K (R, 3, n*n)``: the radiance of each unit visibility vector, before de-ringing."""
+        rows = len(state.vertices)
+        K = np.empty((rows, 3, size))
+        unit = np.zeros((rows, size), np.float32)
+        for j in range(size):
+            unit[:, j] = 1.0
+            K[:, :, j] = self.shade(state, unit)
+            unit[:, j] = 0.0
+        return K
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        for runtime in self.runtimes:
+            runtime.close()
+
+
+def _state(bake, frames, rows, lights):
+    """The FrameState shading reads: rows ``rows`` of asset frames ``frames``, stacked."""
     from shtools.scene.pose import FrameState
 
-    return FrameState(np.asarray(bake.frame_vertices(t)[rows], np.float64),
-                      np.asarray(bake.frame_normals(t)[rows], np.float64), [], lights, [],
+    vertices = np.concatenate([bake.frame_vertices(t)[rows] for t in frames])
+    normals = np.concatenate([bake.frame_normals(t)[rows] for t in frames])
+    return FrameState(vertices.astype(np.float64), normals.astype(np.float64), [], lights, [],
                       ["shexp"] * len(lights))
-
-
-def _linear_shading(run, state, size: int) -> np.ndarray:
-    """``K (R, 3, n*n)``: the radiance of each unit visibility vector, before de-ringing."""
-    from shtools.scene.shadows import shade_frame
-
-    rows = len(state.vertices)
-    K = np.empty((rows, 3, size))
-    unit = np.zeros((rows, size), np.float32)
-    for j in range(size):
-        unit[:, j] = 1.0
-        K[:, :, j] = shade_frame(run, state, unit)
-        unit[:, j] = 0.0
-    return K
 
 
 def _fixed_rows(bake) -> np.ndarray:
@@ -242,7 +308,7 @@ def _same_lights(lights: list) -> bool:
 
 def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
             rotate: float = 0.0, scene=None, compression: str | None = None,
-            progress=None) -> dict:
+            threads: int | None = None, progress=None) -> dict:
     """Re-shade every frame of a bake under another light; write a new bake asset.
 
     One call from Python; ``shtools relight`` runs it.  The output is a bake
@@ -269,6 +335,8 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         default) stores them plain, so writing costs no more than the shading
         (gzip at HDF5's flush took longer than shading every frame); ``"gzip"``
         as a bake stores them, for a smaller file.
+    threads : int, optional
+        Threads shading (:func:`relight_frames`; default one per usable core).
     progress : callable, optional
         A progress factory (:mod:`shtools.progress`).
 
@@ -308,13 +376,22 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
                              "lights": None if scene is None else Path(scene.path).name}
     static = b.vertices.ndim == 2
-    writer = BakeWriter(
-        output, n_frames=b.n_frames, faces=b.faces, sh_order=b.sh_order,
-        static_vertices=b.vertices if static else None,
-        static_normals=b.normals if static else None, n_vertices=b.n_vertices,
-        visibility_size=b.visibility.shape[2], times=b.times, frame_index=b.frame_index,
-        albedo=b.albedo, object_offsets=b.object_offsets, object_names=b.object_names,
-        parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"), compression=compression)
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1, thread_name_prefix="relight-inputs") as hasher:
+        # the writer hashes its inputs (the bake is large; hashlib frees the GIL) while
+        # the first frames are shaded
+        made = hasher.submit(
+            BakeWriter, output, n_frames=b.n_frames, faces=b.faces, sh_order=b.sh_order,
+            static_vertices=b.vertices if static else None,
+            static_normals=b.normals if static else None, n_vertices=b.n_vertices,
+            visibility_size=b.visibility.shape[2], times=b.times, frame_index=b.frame_index,
+            albedo=b.albedo, object_offsets=b.object_offsets, object_names=b.object_names,
+            parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"),
+            compression=compression)
+        frames = relight_frames(b, env, scene, settings, threads)
+        first = next(frames)
+        writer = made.result()
     with (h5py.File(bake, "r") as source, writer as w,
           (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
         # per-frame datasets stored as the output stores them are copied as stored
@@ -322,7 +399,7 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         kept = {name: source[name] for name in ("vertices", "normals", "visibility")
                 if source[name].ndim == 3 and source[name].compression
                 == (None if name == "visibility" else compression)}
-        for t, radiance in enumerate(relight_frames(b, env, scene, settings)):
+        for t, radiance in enumerate(itertools.chain([first], frames)):
             frame = {name: kept.get(name, getattr(b, name)[t])
                      for name in ("vertices", "normals") if not static}
             w.write_frame(t, radiance, visibility=kept.get("visibility", b.visibility[t]),
