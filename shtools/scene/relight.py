@@ -193,36 +193,36 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     def linear_part(rows):
         return shaders.linear(_state(bake, [0], rows, lights[0]), bake.sh_order ** 2)
 
-    def moving_part(frames):
-        if not moving.size:
-            return None
-        g = np.concatenate([bake.visibility[t][moving] for t in frames])
-        shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
-        return shaded.reshape(len(frames), moving.size, 3)
+    def frames_of(frames, K):
+        """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
+        out = np.empty((len(frames), bake.n_vertices, 3))
+        if moving.size:
+            g = np.concatenate([bake.visibility[t][moving] for t in frames])
+            shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
+            out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
+        for k, t in enumerate(frames):
+            if K is not None:
+                out[k, fixed] = np.einsum("vcj,vj->vc", K,
+                                          bake.visibility[t][fixed].astype(np.float64))
+            if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
+                # colours without a negative channel are left as they are by it
+                low = np.minimum(np.minimum(out[k, :, 0], out[k, :, 1]), out[k, :, 2])
+                neg = np.flatnonzero(low < 0.0)
+                out[k, neg] = desaturate_negative(out[k, neg])
+        return out.astype(np.float32)
 
     with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
         K = None
         if fixed.size:
             parts = [p for p in np.array_split(fixed, threads) if p.size]
             K = np.concatenate(list(pool.map(linear_part, parts)))
-        pending = [pool.submit(moving_part, frames) for frames in batches[:2 * threads]]
-        for i, frames in enumerate(batches):
-            shaded = pending.pop(0).result()
-            if i + 2 * threads < len(batches):
-                pending.append(pool.submit(moving_part, batches[i + 2 * threads]))
-            for k, t in enumerate(frames):
-                out = np.empty((bake.n_vertices, 3))
-                if K is not None:
-                    g = bake.visibility[t][fixed].astype(np.float64)
-                    out[fixed] = np.einsum("vcj,vj->vc", K, g)
-                if shaded is not None:
-                    out[moving] = shaded[k]
-                if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
-                    # colours without a negative channel are left as they are by it
-                    low = np.minimum(np.minimum(out[:, 0], out[:, 1]), out[:, 2])
-                    neg = np.flatnonzero(low < 0.0)
-                    out[neg] = desaturate_negative(out[neg])
-                yield out.astype(np.float32)
+        window = 2 * threads  # batches in flight: bounded memory, every thread busy
+        pending = [pool.submit(frames_of, frames, K) for frames in batches[:window]]
+        for i in range(len(batches)):
+            done = pending.pop(0).result()
+            if i + window < len(batches):
+                pending.append(pool.submit(frames_of, batches[i + window], K))
+            yield from done
 
 
 #: Most receiver rows shaded in one call (frames batched under unchanging lights).
