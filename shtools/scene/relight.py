@@ -5,10 +5,12 @@ A bake made with ``--store-visibility`` keeps each vertex's SH visibility
 cosine, the light and ``g`` (SHEXP Sec. 7; Sloan et al. 2002, "Precomputed
 Radiance Transfer", Sec. 4 — keeping visibility in SH is what makes a new
 light cheap), so a new environment, optionally turned about +Y by an SH
-rotation, needs no posing, no blockers and no exponential: each frame is one
-:func:`shtools.scene.shadows.shade_frame` call, the very function the baker
-shades with, so the result is the radiance a fresh bake of the same scene
-under that light gives, to float32 rounding.
+rotation, needs no posing, no blockers and no exponential.  Frames are shaded
+by :func:`shtools.scene.shadows.shade_frame`, the very function the baker
+shades with (for vertices that never move, once per unit visibility vector:
+shading is linear in ``g``; :func:`relight_frames`), so the result is the
+radiance a fresh bake of the same scene under that light gives, to float32
+rounding.
 
 Spherical lights (a scene's ``[[lights]]``, posed at each frame's time) are
 shaded through the same stored visibility, the baker's ``shexp`` way; the
@@ -123,10 +125,11 @@ def scene_lights(scene) -> object:
         A light shadowed another way than ``shexp``.
     """
     from shtools.scene.scene import Scene, load_scene
+    from shtools.scene.shadows import ShexpLight
 
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
     for spec in scene.lights:
-        if spec.shadows != "shexp":
+        if spec.shadows != ShexpLight.name:
             raise InputError(f"light '{spec.name}' uses shadows = \"{spec.shadows}\", which "
                              "needs the posed blocker meshes a bake does not keep; relighting "
                              "shades spherical lights through the stored visibility (shadows = "
@@ -282,11 +285,12 @@ class _Shaders:
 def _state(bake, frames, rows, lights):
     """The FrameState shading reads: rows ``rows`` of asset frames ``frames``, stacked."""
     from shtools.scene.pose import FrameState
+    from shtools.scene.shadows import ShexpLight
 
     vertices = np.concatenate([bake.frame_vertices(t)[rows] for t in frames])
     normals = np.concatenate([bake.frame_normals(t)[rows] for t in frames])
     return FrameState(vertices.astype(np.float64), normals.astype(np.float64), [], lights, [],
-                      ["shexp"] * len(lights))
+                      [ShexpLight.name] * len(lights))
 
 
 def _fixed_rows(bake) -> np.ndarray:
