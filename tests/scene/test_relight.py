@@ -221,3 +221,12 @@ def test_relight_keeps_the_bakes_deringing(tmp_path, moving):
     top = float(np.max(np.abs(fresh)))
     np.testing.assert_allclose(read_bake(tmp_path / "relit.h5").radiance, fresh, rtol=1e-4,
                                atol=1e-6 * top)
+
+
+@pytest.mark.parametrize("moving", ["ball"])
+def test_relit_bytes_do_not_depend_on_the_thread_count(baked_a, tmp_path):
+    scene_a, bake_a = baked_a
+    for threads in (1, 3):
+        relight(bake_a, tmp_path / "b.h5", tmp_path / f"t{threads}.h5", rotate=20.0,
+                scene=scene_a, threads=threads)
+    assert (tmp_path / "t1.h5").read_bytes() == (tmp_path / "t3.h5").read_bytes()
