@@ -297,8 +297,9 @@ def _fixed_rows(bake) -> np.ndarray:
     """Vertices whose position and normal are the same in every frame, ``(V,)`` bool."""
     if bake.vertices.ndim == 2:
         return np.ones(bake.n_vertices, bool)
-    return (np.all(bake.vertices == bake.vertices[:1], axis=(0, 2))
-            & np.all(bake.normals == bake.normals[:1], axis=(0, 2)))
+    v, n = bake.vertices, bake.normals  # finite (read_bake checks): equal iff min == max
+    return np.all(v.min(axis=0) == v.max(axis=0), axis=1) & np.all(
+        n.min(axis=0) == n.max(axis=0), axis=1)
 
 
 def _same_lights(lights: list) -> bool:
