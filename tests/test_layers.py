@@ -36,6 +36,7 @@ ALLOWED = {
               "lighting", "reference", "export"},
     "cli": {"*"},
     "demo": {"*"},
+    "view": {"*"},  # the browser viewer, beside the CLI
     "__init__": {"errors"},
     "__main__": {"*"},
 }

@@ -39,6 +39,8 @@ COMMANDS = {
     "light": "shtools.cli.light:light",
     "bake": "shtools.cli.bake:bake",
     "export": "shtools.cli.export:export",
+    "relight": "shtools.cli.relight:relight",
+    "view": "shtools.cli.view:view",
     "eval": "shtools.cli.eval:eval_cmd",
     "info": "shtools.cli.assets:info",
     "check": "shtools.cli.assets:check",

@@ -273,7 +273,8 @@ class BakeWriter:
     parameters, inputs : mapping, optional
         Provenance, as for :func:`~shtools.data_formats.write_asset`.
     compression : str or None
-        h5py filter for the per-frame datasets (deterministic).
+        h5py filter for the per-frame geometry and radiance (deterministic);
+        the visibility is stored without one.
     """
 
     def __init__(
@@ -332,6 +333,8 @@ class BakeWriter:
         self._written = np.zeros(T, dtype=bool)
         self._stack: contextlib.ExitStack | None = None
         self._file: h5py.File | None = None
+        self._datasets: dict[str, h5py.Dataset] = {}  # per-frame datasets, opened once
+        self._direct: dict[int, bool] = {}  # id(source dataset) -> chunks copy as stored
 
     def size_bound(self) -> int:
         """Bytes the file can take at most (:func:`bake_size_bound`)."""
@@ -388,7 +391,13 @@ class BakeWriter:
         f.create_dataset("radiance", (T, V, 3), "f4", chunks=(1, V, 3), **frame)
         if self.visibility_size:
             k = int(self.visibility_size)
-            f.create_dataset("visibility", (T, V, k), "f4", chunks=(1, V, k), **frame)
+            # stored plain: SH coefficients gain ~20 % from gzip, and decompressing them
+            # would be most of the cost of relighting (shtools.scene.relight), which
+            # reads them all
+            f.create_dataset("visibility", (T, V, k), "f4", chunks=(1, V, k), **plain)
+        self._datasets = {name: f[name] for name in ("radiance", "vertices", "normals",
+                                                     "visibility")
+                          if name in f and f[name].ndim == 3}
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
@@ -412,6 +421,9 @@ class BakeWriter:
             Required when the receivers move.
         visibility : ndarray, shape (V, n*n), optional
             Required when the writer stores visibility.
+
+        ``vertices``, ``normals`` and ``visibility`` may also be another bake's
+        per-frame dataset ``(T, V, k)`` (h5py): its frame ``t`` is copied.
         """
         f = self._file
         if f is None or self._stack is None:
@@ -423,13 +435,35 @@ class BakeWriter:
         if not np.all(np.isfinite(radiance)):
             raise AssetError(f"frame {int(self.frame_index[t])} produced NaN/inf radiance",
                              self.path)
-        f["radiance"][t] = radiance
-        if not self.static:
-            f["vertices"][t] = np.asarray(vertices, dtype=np.float32)
-            f["normals"][t] = np.asarray(normals, dtype=np.float32)
+        ds = self._datasets
+        ds["radiance"][t] = radiance
+        per_frame = {"vertices": vertices, "normals": normals} if not self.static else {}
         if self.visibility_size:
-            f["visibility"][t] = np.asarray(visibility, dtype=np.float32)
+            per_frame["visibility"] = visibility
+        for name, values in per_frame.items():
+            if isinstance(values, h5py.Dataset):
+                self._copy_chunk(values, ds[name], t)
+            else:
+                ds[name][t] = np.asarray(values, dtype=np.float32)
         self._written[t] = True
+
+    def _copy_chunk(self, source: h5py.Dataset, target: h5py.Dataset, t: int) -> None:
+        """Frame ``t`` of a per-frame dataset of another bake, its stored bytes copied as
+        they are when both store frames alike (one frame a chunk, the same filters): no
+        decompression and compression again, the same values either way."""
+        same = self._direct.get(id(source))
+        if same is None:
+            same = self._direct[id(source)] = (
+                source.shape == target.shape and source.dtype == target.dtype
+                and source.chunks == target.chunks == (1, *target.shape[1:])
+                and source.compression == target.compression
+                and source.compression_opts == target.compression_opts
+                and source.shuffle == target.shuffle)
+        if same:
+            mask, chunk = source.id.read_direct_chunk((t, 0, 0))
+            target.id.write_direct_chunk((t, 0, 0), chunk, mask)
+        else:
+            target[t] = np.asarray(source[t], dtype=np.float32)
 
 
 def write_bake(

@@ -401,6 +401,10 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
 
     if (lights := light_parameters(scene.lights)) is not None:  # absent: all shexp, as before
         parameters["light_shadows"] = lights
+    from shtools.runtime.settings import ShadowSettings
+
+    if st.deringing != ShadowSettings.deringing:  # absent: the default; relighting reads it
+        parameters["deringing"] = st.deringing
     inputs = {"scene": scene.path, **prepared.inputs}
     return BakeWriter(
         output,

@@ -50,7 +50,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     vertices is within it keep the object's blocker (a cluster's receivers must
     skip the same blockers); without clusters every receiver-only vertex is traced.
     """
-    from shtools.runtime import SelfVisibility, SphereBlocker, SphereLight
+    from shtools.runtime import SelfVisibility, SphereBlocker
     from shtools.scene.transfer import (
         posed_caster,
         posed_local_log,
@@ -127,13 +127,17 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
         selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters) for c in casters)
                      if v is not None)
-    lights = []
-    for spec in prepared.scene.lights:
-        key = light_at(spec, t)
-        lights.append(SphereLight(position=key.position, radius=float(key.radius),
-                                  color=key.color))
+    lights = pose_lights(prepared.scene, t)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
+
+
+def pose_lights(scene, t: float) -> list:
+    """The scene's ``[[lights]]`` at time ``t``, as runtime SphereLights (one per light)."""
+    from shtools.runtime import SphereLight
+
+    return [SphereLight(position=key.position, radius=float(key.radius), color=key.color)
+            for key in (light_at(spec, t) for spec in scene.lights)]
 
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters=None):

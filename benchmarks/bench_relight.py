@@ -1,0 +1,94 @@
+"""Relighting a stored-visibility bake against re-baking it: the demo scene under a new light.
+
+    python benchmarks/bench_relight.py [--quick]
+
+Bakes the demo (48 frames; ``--quick`` 6) with ``--store-visibility`` under its sky,
+then puts it under a warmer sky turned 90 degrees about +Y two ways, side by side:
+a fresh bake of the scene with that light (set-up included, as a user re-bakes) and
+``shtools relight`` of the first bake (the scene's lamp kept, through the stored
+visibility).  Reports both times, their ratio and how far the radiances differ.
+
+Target: relight >= 20x faster than the bake, the same radiance to 1e-4 relative.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: A warmer sky than the demo's: per-channel gains of its SH.
+WARM = np.array([1.25, 0.95, 0.7])
+ROTATE_DEG = 90.0
+RELIGHT_RUNS = 3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="6 frames, not 48")
+    args = parser.parse_args(sys.argv[1:])
+    from shtools.data_formats.bake import read_bake
+    from shtools.data_formats.light import read_light, write_light
+    from shtools.demo import FRAMES, run_demo
+    from shtools.scene.bake import bake_to_file
+    from shtools.scene.relight import relight
+    from shtools.scene.scene import load_scene
+
+    frames = 6 if args.quick else FRAMES
+    with tempfile.TemporaryDirectory() as tmp:
+        demo = Path(tmp) / "demo"
+        run_demo(demo, frames=frames, quiet=True)
+        scene = demo / "scene.toml"
+        bake_to_file(load_scene(scene), demo / "a.h5", store_visibility=True)
+        coeffs, attrs = read_light(demo / "sky.h5")
+        write_light(demo / "warm.h5", coeffs * WARM, source="inline",
+                    parameters={"window": (attrs.get("parameters") or {}).get("window")})
+        text = scene.read_text()
+        assert 'light = "sky.h5"' in text
+        warm = demo / "warm.toml"
+        warm.write_text(text.replace('light = "sky.h5"',
+                                     f'light = "warm.h5"\nrotate_deg = {ROTATE_DEG}'))
+
+        start = time.perf_counter()
+        summary = bake_to_file(load_scene(warm), demo / "b.h5")
+        bake_s = time.perf_counter() - start
+        runs = []
+        for _ in range(RELIGHT_RUNS):  # seconds each: the median of a few, on a shared machine
+            start = time.perf_counter()
+            relight(demo / "a.h5", demo / "warm.h5", demo / "relit.h5", rotate=ROTATE_DEG,
+                    scene=scene)
+            runs.append(time.perf_counter() - start)
+        relight_s = float(np.median(runs))
+
+        fresh = read_bake(demo / "b.h5").radiance
+        relit = read_bake(demo / "relit.h5").radiance
+        top = float(np.max(np.abs(fresh)))
+        diff = np.abs(relit - fresh)
+        # as the tests: rtol 1e-4, atol 1e-6 of the brightest value (deep shadows near 0)
+        outside = int(np.sum(diff > 1e-4 * np.abs(fresh) + 1e-6 * top))
+        lit = np.abs(fresh) > 1e-3 * top
+        rel = float(np.max(diff[lit] / np.abs(fresh[lit])))
+        print(f"## shtools relight vs a fresh bake — demo, {frames} frames x "
+              f"{summary['vertices']:,} vertices{', --quick' if args.quick else ''}\n")
+        print("| way | seconds | per frame ms |")
+        print("|---|---|---|")
+        print(f"| bake (set-up {summary['setup_seconds']:.1f} s included) | {bake_s:.2f} | "
+              f"{1000 * bake_s / frames:.1f} |")
+        print(f"| bake, frames only | {summary['frame_seconds']:.2f} | "
+              f"{1000 * summary['frame_seconds'] / frames:.1f} |")
+        print(f"| relight (read, shade, write; median of {RELIGHT_RUNS}: "
+              f"{min(runs):.2f}-{max(runs):.2f} s) | {relight_s:.2f} | "
+              f"{1000 * relight_s / frames:.1f} |")
+        print(f"\nrelight is {bake_s / relight_s:.0f}x faster than the bake "
+              f"({summary['frame_seconds'] / relight_s:.0f}x its frames alone; target >= 20x); "
+              f"max relative radiance difference {rel:.1e} where radiance > 1e-3 of the "
+              f"brightest, {outside} of {diff.size:,} values outside rtol 1e-4 "
+              f"(atol 1e-6 x brightest; target: 0)")
+
+
+if __name__ == "__main__":
+    main()

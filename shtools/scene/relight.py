@@ -1,0 +1,426 @@
+"""Relighting a bake without re-baking it: the stored visibility shaded under another light.
+
+A bake made with ``--store-visibility`` keeps each vertex's SH visibility
+``g`` per frame.  Outgoing radiance is the triple product of the clamped
+cosine, the light and ``g`` (SHEXP Sec. 7; Sloan et al. 2002, "Precomputed
+Radiance Transfer", Sec. 4 — keeping visibility in SH is what makes a new
+light cheap), so a new environment, optionally turned about +Y by an SH
+rotation, needs no posing, no blockers and no exponential.  Frames are shaded
+by :func:`shtools.scene.shadows.shade_frame`, the very function the baker
+shades with (for vertices that never move, once per unit visibility vector:
+shading is linear in ``g``; :func:`relight_frames`), so the result is the
+radiance a fresh bake of the same scene under that light gives, to float32
+rounding.
+
+Spherical lights (a scene's ``[[lights]]``, posed at each frame's time) are
+shaded through the same stored visibility, the baker's ``shexp`` way; the
+other ways (SSOC, ray tracing) need the posed blocker meshes, which a bake
+does not keep.
+
+From Python::
+
+    from shtools.scene.relight import relight
+    relight("baked.h5", "studio.h5", "relit.h5", rotate=90.0, scene="scene.toml")
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from shtools.errors import AssetError, InputError
+
+
+@dataclass
+class _RelightSource:
+    """What :func:`~shtools.scene.shadows.shade_frame` reads of a prepared scene."""
+
+    env_sh: np.ndarray | None
+    midrange: None = None  # a relit environment is distant (at infinity)
+
+
+def relight_settings(bake):
+    """The runtime settings a bake was shaded with (order, window, de-ringing).
+
+    Parameters
+    ----------
+    bake : shtools.data_formats.bake.Bake
+
+    Returns
+    -------
+    shtools.runtime.ShadowSettings
+    """
+    from shtools.runtime import ShadowSettings
+
+    params = bake.parameters
+    defaults = ShadowSettings()
+    return ShadowSettings(order=bake.sh_order,
+                          window=params.get("window", defaults.window),
+                          window_h=params.get("window_h", defaults.window_h),
+                          deringing=params.get("deringing", defaults.deringing),
+                          processes=1)
+
+
+def relight_environment(light: str | os.PathLike, order: int, window, rotate: float = 0.0,
+                        inputs: dict | None = None) -> np.ndarray:
+    """A light asset as a bake would load it as ``[environment] light``, turned ``rotate`` degrees.
+
+    The same loader as the baker's (:mod:`shtools.scene.prepare`): its checks
+    (a light windowed twice) and its SH rotation about +Y.
+
+    Parameters
+    ----------
+    light : path-like
+        A ``light`` asset of SH order ``order``.
+    order : int
+        The bake's SH order.
+    window : str or None
+        The bake's ``window`` setting.
+    rotate : float
+        Degrees about +Y (the scene key ``rotate_deg``).
+    inputs : dict, optional
+        Filled with ``{"environment": path}`` for provenance.
+
+    Returns
+    -------
+    ndarray, shape (n*n, 3)
+
+    Raises
+    ------
+    AssetError
+        Not a light asset, another SH order, or windowed twice.
+    """
+    from shtools.data_formats.light import read_light
+    from shtools.scene.prepare import _environment
+    from shtools.scene.scene import EnvironmentSpec
+
+    coeffs, _ = read_light(light)
+    n = math.isqrt(len(coeffs))
+    if n != order:
+        raise AssetError(f"light is SH order {n} but the bake is order {order}; re-project it "
+                         f"with 'shtools light project --order {order}'", light)
+    spec = EnvironmentSpec(kind="light", path=Path(light), rotate=math.radians(float(rotate)))
+    scene = SimpleNamespace(environment=spec, settings=SimpleNamespace(order=order,
+                                                                       window=window))
+    return _environment(scene, {} if inputs is None else inputs)
+
+
+def scene_lights(scene) -> object:
+    """The parsed scene whose ``[[lights]]`` a relight adds (each must use ``shexp``).
+
+    Parameters
+    ----------
+    scene : path-like or shtools.scene.scene.Scene
+
+    Raises
+    ------
+    InputError
+        A light shadowed another way than ``shexp``.
+    """
+    from shtools.scene.scene import Scene, load_scene
+    from shtools.scene.shadows import ShexpLight
+
+    scene = scene if isinstance(scene, Scene) else load_scene(scene)
+    for spec in scene.lights:
+        if spec.shadows != ShexpLight.name:
+            raise InputError(f"light '{spec.name}' uses shadows = \"{spec.shadows}\", which "
+                             "needs the posed blocker meshes a bake does not keep; relighting "
+                             "shades spherical lights through the stored visibility (shadows = "
+                             "\"shexp\") only", scene.path)
+    if not scene.lights:
+        raise InputError("has no [[lights]] to add; leave the scene out", scene.path)
+    return scene
+
+
+def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None = None):
+    """Radiance of every frame of ``bake`` under ``env_sh`` (and ``scene``'s lights).
+
+    Shading is linear in the visibility ``g`` before de-ringing: a vertex whose
+    position, normal and lights do not change over the bake has radiance
+    ``K g`` with a fixed ``K (3, n*n)``.  ``K`` is made once by the baker's own
+    :func:`~shtools.scene.shadows.shade_frame` (without de-ringing) of the unit
+    visibility vectors, so these vertices cost one small product per frame; the
+    others are shaded frame by frame with ``shade_frame`` as the baker does
+    (several frames in one call while the lights do not change).  De-ringing
+    (``settings.deringing``) follows, as in the runtime's ``shade``.
+
+    Parameters
+    ----------
+    bake : shtools.data_formats.bake.Bake
+        With stored visibility.
+    env_sh : ndarray, shape (n*n, 3) or None
+        Distant environment (:func:`relight_environment`).
+    scene : shtools.scene.scene.Scene, optional
+        Its spherical lights are posed at each frame's time and shaded through
+        the stored visibility (:func:`scene_lights`).
+    settings : shtools.runtime.ShadowSettings, optional
+        Default :func:`relight_settings` of the bake.
+    threads : int, optional
+        Threads sharing the work (NumPy releases the GIL in its array loops),
+        each with its own runtime; default one per usable core.
+
+    Yields
+    ------
+    ndarray, shape (V, 3) float32
+        Frame by frame, in the bake's order.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from shtools.runtime.shading import desaturate_negative
+    from shtools.scene.pose import pose_lights
+    from shtools.tasks import default_workers
+
+    if bake.visibility is None:
+        raise InputError("has no stored visibility; rebake it with 'shtools bake "
+                         "--store-visibility' to relight it", bake.path)
+    settings = settings or relight_settings(bake)
+    threads = max(1, threads or default_workers())
+    times = [float(t) for t in bake.times]
+    lights = [[] if scene is None else pose_lights(scene, t) for t in times]
+    same = _same_lights(lights)
+    still = _fixed_rows(bake) if same else np.zeros(bake.n_vertices, bool)
+    fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
+    # under the same lights, the moving rows of several frames are shaded in one call
+    batch = max(1, BATCH_ROWS // max(1, moving.size)) if same else 1
+    batches = [list(range(a, min(a + batch, bake.n_frames)))
+               for a in range(0, bake.n_frames, batch)]
+    shaders = _Shaders(env_sh, settings)
+
+    def linear_part(rows):
+        return shaders.linear(_state(bake, [0], rows, lights[0]), bake.sh_order ** 2)
+
+    def frames_of(frames, K):
+        """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
+        out = np.empty((len(frames), bake.n_vertices, 3))
+        if moving.size:
+            g = np.concatenate([bake.visibility[t][moving] for t in frames])
+            shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
+            out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
+        for k, t in enumerate(frames):
+            if K is not None:
+                out[k, fixed] = np.einsum("vcj,vj->vc", K,
+                                          bake.visibility[t][fixed].astype(np.float64))
+            if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
+                # colours without a negative channel are left as they are by it
+                low = np.minimum(np.minimum(out[k, :, 0], out[k, :, 1]), out[k, :, 2])
+                neg = np.flatnonzero(low < 0.0)
+                out[k, neg] = desaturate_negative(out[k, neg])
+        return out.astype(np.float32)
+
+    with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
+        K = None
+        if fixed.size:
+            parts = [p for p in np.array_split(fixed, threads) if p.size]
+            K = np.concatenate(list(pool.map(linear_part, parts)))
+        window = 2 * threads  # batches in flight: bounded memory, every thread busy
+        pending = [pool.submit(frames_of, frames, K) for frames in batches[:window]]
+        for i in range(len(batches)):
+            done = pending.pop(0).result()
+            if i + window < len(batches):
+                pending.append(pool.submit(frames_of, batches[i + window], K))
+            yield from done
+
+
+#: Most receiver rows shaded in one call (frames batched under unchanging lights).
+BATCH_ROWS = 1 << 15
+
+
+class _Shaders:
+    """One runtime per thread, without de-ringing (applied to each whole frame after)."""
+
+    def __init__(self, env_sh, settings):
+        import threading
+        from dataclasses import replace
+
+        self.source = _RelightSource(env_sh)
+        self.settings = replace(settings, deringing="none")
+        self.local = threading.local()
+        self.runtimes: list = []
+        self.lock = threading.Lock()
+
+    def _run(self):
+        from shtools.runtime import ShadowRuntime
+        from shtools.scene.shadows import BakeRun
+
+        run = getattr(self.local, "run", None)
+        if run is None:
+            runtime = ShadowRuntime(self.settings)
+            with self.lock:
+                self.runtimes.append(runtime)
+            run = self.local.run = BakeRun(self.source, runtime, "relight")
+        return run
+
+    def shade(self, state, visibility) -> np.ndarray:
+        """:func:`~shtools.scene.shadows.shade_frame` of ``state`` (before de-ringing)."""
+        from shtools.scene.shadows import shade_frame
+
+        return shade_frame(self._run(), state, visibility)
+
+    def linear(self, state, size: int) -> np.ndarray:
+        """``K (R, 3, n*n)``: the radiance of each unit visibility vector, before de-ringing."""
+        rows = len(state.vertices)
+        K = np.empty((rows, 3, size))
+        unit = np.zeros((rows, size), np.float32)
+        for j in range(size):
+            unit[:, j] = 1.0
+            K[:, :, j] = self.shade(state, unit)
+            unit[:, j] = 0.0
+        return K
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        for runtime in self.runtimes:
+            runtime.close()
+
+
+def _state(bake, frames, rows, lights):
+    """The FrameState shading reads: rows ``rows`` of asset frames ``frames``, stacked."""
+    from shtools.scene.pose import FrameState
+    from shtools.scene.shadows import ShexpLight
+
+    vertices = np.concatenate([bake.frame_vertices(t)[rows] for t in frames])
+    normals = np.concatenate([bake.frame_normals(t)[rows] for t in frames])
+    return FrameState(vertices.astype(np.float64), normals.astype(np.float64), [], lights, [],
+                      [ShexpLight.name] * len(lights))
+
+
+def _fixed_rows(bake) -> np.ndarray:
+    """Vertices whose position and normal are the same in every frame, ``(V,)`` bool."""
+    if bake.vertices.ndim == 2:
+        return np.ones(bake.n_vertices, bool)
+    v, n = bake.vertices, bake.normals  # finite (read_bake checks): equal iff min == max
+    return np.all(v.min(axis=0) == v.max(axis=0), axis=1) & np.all(
+        n.min(axis=0) == n.max(axis=0), axis=1)
+
+
+def _same_lights(lights: list) -> bool:
+    """True when the posed lights of every frame equal the first frame's."""
+    first = lights[0]
+    return all(len(frame) == len(first) and all(
+        np.array_equal(a.position, b.position) and a.radius == b.radius
+        and np.array_equal(a.color, b.color) for a, b in zip(frame, first, strict=True))
+        for frame in lights)
+
+
+def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
+            rotate: float = 0.0, scene=None, compression: str | None = None,
+            threads: int | None = None, progress=None) -> dict:
+    """Re-shade every frame of a bake under another light; write a new bake asset.
+
+    One call from Python; ``shtools relight`` runs it.  The output is a bake
+    like the input (geometry, albedo, objects, visibility kept, so it can be
+    relit again) whose radiance is what a fresh bake of the same scene with
+    ``[environment] light = LIGHT`` (``rotate_deg = rotate``) and, given
+    ``scene``, that scene's spherical lights gives.  It appears atomically,
+    and never replaces the bake or the light it reads.
+
+    Parameters
+    ----------
+    bake : path-like
+        A bake asset made with ``--store-visibility``.
+    light : path-like
+        A ``light`` asset of the bake's SH order (``shtools light project``).
+    output : path-like
+        The relit bake asset.
+    rotate : float
+        Turn the light this many degrees about +Y (SH rotation).
+    scene : path-like or Scene, optional
+        Add this scene's ``[[lights]]`` (``shexp`` shadows from the stored visibility).
+    compression : str or None
+        h5py filter of the output's per-frame geometry and radiance: None (the
+        default) stores them plain, so writing costs no more than the shading
+        (gzip at HDF5's flush took longer than shading every frame); ``"gzip"``
+        as a bake stores them, for a smaller file.
+    threads : int, optional
+        Threads shading (:func:`relight_frames`; default one per usable core).
+    progress : callable, optional
+        A progress factory (:mod:`shtools.progress`).
+
+    Returns
+    -------
+    dict
+        ``frames``, ``vertices``, ``seconds``, ``output``, ``lights``.
+
+    Raises
+    ------
+    InputError, AssetError
+        One line naming the file: no stored visibility, a light of another
+        SH order, an output that is an input.
+    """
+    import h5py
+
+    from shtools.data_formats.bake import BakeWriter, read_bake
+    from shtools.progress import silent
+
+    start = time.perf_counter()
+    for src in (bake, light) + (() if scene is None or not isinstance(scene, str | os.PathLike)
+                                 else (scene,)):
+        if _same_file(output, src):
+            raise InputError(f"is also an input ({src}); choose another output", output)
+    b = read_bake(bake)
+    if b.visibility is None:  # before reading the light: the bake is what is missing
+        raise InputError("has no stored visibility; rebake it with 'shtools bake "
+                         "--store-visibility' to relight it", bake)
+    settings = relight_settings(b)
+    inputs = {"bake": bake}
+    env = relight_environment(light, b.sh_order, b.parameters.get("window", settings.window),
+                              rotate, inputs)
+    if scene is not None:
+        scene = scene_lights(scene)
+        inputs["scene"] = scene.path
+    parameters = dict(b.parameters)
+    parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
+                             "lights": None if scene is None else Path(scene.path).name}
+    static = b.vertices.ndim == 2
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1, thread_name_prefix="relight-inputs") as hasher:
+        # the writer hashes its inputs (the bake is large; hashlib frees the GIL) while
+        # the first frames are shaded
+        made = hasher.submit(
+            BakeWriter, output, n_frames=b.n_frames, faces=b.faces, sh_order=b.sh_order,
+            static_vertices=b.vertices if static else None,
+            static_normals=b.normals if static else None, n_vertices=b.n_vertices,
+            visibility_size=b.visibility.shape[2], times=b.times, frame_index=b.frame_index,
+            albedo=b.albedo, object_offsets=b.object_offsets, object_names=b.object_names,
+            parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"),
+            compression=compression)
+        frames = relight_frames(b, env, scene, settings, threads)
+        first = next(frames)
+        writer = made.result()
+    with (h5py.File(bake, "r") as source, writer as w,
+          (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
+        # per-frame datasets stored as the output stores them are copied as stored
+        # (compressed bytes), not compressed again; the others come from memory
+        kept = {name: source[name] for name in ("vertices", "normals", "visibility")
+                if source[name].ndim == 3 and source[name].compression
+                == (None if name == "visibility" else compression)}
+        for t, radiance in enumerate(itertools.chain([first], frames)):
+            frame = {name: kept.get(name, getattr(b, name)[t])
+                     for name in ("vertices", "normals") if not static}
+            w.write_frame(t, radiance, visibility=kept.get("visibility", b.visibility[t]),
+                          **frame)
+            bar.update(1)
+    return {"frames": b.n_frames, "vertices": b.n_vertices,
+            "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),
+            "lights": 0 if scene is None else len(scene.lights)}
+
+
+def _same_file(a, b) -> bool:
+    """True when ``a`` and ``b`` name one file (links included)."""
+    a, b = Path(a), Path(b)
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)

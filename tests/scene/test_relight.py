@@ -1,0 +1,232 @@
+"""Relighting a stored-visibility bake equals a real re-bake under the new light."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from shtools.data_formats.bake import read_bake
+from shtools.data_formats.light import write_light
+from shtools.scene.bake import bake_to_file
+from shtools.scene.relight import relight
+from shtools.scene.scene import load_scene
+
+ORDER = 3
+
+SCENE = """
+[settings]
+order = {order}
+frames = 3
+fps = 4
+
+[environment]
+light = "{light}"
+rotate_deg = {rotate}
+{lamp}
+[[objects]]
+name = "ground"
+primitive = {{ type = "plane", size = [4, 4], subdivisions = 12 }}
+role = "receiver"
+{ground_keys}
+[[objects]]
+name = "ball"
+primitive = {{ type = "sphere", radius = 0.5, subdivisions = 2 }}
+role = "{ball_role}"
+[[objects.keyframes]]
+time = 0
+translate = [-0.5, 0.7, 0]
+[[objects.keyframes]]
+time = 0.5
+translate = [0.5, 0.6, 0.2]
+"""
+
+LAMP = """
+[[lights]]
+name = "lamp"
+shadows = "{shadows}"
+position = [1.0, 2.5, 0.5]
+radius = 0.3
+color = [6.0, 5.0, 4.0]
+{lamp_keys}"""
+
+#: keyframes that move the ground and the lamp (else only the ball moves)
+GROUND_KEYS = """[[objects.keyframes]]
+time = 0
+[[objects.keyframes]]
+time = 0.5
+translate = [0.2, 0, 0.1]
+"""
+LAMP_KEYS = """[[lights.keyframes]]
+time = 0
+[[lights.keyframes]]
+time = 0.5
+position = [-1.0, 2.0, 1.0]
+radius = 0.4
+color = [3.0, 4.0, 6.0]
+"""
+
+
+def _sky(path, seed, order=ORDER):
+    """A coloured sky: a bright DC term plus random higher bands (a directional part)."""
+    rng = np.random.default_rng(seed)
+    coeffs = rng.normal(0.0, 0.3, (order * order, 3))
+    coeffs[0] = math.sqrt(4 * math.pi) * np.array([1.0, 0.9, 0.8])
+    write_light(path, coeffs, source="inline", parameters={"order": order, "window": "none"})
+    return path
+
+
+def _scene(tmp_path, name, light, rotate=0.0, lamp=True, shadows="shexp", moving="all"):
+    path = tmp_path / name
+    keys = moving == "all"
+    lamp = LAMP.format(shadows=shadows, lamp_keys=LAMP_KEYS if keys else "") if lamp else ""
+    path.write_text(SCENE.format(order=ORDER, light=light, rotate=rotate, lamp=lamp,
+                                 ground_keys=GROUND_KEYS if keys else "",
+                                 ball_role="blocker" if moving == "none" else "both"))
+    return path
+
+
+@pytest.fixture(params=["all", "ball", "none"])
+def moving(request):
+    """What moves: ground and lamp keyframed (every vertex shaded per frame); only the
+    ball (the ground from its fixed linear shading, the ball shaded per frame); or no
+    receiver (the ball only blocks: a bake with one pose of the receivers)."""
+    return request.param
+
+
+@pytest.fixture
+def baked_a(tmp_path, moving):
+    """Light A, the lamp, visibility stored; and light B beside it."""
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    scene = _scene(tmp_path, "a.toml", "a.h5", moving=moving)
+    bake_to_file(load_scene(scene), tmp_path / "a_baked.h5", store_visibility=True,
+                 processes=1, workers=1)
+    return scene, tmp_path / "a_baked.h5"
+
+
+def test_relight_equals_a_fresh_bake_under_the_new_light(baked_a, tmp_path, moving):
+    scene_a, bake_a = baked_a
+    scene_b = _scene(tmp_path, "b.toml", "b.h5", rotate=35.0, moving=moving)
+    bake_to_file(load_scene(scene_b), tmp_path / "b_baked.h5", processes=1, workers=1)
+    summary = relight(bake_a, tmp_path / "b.h5", tmp_path / "relit.h5", rotate=35.0,
+                      scene=scene_a)
+    assert summary["frames"] == 3 and summary["lights"] == 1
+    relit, fresh, old = (read_bake(tmp_path / n) for n in ("relit.h5", "b_baked.h5",
+                                                            "a_baked.h5"))
+    # the relit frames differ from light A's (the test could not pass by copying) ...
+    assert np.max(np.abs(old.radiance - fresh.radiance)) > 0.05 * np.max(fresh.radiance)
+    # ... and equal the fresh bake: the same float32 shading of the same visibility;
+    # rtol 1e-4 is float32 rounding of a sum of ~10 terms, atol the same relative to
+    # the brightest vertex for the deep-shadow vertices near 0
+    top = float(np.max(np.abs(fresh.radiance)))
+    np.testing.assert_allclose(relit.radiance, fresh.radiance, rtol=1e-4, atol=1e-6 * top)
+    # everything but the radiance is carried over, visibility included (it can be relit again)
+    np.testing.assert_array_equal(relit.visibility, old.visibility)
+    np.testing.assert_array_equal(relit.vertices, old.vertices)
+    assert relit.object_names == old.object_names and relit.attrs["fps"] == old.attrs["fps"]
+
+
+def test_relight_without_lights_is_the_environment_alone(baked_a, tmp_path, moving):
+    _, bake_a = baked_a
+    scene_b = _scene(tmp_path, "b.toml", "b.h5", lamp=False, moving=moving)
+    bake_to_file(load_scene(scene_b), tmp_path / "b_baked.h5", processes=1, workers=1)
+    relight(bake_a, tmp_path / "b.h5", tmp_path / "relit.h5")
+    top = float(np.max(read_bake(tmp_path / "b_baked.h5").radiance))
+    np.testing.assert_allclose(read_bake(tmp_path / "relit.h5").radiance,
+                               read_bake(tmp_path / "b_baked.h5").radiance, rtol=1e-4,
+                               atol=1e-6 * top)
+
+
+def _one_line_error(run_cli, *args):
+    code, _, stderr = run_cli(*args)
+    assert code not in (0, 3) and stderr.count("\n") == 1 and "Traceback" not in stderr, stderr
+    return stderr
+
+
+@pytest.mark.parametrize("moving", ["ball"])  # one bake is enough here
+def test_relight_refuses_bad_input_in_one_line(baked_a, tmp_path, run_cli):
+    scene_a, bake_a = baked_a
+    before = bake_a.read_bytes()
+    out = tmp_path / "relit.h5"
+    # a bake without stored visibility
+    bake_to_file(load_scene(scene_a), tmp_path / "plain.h5", processes=1, workers=1)
+    err = _one_line_error(run_cli, "relight", tmp_path / "plain.h5", "--light",
+                          tmp_path / "b.h5", "-o", out)
+    assert "--store-visibility" in err and "plain.h5" in err
+    # a light of another SH order
+    _sky(tmp_path / "c.h5", 3, order=ORDER + 1)
+    err = _one_line_error(run_cli, "relight", bake_a, "--light", tmp_path / "c.h5", "-o", out)
+    assert f"order {ORDER + 1}" in err and f"--order {ORDER}" in err
+    # the output is the input
+    err = _one_line_error(run_cli, "relight", bake_a, "--light", tmp_path / "b.h5", "-o", bake_a)
+    assert "also an input" in err
+    # not a bake
+    err = _one_line_error(run_cli, "relight", tmp_path / "b.h5", "--light", tmp_path / "b.h5",
+                          "-o", out)
+    # a light the stored visibility cannot shadow
+    ssoc = _scene(tmp_path, "ssoc.toml", "a.h5", shadows="ssoc", moving="none")
+    err = _one_line_error(run_cli, "relight", bake_a, "--light", tmp_path / "b.h5",
+                          "--lights", ssoc, "-o", out)
+    assert "ssoc" in err
+    assert not out.exists() and bake_a.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+
+
+@pytest.mark.parametrize("moving", ["ball"])
+def test_relight_cli_writes_the_asset(baked_a, tmp_path, run_cli):
+    scene_a, bake_a = baked_a
+    code, stdout, stderr = run_cli("relight", bake_a, "--light", tmp_path / "b.h5",
+                                   "--rotate", "90", "--lights", scene_a, "--compress",
+                                   "-o", tmp_path / "relit.h5")
+    assert code == 0, stderr
+    assert "relit 3 frame(s)" in stdout
+    relit = read_bake(tmp_path / "relit.h5")
+    assert relit.parameters["relight"] == {"light": "b.h5", "rotate_deg": 90.0,
+                                           "lights": "a.toml"}
+    # --compress stores geometry and radiance as a bake does, the same values as plain
+    relight(bake_a, tmp_path / "b.h5", tmp_path / "plain.h5", rotate=90.0, scene=scene_a)
+    plain = read_bake(tmp_path / "plain.h5")
+    np.testing.assert_array_equal(plain.radiance, relit.radiance)
+    np.testing.assert_array_equal(plain.vertices, relit.vertices)
+    import h5py
+
+    with h5py.File(tmp_path / "relit.h5") as f, h5py.File(tmp_path / "plain.h5") as g:
+        assert f["radiance"].compression == "gzip" and g["radiance"].compression is None
+
+
+@pytest.mark.parametrize("moving", ["ball"])
+def test_relight_keeps_the_bakes_deringing(tmp_path, moving):
+    """A bake with deringing = "none" keeps its negative lobes when relit, as a fresh bake."""
+    _sky(tmp_path / "a.h5", 1)
+    # a sky of strong low bands: its order-3 truncation rings below zero in places
+    coeffs = np.zeros((ORDER * ORDER, 3))
+    coeffs[0] = math.sqrt(4 * math.pi) * 0.3
+    coeffs[2] = [3.0, 2.5, 2.0]
+    coeffs[6] = [-2.0, -1.5, -1.0]
+    write_light(tmp_path / "ring.h5", coeffs, source="inline", parameters={"window": "none"})
+    for name, light in (("a.toml", "a.h5"), ("b.toml", "ring.h5")):
+        path = _scene(tmp_path, name, light, moving=moving)
+        path.write_text(path.read_text().replace("fps = 4", 'fps = 4\nderinging = "none"'))
+    bake_to_file(load_scene(tmp_path / "a.toml"), tmp_path / "a_baked.h5",
+                 store_visibility=True, processes=1, workers=1)
+    bake_to_file(load_scene(tmp_path / "b.toml"), tmp_path / "b_baked.h5", processes=1,
+                 workers=1)
+    assert read_bake(tmp_path / "a_baked.h5").parameters["deringing"] == "none"
+    relight(tmp_path / "a_baked.h5", tmp_path / "ring.h5", tmp_path / "relit.h5",
+            scene=tmp_path / "a.toml")
+    fresh = read_bake(tmp_path / "b_baked.h5").radiance
+    assert (fresh < 0).any()  # the check below sees negative radiance kept, not removed
+    top = float(np.max(np.abs(fresh)))
+    np.testing.assert_allclose(read_bake(tmp_path / "relit.h5").radiance, fresh, rtol=1e-4,
+                               atol=1e-6 * top)
+
+
+@pytest.mark.parametrize("moving", ["ball"])
+def test_relit_bytes_do_not_depend_on_the_thread_count(baked_a, tmp_path):
+    scene_a, bake_a = baked_a
+    for threads in (1, 3):
+        relight(bake_a, tmp_path / "b.h5", tmp_path / f"t{threads}.h5", rotate=20.0,
+                scene=scene_a, threads=threads)
+    assert (tmp_path / "t1.h5").read_bytes() == (tmp_path / "t3.h5").read_bytes()
