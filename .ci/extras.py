@@ -91,6 +91,16 @@ def _dask() -> None:
         assert client.submit(sum, [1, 2]).result() == 3
 
 
+def _view() -> None:
+    """The viewer's colours of a tiny bake (what its page draws) and its command."""
+    from shtools.view import BakeView
+
+    with tempfile.TemporaryDirectory() as tmp:
+        _tiny_bake(Path(tmp))
+        view = BakeView(Path(tmp) / "baked.h5")
+        assert len(view.colors(1, "radiance")) == 3 * 3, view.summary()
+
+
 #: extra -> (modules or packages it makes importable, a call that must run)
 EXTRAS = {
     "geometry": (["shtools.geometry", "shtools.reference", "shtools.scene",
@@ -101,6 +111,7 @@ EXTRAS = {
     "plots": (["matplotlib.pyplot"], _plot),
     "usd": (["shtools.export.usd"], _usd),
     "distributed": (["dask.distributed", "shtools.tasks"], _dask),
+    "view": (["shtools.view", "shtools.cli.view"], _view),
 }
 
 
