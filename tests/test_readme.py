@@ -112,11 +112,8 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
     np.testing.assert_allclose(rgb[far], baked.radiance[0][far], rtol=2e-2, atol=2e-3)
 
     # the skinned recipe, after the Quick start (it reuses light.h5)
-    sys.path.insert(0, str(REPO / "tests" / "scene"))
-    try:
-        from rig import write_bending_tube
-    finally:
-        sys.path.pop(0)
+    from helpers.rig import write_bending_tube
+
     write_bending_tube(tmp_path / "character.glb")
     (script,) = _blocks(_section("A skinned character (glTF with a skin and a walk cycle)"),
                         "sh")
