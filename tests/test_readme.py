@@ -156,12 +156,25 @@ def test_doc_table_cells_stay_short():
     assert long_cells == []
 
 
+#: History and outside documents: chronology lives in CHANGELOG.md, papers are cited
+#: by name and section (docs/references.md)
+HISTORY = re.compile(r"\bwaves? ?\d|\bwave-\d|\bissue[- ]\d+|spec §|\bthe seed\b|\.\./shared/",
+                     re.IGNORECASE)
+
+
 def test_readme_and_docs_carry_no_history_or_outside_paths():
     """Chronology lives in CHANGELOG.md, papers are cited by name (docs/references.md)."""
-    pattern = re.compile(r"\bwaves? ?\d|\bwave-\d|\bissue \d+|spec §|\bthe seed\b|\.\./shared/",
-                         re.IGNORECASE)
     found = [(path.name, m.group(0)) for path in [REPO / "README.md", *DOCS]
-             for m in pattern.finditer(path.read_text(encoding="utf-8"))]
+             for m in HISTORY.finditer(path.read_text(encoding="utf-8"))]
+    assert found == []
+
+
+def test_code_and_help_text_carry_no_history_or_outside_paths():
+    """No comment, docstring or --help text in shtools/ narrates rounds of work, names an
+    issue or cites a document outside the repository."""
+    found = [(str(path.relative_to(REPO)), m.group(0))
+             for path in sorted((REPO / "shtools").rglob("*.py"))
+             for m in HISTORY.finditer(path.read_text(encoding="utf-8"))]
     assert found == []
 
 
