@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.processes import alive, children, cmdline
 
 from shtools.cli.main import main
 
@@ -148,16 +149,6 @@ def kit(tmp_path_factory):
     return Kit(tmp_path_factory.mktemp("kit"))
 
 
-def _children(pid: int | None = None) -> list[int]:
-    """Live child processes of ``pid`` (default this process), from /proc."""
-    pid = os.getpid() if pid is None else pid
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        with contextlib.suppress(OSError):
-            out += [int(c) for c in (task / "children").read_text().split()]
-    return [c for c in out if _alive(c)]
-
-
 def _leftover_processes() -> list[int]:
     """Processes this test process left running: its children, and what its fork server forked.
 
@@ -166,20 +157,12 @@ def _leftover_processes() -> list[int]:
     workers left behind.
     """
     left = []
-    for child in _children():
-        if b"multiprocessing." in (_cmdline(child) or b""):
-            left += _children(child)
+    for child in children():
+        if b"multiprocessing." in (cmdline(child) or b""):
+            left += children(child)
         else:
             left.append(child)
     return left
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (OSError, IndexError):
-        return False
-    return state not in ("Z", "X")
 
 
 def _temporaries(*folders: Path) -> list[str]:
@@ -611,8 +594,8 @@ def _long_bake(kit, tmp_path, args=("--processes", "2", "--workers", "1")):
     while time.monotonic() < deadline and proc.poll() is None:
         # the workers are forked by multiprocessing's fork server, a child of the bake
         # started by exec (as is its resource tracker); all of them must go at the end
-        helpers = [c for c in _children(proc.pid) if b"multiprocessing." in (_cmdline(c) or b"")]
-        workers = [w for h in helpers for w in _children(h)]
+        helpers = [c for c in children(proc.pid) if b"multiprocessing." in (cmdline(c) or b"")]
+        workers = [w for h in helpers for w in children(h)]
         if workers:
             workers += helpers
             break
@@ -623,18 +606,11 @@ def _long_bake(kit, tmp_path, args=("--processes", "2", "--workers", "1")):
     return proc, workers, out
 
 
-def _cmdline(pid: int) -> bytes | None:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return None
-
-
 def _wait_gone(pids, seconds=20.0):
     deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline and any(_alive(p) for p in pids):
+    while time.monotonic() < deadline and any(alive(p) for p in pids):
         time.sleep(0.05)
-    return [p for p in pids if _alive(p)]
+    return [p for p in pids if alive(p)]
 
 
 needs_linux = pytest.mark.skipif(not sys.platform.startswith("linux"),

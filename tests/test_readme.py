@@ -112,11 +112,8 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
     np.testing.assert_allclose(rgb[far], baked.radiance[0][far], rtol=2e-2, atol=2e-3)
 
     # the skinned recipe, after the Quick start (it reuses light.h5)
-    sys.path.insert(0, str(REPO / "tests" / "scene"))
-    try:
-        from rig import write_bending_tube
-    finally:
-        sys.path.pop(0)
+    from helpers.rig import write_bending_tube
+
     write_bending_tube(tmp_path / "character.glb")
     (script,) = _blocks(_section("A skinned character (glTF with a skin and a walk cycle)"),
                         "sh")
@@ -159,12 +156,25 @@ def test_doc_table_cells_stay_short():
     assert long_cells == []
 
 
+#: History and outside documents: chronology lives in CHANGELOG.md, papers are cited
+#: by name and section (docs/references.md)
+HISTORY = re.compile(r"\bwaves? ?\d|\bwave-\d|\bissue[- ]\d+|spec §|\bthe seed\b|\.\./shared/",
+                     re.IGNORECASE)
+
+
 def test_readme_and_docs_carry_no_history_or_outside_paths():
     """Chronology lives in CHANGELOG.md, papers are cited by name (docs/references.md)."""
-    pattern = re.compile(r"\bwaves? ?\d|\bwave-\d|\bissue \d+|spec §|\bthe seed\b|\.\./shared/",
-                         re.IGNORECASE)
     found = [(path.name, m.group(0)) for path in [REPO / "README.md", *DOCS]
-             for m in pattern.finditer(path.read_text(encoding="utf-8"))]
+             for m in HISTORY.finditer(path.read_text(encoding="utf-8"))]
+    assert found == []
+
+
+def test_code_and_help_text_carry_no_history_or_outside_paths():
+    """No comment, docstring or --help text in shtools/ narrates rounds of work, names an
+    issue or cites a document outside the repository."""
+    found = [(str(path.relative_to(REPO)), m.group(0))
+             for path in sorted((REPO / "shtools").rglob("*.py"))
+             for m in HISTORY.finditer(path.read_text(encoding="utf-8"))]
     assert found == []
 
 

@@ -5,18 +5,18 @@ field, so every frame its visibility is sampled at points on **one** sphere,
 its bounding sphere (centre ``c``, radius ``r``), and extrapolated to other
 distances by SH scaling (:mod:`shtools.runtime.deformable`).
 
-Layout (**derived**: the seed samples 6 x 8 x 8 = 384 points in a cube-map
+Layout (**derived**: Wang et al. sample 6 x 8 x 8 = 384 points in a cube-map
 layout; a polar layout has no face seams and interpolates bilinearly): sample
 ``(i, j)`` is at polar angle ``theta_i = pi (i + 1/2) / R`` from ``+z`` and
 azimuth ``phi_j = 2 pi (j + 1/2) / A``; the default ``R x A = 16 x 24 = 384``
-samples matches the seed's count.
+samples matches their count.
 
 At each sample point ``q = c + r w`` only the **inward hemisphere** (directions
 with ``s . (c - q) > 0``) is cast: the object lies entirely on the centre's
 side of the sphere's tangent plane at ``q``, so the outward hemisphere is
 exactly unoccluded.  The occlusion is projected with a hemisphere product rule
 (Gauss–Legendre in ``cos`` of the angle from the inward axis, uniform in
-azimuth; default 16 x 32 = 512 rays per sample, the seed rasterises 32 x 32
+azimuth; default 16 x 32 = 512 rays per sample, Wang et al. rasterise 32 x 32
 pixels), and the visibility is ``sqrt(4 pi) e0 - O``.  Optionally its SH log
 (eigen-inversion) is stored too, so the field joins the SHEXP log accumulation.
 
@@ -37,7 +37,7 @@ from shtools.runtime.deformable import DeformableField, layout_directions
 from shtools.sh import basis, check_order, rotation_matrix
 from shtools.sh import log as sh_log
 
-#: Default polar layout of the sample points (rings x azimuths): 384 like the seed.
+#: Default polar layout of the sample points (rings x azimuths): 384 like Wang et al.'s.
 DEFAULT_LAYOUT = (16, 24)
 #: Default hemisphere rule per sample (cos-nodes x azimuths): 512 rays.
 DEFAULT_RAYS = (16, 32)

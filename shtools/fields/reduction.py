@@ -8,14 +8,14 @@ One shell's OCVs ``O (R, R, n*n)`` on the cell-centred (theta, phi) grid:
 2. ``Ô`` = ``Õ`` interpolated back at every current sample position with the
    **runtime's own lookup** (:func:`shtools.runtime.fields.interpolate_grid`:
    theta clamps, phi wraps), so the threshold holds for what the runtime
-   reconstructs (step 5; the seed clamps phi as well -- our lookup wraps);
+   reconstructs (step 5; Tamura et al. clamp phi as well -- our lookup wraps);
 3. ``e = (1/4 pi) int |Ô . y - O . y|`` per sample (eq. 1) on a fixed
    quadrature (:data:`ERROR_QUAD_DEGREE`);
 4. if every ``e < threshold`` the new samples replace the current ones and R
    halves; otherwise R stays (step 7).  ``R`` never goes below
-   ``min_resolution`` (Table 1 never goes below 8; the seed does not state it).
+   ``min_resolution`` (Table 1 never goes below 8; the paper does not state it).
 
-The seed compares each level with the previous one, so errors can add up; the
+Tamura et al. compare each level with the previous one, so errors can add up; the
 cumulative error against the full-resolution samples is reported per shell,
 and ``cumulative=True`` (beyond the paper) compares every level against them.
 """
@@ -98,7 +98,7 @@ def reduce_shell(grid, threshold: float, min_resolution: int = 8, *,
     grid : array_like, shape (R, R, n*n)
         Initial OCVs, R a power of two.
     threshold : float
-        > 0 (the seed uses 0.01).
+        > 0 (Tamura et al. use 0.01).
     min_resolution : int
         Floor of R (a power of two).
     cumulative : bool

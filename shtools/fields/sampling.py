@@ -2,7 +2,7 @@ r"""Shadow-field sampling: the object's visibility seen from points around it, i
 
 * :func:`bounding_sphere` -- the object's minimal bounding sphere (centre, ``V_r``);
 * :func:`shell_radii` -- Tamura's ``r_c = 0.2 V_r (1 + c)``;
-* :func:`direction_map` -- the per-sample direction set: the seed's 64 x 64
+* :func:`direction_map` -- the per-sample direction set: Tamura et al.'s 64 x 64
   (theta, phi) map, cell-centred, each direction weighted by its cell's exact
   solid angle (``(cos theta_lo - cos theta_hi) 2 pi / M``), so the weights sum
   to ``4 pi`` exactly;

@@ -15,8 +15,8 @@ with at least ``n_dirs`` nodes and projected to order ``n`` with its weights,
 ``g_i = Σ_q w_q V(s_q) y_i(s_q)``.  The rule is exact for polynomials of degree
 ``d`` (``(d/2 + 1)(d + 1) >= n_dirs``), not for the discontinuous visibility,
 so ``n_dirs`` sets the accuracy: shadow boundaries cut the rule's cells.
-Measured on a closed form (a cone of half-angle 45° about +y plus a half
-space, ``tests/fields``): single coefficients within 4.6e-2 at 2,000 nodes,
+On a closed form (a cone of half-angle 45° about +y plus a half space,
+``tests/fields``): single coefficients within 4.6e-2 at 2,000 nodes,
 2e-2 at 8,000 and 3.7e-3 at 20,000 (``g_0 = 3.54`` for reference).  The
 ray-traced reference uses the same family of rules, so at equal ``n_dirs``
 both carry the same quadrature error.
@@ -143,8 +143,8 @@ def self_visibility(vertices, normals, meshes, order: int, *, n_dirs: int = DEFA
 
 
 #: Directions per vertex of :func:`hemisphere_visibility` (skinned objects traced every
-#: frame): the fewest that keep the issue-16 goal (5 % against the real mesh) with about
-#: a point to spare; what each count costs and buys is measured in docs/scenes.md
+#: frame): the fewest that keep the radiance error against the real mesh under 5 % with
+#: about a point to spare; what each count costs and buys is in docs/scenes.md
 #: (``benchmarks/bench_fidelity.py --skinned``).
 HEMISPHERE_DIRECTIONS = 32
 #: Blocked (vertex, direction) pairs whose basis is evaluated at once (~16 MB at order 6).
@@ -270,9 +270,9 @@ def _subtract_blocked(g, vertex, dirs, weight, order: int) -> None:
 
 #: Rays a receiver casts toward a traced object whose bounding sphere fills its whole
 #: hemisphere (:func:`cone_visibility`); a smaller cone gets fewer in proportion to its
-#: solid angle.  The fewest that keep the issue-16 ground goal (3 % against the real mesh)
-#: on the dragon + armadillo ground under the Mondello sun (64: 3.2 %, 96: 2.7 %) and, with
-#: margin, on CesiumMan and the Fox (``benchmarks/bench_fidelity.py``, ``--skinned``).
+#: solid angle.  The fewest that keep the ground's radiance error against the real mesh
+#: under 3 % on the dragon + armadillo ground under the Mondello sun and, with margin, on
+#: CesiumMan and the Fox (``benchmarks/bench_fidelity.py``, ``--skinned``).
 CONE_DIRECTIONS = 96
 #: Fewest rays per receiver of :func:`cone_visibility` (distant receivers, small cones).
 CONE_MIN_RAYS = 4

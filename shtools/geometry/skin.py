@@ -33,14 +33,11 @@ import numpy as np
 from shtools.errors import InputError
 from shtools.geometry.transforms import (
     decompose_trs,
-    quaternion_matrix,
     slerp,
     trs_matrix,
 )
 
-# the transform names are re-exported for shtools.scene.animation, which imports them
-# from here; their home is shtools.geometry.transforms
-__all__ = ["SkinnedModel", "load_skinned_gltf", "quaternion_matrix", "slerp", "trs_matrix"]
+__all__ = ["SkinnedModel", "load_skinned_gltf"]
 
 _COMPONENT_DTYPES = {
     5120: np.int8,

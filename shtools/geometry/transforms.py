@@ -7,9 +7,19 @@ Conventions (those of glTF 2.0, "Transformations"): quaternions are
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["decompose_trs", "matrix_quaternion", "quaternion_matrix", "slerp", "trs_matrix"]
+__all__ = [
+    "decompose_trs",
+    "euler_to_quaternion",
+    "matrix_quaternion",
+    "quaternion_matrix",
+    "quaternion_multiply",
+    "slerp",
+    "trs_matrix",
+]
 
 #: below this cosine between keys, slerp falls back to normalised lerp (no division
 #: by a vanishing sin)
@@ -104,3 +114,24 @@ def matrix_quaternion(r: np.ndarray) -> np.ndarray:
         q[k] = (r[k, i] + r[i, k]) / s
     q = np.asarray(q)
     return q / np.linalg.norm(q)
+
+
+def euler_to_quaternion(degrees: np.ndarray) -> np.ndarray:
+    """Quaternion (x, y, z, w) of ``R = Rz @ Ry @ Rx`` from angles in degrees (x, y, z)."""
+    hx, hy, hz = np.radians(np.asarray(degrees, dtype=float)) / 2
+    qx = np.array([math.sin(hx), 0, 0, math.cos(hx)])
+    qy = np.array([0, math.sin(hy), 0, math.cos(hy)])
+    qz = np.array([0, 0, math.sin(hz), math.cos(hz)])
+    return quaternion_multiply(quaternion_multiply(qz, qy), qx)
+
+
+def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions (x, y, z, w); ``a*b`` rotates by b then a."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array([
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    ])

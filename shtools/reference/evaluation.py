@@ -45,9 +45,9 @@ from shtools.runtime import (
     field_product_visibility,
 )
 from shtools.runtime.hierarchy import leaf_spheres
-from shtools.runtime.settings import RUNTIME_EXP_METHODS
+from shtools.runtime.settings import EXP_CHOICES
 
-METHOD_NAMES = (*RUNTIME_EXP_METHODS, "product")
+METHOD_NAMES = (*EXP_CHOICES, "product")
 
 
 @dataclass

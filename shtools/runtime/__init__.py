@@ -34,14 +34,14 @@ occlusion camera, Mo et al.; NumPy rasterised shadow and distortion maps) gives
 the visible fraction ``S`` of a light per receiver, shaded as ``S`` times
 :func:`~shtools.runtime.shading.sphere_light_unshadowed` (``docs/ssoc.md``).
 
-Defaults and costs (``benchmarks/bench_runtime.py``, issue 4): the log is
+Defaults and costs (``benchmarks/bench_runtime.py``): the log is
 accumulated at ``n_acc = min(n + 2, 6)`` and exponentiated there with PS*-2
 (HYB when ``n_acc <= 4``), then truncated to ``n``.  Accumulating at 6 for
-shading at 4 roughly halves the truncation error of the visibility (paper
-Fig. 7e) — it is what meets the 3 % radiance target against ray tracing of the
-sphere set — at about 1.5x the frame CPU time of ``acc_order=4``, the fast
-setting.  Tables passed in must have exactly the accumulation order (the cap
-log depends on the order it is computed at).
+shading at 4 roughly halves the truncation error of the visibility (Ren et al.
+2006, Fig. 7e) — it is what meets the 3 % radiance target against ray tracing of
+the sphere set — at a higher frame CPU time than ``acc_order=4``, the fast
+setting (``benchmarks/RESULTS.md``).  Tables passed in must have exactly the
+accumulation order (the cap log depends on the order it is computed at).
 
 Performance notes: a frame's receiver clusters are split into parts of equal
 work, one evaluated in the calling process and the others in worker

@@ -182,7 +182,7 @@ class BlockKernel:
         self.norm = normalisation(self.order).astype(np.float32)
         self._scratch = np.empty((_N_SCRATCH + self.order, 0), np.float32)
         # intp indices: np.take of 8-byte items with int32 indices spread over
-        # the table takes a slow path (~8x slower, measured with NumPy 2)
+        # the table takes a slow path (NumPy 2)
         self._idx = np.empty(0, np.intp)
         self._masks = np.empty((2, 0), np.bool_)
 

@@ -45,9 +45,8 @@ from shtools.sh import rotation_matrix
 PART_BLOCKERS = (FieldBlocker, DeformableBlocker)
 #: A deformable field at one receiver (lookup, scaling, exp) costs about as much CPU
 #: as this many sphere-receiver pairs; it weighs receivers when a frame is split
-#: (``MIN_PARALLEL_PAIRS``, cluster costs).  Measured (order 4, acc 6, 10k receivers,
-#: one process, load 9.5 on 2 cores): 3.3 us per receiver (log space; 3.5 product)
-#: vs 0.05 us per pair of 48 spheres, exp included.
+#: (``MIN_PARALLEL_PAIRS``, cluster costs): the CPU of one deformable receiver over
+#: that of one sphere-receiver pair, exp included (order 4, acc 6, either field space).
 DEFORMABLE_RECEIVER_PAIRS = 64
 
 

@@ -39,8 +39,8 @@ VOLTERRA_DEGREE = (4, 6)
 #: The projection onto class k of f * g collects f_i g_j with i XOR j == k.
 _CLASS_PAIRS = tuple(tuple((i, i ^ k) for i in range(4)) for k in range(4))
 #: From this order on, products use the 4 parity classes (4x fewer matrix flops
-#: for ~4x more elementwise work: 1.3-1.6x faster at order 6, measured in
-#: benchmarks/bench_runtime.py); below it the plain full quadrature is faster.
+#: for ~4x more elementwise work, which pays from this order on; below it the plain
+#: full quadrature is faster: benchmarks/bench_runtime.py times both).
 SPLIT_MIN_ORDER = 5
 
 

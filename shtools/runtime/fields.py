@@ -61,7 +61,7 @@ def shell_bilinear(theta, phi, res):
     """Sample indices and weights of the bilinear lookup on a cell-centred shell grid.
 
     Sample ``(s, t)`` sits at ``theta_s = (s + 1/2) pi / R``, ``phi_t = (t + 1/2) 2 pi / R``.
-    theta clamps to the first/last row; phi wraps (the seed's duplicated border
+    theta clamps to the first/last row; phi wraps (Tamura et al.'s duplicated border
     columns, Sec. 5.1).
 
     Parameters

@@ -15,7 +15,7 @@ face's half field of view.
   covered.
 * ``"frustum"``: one face about the mean direction to the receivers, widened
   by the same guard; only valid while every receiver is within 60° of it
-  (the seed's single light frustum).  ``"auto"`` picks it when it fits and the
+  (Mo et al.'s single light frustum).  ``"auto"`` picks it when it fits and the
   cube otherwise.  The chosen mode is recorded in :attr:`LightCamera.mode`.
 """
 

@@ -13,8 +13,8 @@ gather and one multiply per band and no interpolation weights: the *ratio*
 small-cap limit), tabulated at the midpoints of ``RATIO_SAMPLES`` cells, so
 :math:`F_l(x) \approx x\,G_l(\text{cell of } x)`.  Its error is first order in
 the cell width, ``|G'| x / (2K)``; at 16384 cells it stays below 6e-4 of each
-band's largest coefficient and the median relative error is 5e-5 (measured
-against the float64 table; tests/runtime/test_accumulate.py checks it).
+band's largest coefficient and the median relative error is 5e-5 (against
+the float64 table; tests/runtime/test_accumulate.py checks it).
 """
 
 from __future__ import annotations

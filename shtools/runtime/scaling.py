@@ -341,7 +341,7 @@ def midrange_lighting(env_sh, points, center, radius: float, table: ScalingTable
     The environment was captured at the sphere's centre (``env_sh``); a point
     at distance ``d`` from it sees the sphere's points along other directions,
     ``L_p = D^T M_mid(d/R) D L_c`` with the axis from the centre to the point
-    (Wang et al. Sec. 3.2; plain scaling, spec §2.7: radiance is invariant
+    (Wang et al. 2005, Sec. 3.2; plain scaling: radiance is invariant
     along rays, so the warp alone is exact up to truncation).
 
     The warp moves the environment's bands ``>= n`` into the bands below, so

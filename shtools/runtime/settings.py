@@ -36,11 +36,10 @@ MAX_ORDER = 8
 MAX_ACC_ORDER = 10
 
 #: Accumulation order used when ``acc_order`` is None: ``n + 2`` (at most 6).
-#: From ``benchmarks/bench_runtime.py`` (accuracy vs order on a procedural scene,
-#: shading order 4): radiance error vs ray tracing of the sphere set 4.7 % at
-#: n_acc = 4, 3.0 % at 5, 1.9 % at 6, 1.0 % at 8; battle-scale frame CPU time
-#: 1 : 1.3 : 1.5 for 4 : 5 : 6 (8 costs about 3x).  6 is the cheapest order that
-#: meets the 3 % target with margin; ``acc_order=4`` is the fast setting.
+#: At shading order 4, 6 is the cheapest order that meets the 3 % radiance target
+#: against ray tracing of the sphere set with margin; ``acc_order=4`` is the fast
+#: setting (error and frame time per order: ``benchmarks/bench_runtime.py``,
+#: ``benchmarks/RESULTS.md``).
 DEFAULT_EXTRA_ACC_ORDERS = 2
 #: Above this accumulation order the default stops growing (cost ~ n_acc^2 per pair).
 MAX_DEFAULT_ACC_ORDER = 6
@@ -56,8 +55,6 @@ EXP_CHOICES = ("auto", *(m.value for m in ExpMethod))
 WINDOW_CHOICES = (*(k.value for k in WindowKind), "none")
 #: Removal of negative radiance left by SH ringing (``shtools.runtime.shading``).
 DERINGING_CHOICES = ("desaturate", "none")
-#: kept for callers of the previous name
-RUNTIME_EXP_METHODS = EXP_CHOICES
 #: How shadow-field blockers are combined (``ShadowSettings.field_space``).
 FIELD_SPACES = ("log", "product")
 
@@ -302,7 +299,7 @@ class ShadowSettings:
         ``"product"`` multiplies their visibility vectors in after the exp with
         truncated SH products at the accumulation order (the papers' way).
         None (default): ``"log"`` for rigid fields, ``"product"`` for
-        deformable ones (:meth:`resolved_field_space`; the measured-best of each,
+        deformable ones (:meth:`resolved_field_space`; the closer to ray tracing of each,
         ``docs/scenes.md``).
     """
 
@@ -371,9 +368,9 @@ class ShadowSettings:
     def resolved_field_space(self, kind: str) -> str:
         """How shadow fields of ``kind`` ("rigid" or "deformable") combine: ``field_space``,
         or by default ``"log"`` for rigid fields and ``"product"`` for deformable ones
-        (measured: the deformable field's ground 0.4-0.7 points closer to ray tracing in
-        product space at about the same frame time; ``benchmarks/bench_fidelity.py
-        --deformable``, ``benchmarks/bench_scaling.py``)."""
+        (the deformable field's ground is closer to ray tracing in product space at
+        about the same frame time; ``benchmarks/bench_fidelity.py --deformable``,
+        ``benchmarks/bench_scaling.py``)."""
         if self.field_space is not None:
             return self.field_space
         return "product" if kind == "deformable" else "log"

@@ -1,8 +1,7 @@
 r"""The soft shadow occlusion camera (SSOC; Mo, Popescu, Wyman): small spherical lights.
 
-Per light and frame, on the CPU in vectorised NumPy (``../shared/specs/
-occlusion-camera.md`` has the checked reading of the seed and the derivations
-marked *derived* below):
+Per light and frame, on the CPU in vectorised NumPy (Mo et al., cited in
+``docs/references.md``; what is marked *derived* below fills gaps in the paper):
 
 1. **silhouettes** from face orientation relative to the light centre
    (:mod:`shtools.runtime.silhouettes`; adjacency built once per topology);
@@ -17,7 +16,7 @@ marked *derived* below):
    normal ``n`` (2, pointing away from the occluder), ``z_near`` and ``z_far``;
 4. **receivers**: the visible fraction ``S`` of the light per receiver.
 
-Geometry (*derived*; the seed's Fig. 5 pseudo-code is missing).  For a
+Geometry (*derived*; the paper's Fig. 5 pseudo-code is missing).  For a
 silhouette at depth :math:`z_n`, a receiver at depth :math:`p_z` and a light
 of radius :math:`r_L`, the penumbra is the band of half-width
 
@@ -29,9 +28,9 @@ of radius :math:`r_L`, the penumbra is the band of half-width
 projection from the edge, the SSOC squeezes the band ``[-d_max, d_max]`` into
 its visible half: distortion :math:`d = (d_{max} - s)/2` and (Eq. 1)
 :math:`S = 1 - d/d_{max}`, smoothed by :math:`3t^2 - 2t^3` (``falloff="smoothstep"``,
-the seed) or replaced by the exact disk-segment fraction
+as in the paper) or replaced by the exact disk-segment fraction
 :math:`\tfrac12 + (\sin^{-1}\tau + \tau\sqrt{1-\tau^2})/\pi`, :math:`\tau = s/d_{max}`
-(``falloff="disk"``, beyond the seed).
+(``falloff="disk"``, beyond the paper).
 
 Boundary rules (Sec. 3.2.2): no record -> plain shadow map; :math:`s \le -d_{max}`
 -> umbra (0); :math:`s \ge d_{max}` or :math:`d_{max} = 0` -> the edge does not
@@ -54,7 +53,7 @@ texels (the 4 taps reach 1 texel, distorted lookups ``δ``) plus a relative
 ``ε`` (default 2e-3) for rasterisation round-off -- so a distorted lookup does
 not find the receiver's own tilted surface in front of itself (Fig. 9).
 
-Choices the seed leaves open (recorded here): quads are rasterised per
+Choices the paper leaves open (recorded here): quads are rasterised per
 sub-segment of at most ``SEGMENT_PX`` pixels (a long edge's bounding box would
 be the whole image); ``z_far`` is the shadow-map depth outside the edge at each
 texel's nearest point (the deepest of 1.5, 3 and 6 px; the receivers' far
@@ -62,12 +61,12 @@ depth where nothing is behind); the quad width uses the edge's smaller
 ``z_near`` and the deepest of those ``z_far`` at its ends and middle, clamped
 to the guard band; the post-distortion test looks at least 1.5 px outside the edge (a point
 closer than that would find the edge's own rasterised pixels); silhouette
-corners get round caps (``corners="caps"``, default; the seed's bare quads
-leave wedge gaps at the convex corners of tessellated contours, measured in
-``tests/runtime/test_ssoc.py``).
+corners get round caps (``corners="caps"``, default; the paper's bare quads
+leave wedge gaps at the convex corners of tessellated contours, as
+``tests/runtime/test_ssoc.py`` shows).
 
 This module is numpy-only and lives in the runtime (rasterisation is a NumPy
-z-buffer, so no ray tracer is needed; the seed's method is raster-based): a
+z-buffer, so no ray tracer is needed; the paper's method is raster-based): a
 pipeline embedding :mod:`shtools.runtime` gets the small-light path too.
 """
 
@@ -110,12 +109,12 @@ class SSOCSettings:
     guard : float
         Guard band of the faces (fraction of the 90° half-tangent).
     max_steps : int
-        Distortion-map lookups per tap (1 = the seed's naive approach, Fig. 5;
+        Distortion-map lookups per tap (1 = the paper's naive approach, Fig. 5;
         2-3 = Sec. 3.2.3).
     falloff : {"smoothstep", "disk"}
-        Seed's Bernstein smoothstep, or the exact disk-segment fraction.
+        The paper's Bernstein smoothstep, or the exact disk-segment fraction.
     filter : bool
-        The seed's 4-tap bilinear blend (False: nearest texel).
+        The paper's 4-tap bilinear blend (False: nearest texel).
     visibility_check : bool
         Fully shadow points still hidden after distortion (Fig. 6).
     bias_rel : float
@@ -125,10 +124,10 @@ class SSOCSettings:
     max_width : float or None
         Widest quad in pixels (default: the guard band, ``guard * f``).
     corners : {"quads", "caps"}
-        ``"quads"``: the seed's quads, which leave wedge-shaped gaps at convex
+        ``"quads"``: the paper's quads, which leave wedge-shaped gaps at convex
         silhouette corners (zig-zag contours of tessellated curved occluders);
         ``"caps"``: capsules (quads plus round caps at the endpoints, records
-        there point radially from the corner) -- beyond the seed.
+        there point radially from the corner) -- beyond the paper.
     """
 
     resolution: int = 1024
@@ -207,7 +206,7 @@ class FaceMaps:
 
 @dataclass
 class SSOCStats:
-    """CPU seconds (process time) per stage of the last frame (the seed's Table 1 columns)."""
+    """CPU seconds (process time) per stage of the last frame (the paper's Table 1 columns)."""
 
     silhouettes: float = 0.0
     shadow_map: float = 0.0

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shtools.geometry.skin import quaternion_matrix, slerp, trs_matrix
+from shtools.geometry.transforms import slerp, trs_matrix
 from shtools.scene.scene import Keyframe, LightKey, ObjectSpec, Pose, SphereLightSpec
 
 __all__ = [
@@ -21,19 +21,12 @@ __all__ = [
     "light_at",
     "local_matrix",
     "pose_matrix",
-    "quaternion_to_matrix",
-    "slerp",
     "transform_normals",
     "transform_points",
     "transform_spheres",
     "vertex_normals",
     "world_matrices",
 ]
-
-
-# --------------------------------------------------------------------------- quaternions
-# glTF's quaternion (x, y, z, w) helpers are shared with the skin loader.
-quaternion_to_matrix = quaternion_matrix
 
 
 def pose_matrix(pose: Pose) -> np.ndarray:

@@ -56,19 +56,6 @@ class BlockerSpec:
     count: int | None = None
     options: dict[str, Any] = field(default_factory=dict)
 
-    # the fit options by name (kept for callers of the first BlockerSpec)
-    @property
-    def method(self) -> str:
-        return self.options.get("method", "variational")
-
-    @property
-    def seed(self) -> int:
-        return self.options.get("seed", 0)
-
-    @property
-    def branching(self) -> int:
-        return self.options.get("branching", 4)
-
 
 @dataclass
 class PrepareContext:

@@ -3,18 +3,18 @@
 Wang et al. 2005, Sec. 3.1: every frame the posed character's visibility is
 sampled on its bounding sphere (:func:`shtools.fields.deformable.sample_deformable_field`)
 and each receiver gets the sample in its direction scaled to its distance by
-the cone SH scaling (``alpha_deg``, default 45, the seed's printed map).  By
+the cone SH scaling (``alpha_deg``, default 45, the map Wang et al. print).  By
 default its scaled visibility is multiplied in after the exp (``field_space``,
-product space for deformable fields: measured closer to ray tracing on the
-ground at about the same frame time); with ``field_space = "log"`` its SH log
+product space for deformable fields: closer to ray tracing on the ground at
+about the same frame time, ``benchmarks/bench_scaling.py``); with ``field_space = "log"`` its SH log
 joins the runtime's log accumulation (one exp for all blockers).
 
 Options: ``alpha_deg`` (cone half-angle in (0, 90) degrees), ``samples``
-(``[rings, azimuths]`` of the polar layout, default ``[16, 24]`` = 384 like the
-seed), ``rays`` (``[cos nodes, azimuths]`` of the inward-hemisphere rule per
+(``[rings, azimuths]`` of the polar layout, default ``[16, 24]`` = 384 like
+Wang et al.'s), ``rays`` (``[cos nodes, azimuths]`` of the inward-hemisphere rule per
 sample, default ``[16, 32]`` = 512), ``log`` (``"naive"``, the default, or
 ``"eigen"``: how each sample's SH log is taken, used in log space; ``benchmarks/bench_scaling.py``
-measured the same accuracy on Fox and CesiumMan, and the eigen logs of the 384
+finds the same accuracy on Fox and CesiumMan, and the eigen logs of the 384
 samples cost more than the rest of the field's frame).
 
 The object's own vertices: by default its posed mesh is traced there every

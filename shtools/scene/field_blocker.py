@@ -12,7 +12,7 @@ real mesh through the log of the O_v stored in the asset (by default at the
 accumulation order, rotated with the object), or of the ``transfer`` asset the
 scene names with ``self_visibility`` (:func:`shtools.scene.transfer.object_self_log`,
 :func:`shtools.scene.pose.pose_frame`).  So one asset gives a rigid object
-real-mesh shadows both on the other receivers and on itself (issue 16).
+real-mesh shadows both on the other receivers and on itself.
 """
 
 from __future__ import annotations

@@ -30,11 +30,10 @@ from shtools.errors import InputError
 from shtools.scene.shadows import LightShadow, register_light_shadow
 
 #: Angular radius (radians) below which ``"auto"`` picks the occlusion camera.
-#: Measured by ``benchmarks/bench_ssoc.py`` (bunny over a plane): SSOC's radiance
-#: error stays below SHEXP order 6's at every radius of the sweep, 0.01-0.3 rad
-#: (1.5-9.4 % vs 13-21 %), so the crossover is beyond 0.3 rad; past the measured
-#: range, and where SSOC's cost grows with the penumbra width (2.8 s vs 0.45 s per
-#: frame at 0.3 rad), "auto" hands the light to SHEXP.  See docs/ssoc.md.
+#: ``benchmarks/bench_ssoc.py`` (bunny over a plane): SSOC's radiance error stays
+#: below SHEXP order 6's at every radius of its sweep, 0.01-0.3 rad, so the crossover
+#: is beyond 0.3 rad; past the swept range, and where SSOC's cost grows with the
+#: penumbra width, "auto" hands the light to SHEXP.  See docs/ssoc.md.
 AUTO_THRESHOLD = 0.3
 #: Strata per receiver of ``shadows = "raytrace"``.
 DEFAULT_SAMPLES = 64

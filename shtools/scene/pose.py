@@ -116,10 +116,10 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                                 selfs, len(blockers) - 1)
             if with_meshes:
                 meshes.append((world_v, o.faces))
-    # each rigid object traced in its own cone, the visibilities multiplied: measured
-    # closer to the real meshes than one joint trace in the cone of their common bounding
-    # sphere at the same ray density (dragon + armadillo ground 3.2 vs 3.7 %: the common
-    # cone spends its rays on the gap), and joint traces of the demo's overlapping limbs
+    # each rigid object traced in its own cone, the visibilities multiplied: closer to
+    # the real meshes than one joint trace in the cone of their common bounding sphere
+    # at the same ray density (the common cone spends its rays on the gap between
+    # them; bench_fidelity's rigid scenes), and joint traces of the demo's overlapping limbs
     # left visible ray noise on its ground (the common cone's sparser rays)
     casters.extend(_rigid_caster([r]) for r in rigid)
     if casters and ground and st.traced_shadows:
@@ -145,7 +145,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters=None):
     its real mesh (a skinned object's posed mesh: the same Embree scene as its own
     vertices); its blocker is skipped on those rows.  Each traced object gives one such
     visibility; the runtime multiplies them (the product of separately traced
-    visibilities, not a joint trace: measured on ``bench_fidelity``'s rigid scenes).
+    visibilities, not a joint trace: see ``bench_fidelity``'s rigid scenes).
 
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
     ``(R,)``, ``(R, 3)``, ``(R, 3)``; returns None when none is within the object's reach."""

@@ -30,16 +30,14 @@ from pydantic import ValidationError
 from shtools.errors import InputError
 from shtools.fields.self_visibility import CONE_DIRECTIONS, HEMISPHERE_DIRECTIONS
 from shtools.geometry.fit_methods import FIT_METHODS
-from shtools.runtime.settings import EXP_CHOICES, WINDOW_CHOICES, ShadowSettings, Unit, setting
+from shtools.geometry.transforms import euler_to_quaternion
+from shtools.runtime.settings import ShadowSettings, Unit, setting
 from shtools.runtime.settings import scene_fields as _scene_fields
 from shtools.scene import schema
 from shtools.scene.blockers import BlockerSpec, blocker_kinds
 from shtools.scene.schema import GLTF_SUFFIXES, IMAGE_SUFFIXES, MESH_SUFFIXES, ROLES
 from shtools.scene.shadows import bake_method_names
 
-#: kept for callers of the first names (the lists live in the settings schema)
-EXP_METHODS = EXP_CHOICES
-WINDOWS = WINDOW_CHOICES
 BAKE_METHODS = bake_method_names()
 
 __all__ = [
@@ -236,27 +234,6 @@ def _file(value: str, base: Path, ctx: _Ctx, suffixes=None) -> Path:
     if not path.is_file():
         raise ctx.error(f"file '{value}' not found (paths are relative to the scene file)")
     return path
-
-
-def euler_to_quaternion(degrees: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w) of ``R = Rz @ Ry @ Rx`` from angles in degrees (x, y, z)."""
-    hx, hy, hz = np.radians(np.asarray(degrees, dtype=float)) / 2
-    qx = np.array([math.sin(hx), 0, 0, math.cos(hx)])
-    qy = np.array([0, math.sin(hy), 0, math.cos(hy)])
-    qz = np.array([0, 0, math.sin(hz), math.cos(hz)])
-    return quaternion_multiply(quaternion_multiply(qz, qy), qx)
-
-
-def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (x, y, z, w); ``a*b`` rotates by b then a."""
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array([
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    ])
 
 
 def _pose(t: schema.Transform, base: Pose | None = None) -> Pose:

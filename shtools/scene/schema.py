@@ -208,7 +208,7 @@ class Transform(Table):
         return self
 
 
-class Keyframe(Transform):
+class ObjectKeyframe(Transform):
     """``[[objects.keyframes]]``: a time (seconds) or frame and transform keys."""
 
     time: Number | None = None
@@ -286,7 +286,7 @@ class Object(Transform):
     role: choice(ROLES) = Field(description="receiver, blocker or both")
     albedo: vector(3, nonnegative=True) | None = None
     parent: str | None = None
-    keyframes: Annotated[list[Keyframe], Field(min_length=1)] | None = None
+    keyframes: Annotated[list[ObjectKeyframe], Field(min_length=1)] | None = None
     loop: StrictBool = False
     blocker: Any = None  # validated against the blocker-kind registry (blocker_model())
     skin: Skin | None = None

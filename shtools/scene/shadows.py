@@ -76,8 +76,8 @@ class VisibilityMethod(ABC):
     def acc_order(self, settings) -> int | None:
         """Order the method accumulates blockers at (None: it projects at the shading order).
 
-        Methods compared with each other accumulate at the same order (issue 16:
-        a baseline at a lower order than SHEXP looked twice as bad as it is).
+        Methods compared with each other accumulate at the same order (a baseline at
+        a lower order than SHEXP would look worse than it is).
         """
         return None
 

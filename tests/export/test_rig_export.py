@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -42,11 +41,8 @@ translate = [0, 1.2, 0.4]
 
 
 def _rig(path: Path, **kwargs) -> None:
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scene"))
-    try:
-        from rig import write_bending_tube
-    finally:
-        sys.path.pop(0)
+    from helpers.rig import write_bending_tube
+
     write_bending_tube(path, **kwargs)
 
 

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
+from helpers.rig import write_bending_tube
 
 from shtools.fields.deformable import bounding_sphere, hemisphere_rule, sample_deformable_field
 from shtools.geometry.raycast import RayCaster
@@ -21,9 +20,6 @@ from shtools.runtime.deformable import (
 from shtools.runtime.scaling import ScalingTable
 from shtools.sh import cap, exp, project, sphere_quadrature
 from shtools.sh.scaling import build_scaling_table
-
-sys.path.insert(0, str(Path(__file__).parents[1] / "scene"))
-from rig import write_bending_tube
 
 ORDER = 4
 

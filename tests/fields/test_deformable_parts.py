@@ -22,7 +22,7 @@ ACC = 6
 
 
 @pytest.fixture(scope="module")
-def scene(standing_torus):
+def torus_and_ball(standing_torus):
     """A torus standing on its rim over a 16 x 16 ground, a sphere beside it, its field."""
     torus = standing_torus
     ground, gnorm = ground_grid(16, [0.0, 0.0], 4.0, y=0.0)
@@ -39,8 +39,8 @@ def _runtime(space: str, processes: int = 1) -> ShadowRuntime:
                                         field_space=space))
 
 
-def test_product_space_multiplies_the_scaled_visibility(scene):
-    torus, ball, blocker, spheres, pts, nrm = scene
+def test_product_space_multiplies_the_scaled_visibility(torus_and_ball):
+    torus, ball, blocker, spheres, pts, nrm = torus_and_ball
     rt = _runtime("product")
     got = rt.visibility(pts, nrm, [spheres, blocker])
     # independent composition: the sphere's visibility (its own exp) times the field's
@@ -66,8 +66,8 @@ def test_product_space_multiplies_the_scaled_visibility(scene):
 
 
 @pytest.mark.parametrize("space", ["log", "product"])
-def test_parts_on_worker_processes_give_the_same_bytes(scene, monkeypatch, space):
-    torus, _, blocker, spheres, ground, gnorm = scene
+def test_parts_on_worker_processes_give_the_same_bytes(torus_and_ball, monkeypatch, space):
+    torus, _, blocker, spheres, ground, gnorm = torus_and_ball
     pts = np.concatenate([ground, torus.vertices])
     nrm = np.concatenate([gnorm, torus.vertex_normals])
     n_g = len(ground)

@@ -30,7 +30,7 @@ class _Counting:
 
 
 @pytest.fixture(scope="module")
-def scene(standing_torus):
+def torus_over_ground(standing_torus):
     """A torus standing on its rim over a 12 x 12 ground, its field and its self-visibility."""
     torus = standing_torus
     ground, gnorm = ground_grid(12, [0.0, 0.0], 4.0, y=0.0)
@@ -43,8 +43,8 @@ def scene(standing_torus):
     return torus, DeformableBlocker(field, table), log, pts, nrm, len(ground)
 
 
-def test_self_visibility_replaces_the_field_on_its_own_rows(scene):
-    torus, blocker, log, pts, nrm, n_g = scene
+def test_self_visibility_replaces_the_field_on_its_own_rows(torus_over_ground):
+    torus, blocker, log, pts, nrm, n_g = torus_over_ground
     env = sky_light(4)
     # log space, as the counting wrapper (a plain log blocker) is combined
     rt = ShadowRuntime(ShadowSettings(order=4, acc_order=ACC, processes=1, field_space="log"))
@@ -75,10 +75,10 @@ def test_self_visibility_replaces_the_field_on_its_own_rows(scene):
     assert err(both) > 0.15
 
 
-def test_a_self_visibility_naming_no_blocker_is_refused(scene):
+def test_a_self_visibility_naming_no_blocker_is_refused(torus_over_ground):
     from shtools.errors import InputError
 
-    _, blocker, log, pts, nrm, n_g = scene
+    _, blocker, log, pts, nrm, n_g = torus_over_ground
     rt = ShadowRuntime(ShadowSettings(order=4, acc_order=ACC, processes=1))
     with pytest.raises(InputError, match="names blocker 3"):
         rt.visibility(pts, nrm, [blocker],

@@ -12,12 +12,12 @@ from shtools.data_formats.spheres import read_spheres
 
 
 @pytest.fixture(scope="module")
-def small_torus():
+def coarse_torus():
     return trimesh.creation.torus(1.0, 0.35, major_sections=24, minor_sections=12)
 
 
-def test_fit_writes_asset_and_json(run_cli, write_mesh, small_torus, tmp_path):
-    mesh_path = write_mesh(small_torus, "torus.obj")
+def test_fit_writes_asset_and_json(run_cli, write_mesh, coarse_torus, tmp_path):
+    mesh_path = write_mesh(coarse_torus, "torus.obj")
     out = tmp_path / "spheres.h5"
     code, stdout, stderr = run_cli("spheres", "fit", mesh_path, "-n", 6, "-o", out,
                                    "--iterations", 3, "--json")
@@ -30,8 +30,8 @@ def test_fit_writes_asset_and_json(run_cli, write_mesh, small_torus, tmp_path):
     assert spheres.outside_volume_ratio > 0
 
 
-def test_same_seed_gives_identical_bytes(run_cli, write_mesh, small_torus, tmp_path):
-    mesh_path = write_mesh(small_torus, "torus.obj")
+def test_same_seed_gives_identical_bytes(run_cli, write_mesh, coarse_torus, tmp_path):
+    mesh_path = write_mesh(coarse_torus, "torus.obj")
     outs = [tmp_path / "a.h5", tmp_path / "b.h5"]
     for out in outs:
         code, _, stderr = run_cli("spheres", "fit", mesh_path, "-n", 4, "-o", out,
@@ -40,8 +40,8 @@ def test_same_seed_gives_identical_bytes(run_cli, write_mesh, small_torus, tmp_p
     assert outs[0].read_bytes() == outs[1].read_bytes()
 
 
-def test_export_import_round_trip(run_cli, write_mesh, small_torus, tmp_path):
-    mesh_path = write_mesh(small_torus, "torus.obj")
+def test_export_import_round_trip(run_cli, write_mesh, coarse_torus, tmp_path):
+    mesh_path = write_mesh(coarse_torus, "torus.obj")
     fitted = tmp_path / "fit.h5"
     assert run_cli("spheres", "fit", mesh_path, "-n", 5, "-o", fitted,
                    "--method", "octree")[0] == 0
@@ -70,7 +70,7 @@ def test_export_import_round_trip(run_cli, write_mesh, small_torus, tmp_path):
         ("too_many", "sample points"),
     ],
 )
-def test_errors_are_one_line_without_output(run_cli, tmp_path, write_mesh, small_torus,
+def test_errors_are_one_line_without_output(run_cli, tmp_path, write_mesh, coarse_torus,
                                             flat_sheet_mesh, case, fragment):
     n = 4
     if case == "missing":
@@ -87,7 +87,7 @@ def test_errors_are_one_line_without_output(run_cli, tmp_path, write_mesh, small
     elif case == "flat":
         mesh_path = write_mesh(flat_sheet_mesh, "flat.obj")
     else:
-        mesh_path = write_mesh(small_torus, "torus.obj")
+        mesh_path = write_mesh(coarse_torus, "torus.obj")
         n = 0 if case == "zero" else 10**6
     out = tmp_path / "out.h5"
     code, _, stderr = run_cli("spheres", "fit", mesh_path, "-n", n, "-o", out)

@@ -160,14 +160,14 @@ def expected_joint_matrices(t, rest_globals):
 
 
 @pytest.fixture
-def rig(tmp_path):
+def bar_rig(tmp_path):
     path = tmp_path / "rig.glb"
     data = build_rig(path)
     return path, data
 
 
-def test_loads_mesh_weights_and_bind(rig):
-    path, (verts, faces, weights, rest_globals) = rig
+def test_loads_mesh_weights_and_bind(bar_rig):
+    path, (verts, faces, weights, rest_globals) = bar_rig
     model = load_skinned_gltf(path)
     np.testing.assert_allclose(model.rest_vertices, verts, atol=F32_TOL)
     np.testing.assert_array_equal(model.faces, faces)
@@ -182,16 +182,16 @@ def test_loads_mesh_weights_and_bind(rig):
 
 
 @pytest.mark.parametrize("t", [0.0, 0.25, 0.5, 0.7, 1.0, 1.5, -1.0])
-def test_joint_matrices_match_hand_computed(rig, t):
-    path, (_, _, _, rest_globals) = rig
+def test_joint_matrices_match_hand_computed(bar_rig, t):
+    path, (_, _, _, rest_globals) = bar_rig
     model = load_skinned_gltf(path)
     want = expected_joint_matrices(min(max(t, 0.0), 1.0), rest_globals)  # clamped time
     np.testing.assert_allclose(model.joint_matrices(t, "wave"), want, atol=F32_TOL)
     np.testing.assert_allclose(model.joint_matrices(t, 0), want, atol=F32_TOL)
 
 
-def test_linear_blend_skinning(rig):
-    path, (verts, _, weights, rest_globals) = rig
+def test_linear_blend_skinning(bar_rig):
+    path, (verts, _, weights, rest_globals) = bar_rig
     model = load_skinned_gltf(path)
     mats = expected_joint_matrices(0.6, rest_globals)
     hom = np.concatenate([verts, np.ones((len(verts), 1))], 1)
@@ -288,10 +288,10 @@ def test_cli_bind_and_bad_rigs(tmp_path, run_cli):
         assert not target.exists()
 
 
-def test_covering_radii_keep_vertices_covered_over_the_animation(rig):
+def test_covering_radii_keep_vertices_covered_over_the_animation(bar_rig):
     from shtools.geometry.binding import bind_spheres, covering_radii
 
-    path, (verts, _, _, rest_globals) = rig
+    path, (verts, _, _, rest_globals) = bar_rig
     model = load_skinned_gltf(path)
     centers = np.array([[0.25, 0.0, 0.0], [1.0, 0.0, 0.0], [1.75, 0.0, 0.0]])
     radii = np.full(3, 0.45)  # covers the bar at rest (half-width 0.2*sqrt(2), 0.25 along x)
@@ -316,10 +316,10 @@ def test_covering_radii_keep_vertices_covered_over_the_animation(rig):
             assert np.any((dist - radii).min(axis=1) > 0.05)
 
 
-def test_spheres_fitted_in_scene_space_are_moved_to_bind_space(rig):
+def test_spheres_fitted_in_scene_space_are_moved_to_bind_space(bar_rig):
     from shtools.geometry.binding import spheres_to_bind_space
 
-    path, _ = rig
+    path, _ = bar_rig
     model = load_skinned_gltf(path)
     # the mesh node is translated by (5, 5, 5): scene = bind + 5 (trimesh.load's view)
     np.testing.assert_allclose(model.mesh_transform[:3, 3], [5, 5, 5])

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers.scenes import ground, scene_text
 
 from shtools.data_formats.spheres import write_spheres
 from shtools.geometry.sphere_set import SphereSet
@@ -91,25 +92,12 @@ def test_eval_scene_file(run_cli, tmp_path):
     assert all(np.isfinite(m["rmse_vs_mesh"]) for m in summary["methods"])
 
 
-SCENE_TOML = """
-[settings]
-order = 2
-
-[environment]
-coeffs = [[3.0, 3.0, 3.0], [0.0, 0.0, 0.0], [1.5, 1.5, 1.4], [0.0, 0.0, 0.0]]
-
-[[objects]]
-name = "ground"
-primitive = { type = "plane", size = [3.0, 3.0], subdivisions = 10 }
-role = "receiver"
-
-[[objects]]
-name = "ball"
-primitive = { type = "sphere", radius = 0.4, subdivisions = 2 }
-role = "blocker"
-translate = [0.0, 0.6, 0.0]
-blocker = { exact = true }
-"""
+SCENE_TOML = scene_text(
+    settings={"order": 2},
+    environment={"coeffs": [[3.0, 3.0, 3.0], [0.0, 0.0, 0.0], [1.5, 1.5, 1.4], [0.0, 0.0, 0.0]]},
+    objects=[ground(size=3.0, subdivisions=10),
+             {"name": "ball", "primitive": {"type": "sphere", "radius": 0.4, "subdivisions": 2},
+              "role": "blocker", "translate": [0.0, 0.6, 0.0], "blocker": {"exact": True}}])
 
 
 def test_eval_maps_have_a_colour_bar_per_row_with_units():

@@ -7,6 +7,7 @@ import json
 import math
 
 import numpy as np
+from helpers.scenes import ground, write_scene
 
 from shtools.reference.evaluation import _exact_environment, error_split
 from shtools.reference.raytrace import quadrature_for
@@ -57,25 +58,13 @@ def test_cli_prints_the_split_per_receiver(tmp_path, run_cli):
     phi = np.linspace(0.0, 2 * math.pi, 12, endpoint=False)
     centers = 0.6 * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
     write_spheres(tmp_path / "s.h5", SphereSet(centers, np.full(12, 0.3), 0.0, 1.0, "ring"))
-    (tmp_path / "scene.toml").write_text("""
-[settings]
-order = 3
-self_visibility = true
-[environment]
-coeffs = [[5.0, 5.0, 5.0], [0.0, 0.0, 0.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0],
-          [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-[[objects]]
-name = "ground"
-primitive = { type = "plane", size = [3, 3], subdivisions = 8 }
-role = "receiver"
-[[objects]]
-name = "torus"
-mesh = "torus.obj"
-role = "both"
-blocker = { spheres = "s.h5" }
-translate = [0.0, 0.9, 0.0]
-rotate = [30.0, 0.0, 0.0]
-""")
+    write_scene(
+        tmp_path / "scene.toml", settings={"order": 3, "self_visibility": True},
+        environment={"coeffs": [[5.0, 5.0, 5.0], [0.0] * 3, [3.0, 3.0, 3.0], *[[0.0] * 3] * 6]},
+        objects=[ground(size=3, subdivisions=8),
+                 {"name": "torus", "mesh": "torus.obj", "role": "both",
+                  "blocker": {"spheres": "s.h5"}, "translate": [0.0, 0.9, 0.0],
+                  "rotate": [30.0, 0.0, 0.0]}])
     code, out, err = run_cli("eval", tmp_path / "scene.toml", "--methods", "auto",
                              "--n-dirs", 600, "--json")
     assert code == 0, err

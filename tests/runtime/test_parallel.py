@@ -179,15 +179,16 @@ def test_stopped_workers_let_the_process_exit(stop, tmp_path):
     (tmp_path / "stop_helpers.py").write_text(STOP_HELPERS)
     script = textwrap.dedent("""
         import os, signal, struct, sys, time
-        sys.path.insert(0, sys.argv[1])
         from shtools.runtime import ShadowSettings
         from shtools.runtime.parallel import VertexWorkers
 
         workers = VertexWorkers(1, ShadowSettings(processes=2), None)  # default tables
     """) + textwrap.dedent(STOPS[stop]) + 'print("stopped", flush=True)\nsys.exit(3)\n'
+    # the test's folder on the script's (and its workers') path, for stop_helpers
+    path = os.pathsep.join(p for p in (str(tmp_path), os.environ.get("PYTHONPATH")) if p)
     proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, env=dict(os.environ, PYTHONPATH=path))
     try:
         # each stop takes at most ~2 s; 60 s is far beyond any load, and the bugs
         # never exit

@@ -3,26 +3,21 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.rig import LENGTH, RADIUS, bone_weights, write_bending_tube
 
 from shtools.errors import InputError
+from shtools.geometry.transforms import euler_to_quaternion, quaternion_matrix, slerp
 from shtools.scene.animation import (
     interpolate_pose,
     light_at,
-    quaternion_to_matrix,
-    slerp,
     transform_spheres,
     vertex_normals,
     world_matrices,
 )
-from shtools.scene.scene import euler_to_quaternion, parse_scene
-
-sys.path.insert(0, str(Path(__file__).parent))
-from rig import LENGTH, RADIUS, bone_weights, write_bending_tube
+from shtools.scene.scene import parse_scene
 
 
 def rot_z(deg):
@@ -37,9 +32,9 @@ def rot_y(deg):
 
 def test_euler_and_quaternion_matrix_match_closed_forms():
     # R = Rz Ry Rx; with only one angle non-zero it is the elementary rotation
-    np.testing.assert_allclose(quaternion_to_matrix(euler_to_quaternion([0, 0, 30])), rot_z(30),
+    np.testing.assert_allclose(quaternion_matrix(euler_to_quaternion([0, 0, 30])), rot_z(30),
                                atol=1e-12)
-    np.testing.assert_allclose(quaternion_to_matrix(euler_to_quaternion([0, 40, 30])),
+    np.testing.assert_allclose(quaternion_matrix(euler_to_quaternion([0, 40, 30])),
                                rot_z(30) @ rot_y(40), atol=1e-12)
 
 
@@ -47,11 +42,11 @@ def test_slerp_is_constant_speed_about_one_axis():
     q0 = euler_to_quaternion([0, 0, 10])
     q1 = euler_to_quaternion([0, 0, 130])
     for u in (0.0, 0.25, 0.5, 1.0):
-        np.testing.assert_allclose(quaternion_to_matrix(slerp(q0, q1, u)), rot_z(10 + 120 * u),
+        np.testing.assert_allclose(quaternion_matrix(slerp(q0, q1, u)), rot_z(10 + 120 * u),
                                    atol=1e-12)
     # q and -q are the same rotation: slerp takes the short way (10 -> -10 through 0)
     np.testing.assert_allclose(
-        quaternion_to_matrix(slerp(q0, -euler_to_quaternion([0, 0, -10]), 0.5)), np.eye(3),
+        quaternion_matrix(slerp(q0, -euler_to_quaternion([0, 0, -10]), 0.5)), np.eye(3),
         atol=1e-12)
 
 
@@ -102,7 +97,7 @@ def test_rigid_keyframes_and_parent_chain(tmp_path):
     body = scene.object("body")
     pose = interpolate_pose(body.keyframes, 1.0)
     np.testing.assert_allclose(pose.translate, [2, 0, 0])
-    np.testing.assert_allclose(quaternion_to_matrix(pose.quaternion), rot_z(45), atol=1e-12)
+    np.testing.assert_allclose(quaternion_matrix(pose.quaternion), rot_z(45), atol=1e-12)
     np.testing.assert_allclose(pose.scale, [2, 2, 2])  # inherited from the static transform
     # beyond the last key the pose holds
     np.testing.assert_allclose(interpolate_pose(body.keyframes, 5.0).translate, [4, 0, 0])

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -202,10 +201,7 @@ def test_bad_inputs_are_one_line_errors(tmp_path, run_cli):
     assert stderr.count("\n") == 1 and not out.exists()
 
     # a skinned object whose glTF has no skin
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from rig import write_bending_tube
+    from helpers.rig import write_bending_tube
 
     write_bending_tube(tmp_path / "rig.glb", with_skin=False)
     text = scene_text() + '\n[[objects]]\nname = "rig"\nmesh = "rig.glb"\nrole = "receiver"\n' \
@@ -218,10 +214,7 @@ def test_bad_inputs_are_one_line_errors(tmp_path, run_cli):
 
 def test_skinned_receiver_and_blocker_bake(tmp_path):
     """A bending tube over the ground: its skinned vertices and posed spheres are used."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from rig import write_bending_tube
+    from helpers.rig import write_bending_tube
 
     write_bending_tube(tmp_path / "rig.glb")
     from shtools.data_formats.spheres import write_spheres
@@ -280,10 +273,7 @@ def test_bad_environment_image_and_tables(tmp_path, run_cli):
 def test_bound_asset_poses_like_on_the_fly_binding(tmp_path, run_cli):
     """`blocker = { bound = ... }` (from `shtools spheres bind`) and `{ spheres = ... }`
     bound at bake time pose the same spheres for a skinned object."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from rig import write_bending_tube
+    from helpers.rig import write_bending_tube
 
     from shtools.data_formats.spheres import write_spheres
     from shtools.geometry.sphere_set import SphereSet

@@ -5,31 +5,16 @@ from __future__ import annotations
 import json
 import math
 
-SCENE = f"""
-[settings]
-order = 2
-frames = 4
-fps = 2
+from helpers.scenes import ground, scene_text
 
-[environment]
-coeffs = [[{1.5 * math.sqrt(4 * math.pi)}, 1, 1], [0, 0, 0], [0.5, 0.5, 0.5], [0, 0, 0]]
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [4, 4], subdivisions = 8 }}
-role = "receiver"
-
-[[objects]]
-name = "ball"
-primitive = {{ type = "sphere", radius = 0.5, subdivisions = 1 }}
-role = "blocker"
-[[objects.keyframes]]
-time = 0
-translate = [-0.5, 0.7, 0]
-[[objects.keyframes]]
-time = 2
-translate = [0.5, 0.7, 0]
-"""
+SCENE = scene_text(
+    settings={"order": 2, "frames": 4, "fps": 2},
+    environment={"coeffs": [[1.5 * math.sqrt(4 * math.pi), 1, 1], [0, 0, 0],
+                            [0.5, 0.5, 0.5], [0, 0, 0]]},
+    objects=[ground(size=4, subdivisions=8),
+             {"name": "ball", "primitive": {"type": "sphere", "radius": 0.5, "subdivisions": 1},
+              "role": "blocker", "keyframes": [{"time": 0, "translate": [-0.5, 0.7, 0]},
+                                               {"time": 2, "translate": [0.5, 0.7, 0]}]}])
 
 
 def _bake(run_cli, tmp_path, scene_name, out, *args):

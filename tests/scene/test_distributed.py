@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import processes
 
 from shtools.errors import InputError
 from shtools.scene.bake import bake_to_file
@@ -335,8 +336,9 @@ def test_ctrl_c_stops_workers_and_leaves_no_file(tmp_path, sig):
             assert proc.poll() is None, proc.stderr.read()
             time.sleep(0.5)
             # forked by the fork server, a child of the bake (as its resource tracker is)
-            children = [w for c in _children(proc.pid) for w in _children(c)]
-        children += _children(proc.pid)  # the fork server and tracker must go too
+            children = [w for c in processes.children(proc.pid)
+                        for w in processes.children(c)]
+        children += processes.children(proc.pid)  # the fork server and tracker must go too
         time.sleep(1.0)
         os.kill(proc.pid, sig)
         _, err = proc.communicate(timeout=120)
@@ -344,23 +346,7 @@ def test_ctrl_c_stops_workers_and_leaves_no_file(tmp_path, sig):
     assert len(err.strip().splitlines()) == 1, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["long.toml"]  # no file, no temp
     time.sleep(0.5)
-    assert children and [pid for pid in children if _alive(pid)] == []
-
-
-def _children(pid: int) -> list[int]:
-    try:
-        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
-    except OSError:
-        return []
-    return [int(c) for c in text.split()]
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().split()[2]
-    except OSError:
-        return False
-    return state != "Z"
+    assert children and [pid for pid in children if processes.alive(pid)] == []
 
 
 def _two_meshes(folder: Path) -> list[Path]:

@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 import trimesh
+from helpers.scenes import ground, scene_text
 
 from shtools.errors import InputError
 from shtools.reference.light_fraction import light_visible_fraction
@@ -17,30 +18,15 @@ from shtools.scene.light_shadows import AUTO_THRESHOLD, angular_radius
 from shtools.scene.scene import parse_scene
 
 
-def lamp_scene(shadows="ssoc", radius=0.08, position=(0.3, 2.5, 0.2), extra="", grid=96):
-    return f"""
-[settings]
-order = 3
-
-[[lights]]
-name = "lamp"
-position = [{position[0]}, {position[1]}, {position[2]}]
-radius = {radius}
-color = [40.0, 40.0, 40.0]
-shadows = "{shadows}"
-{extra}
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [2.0, 2.0], subdivisions = {grid} }}
-role = "receiver"
-
-[[objects]]
-name = "ball"
-primitive = {{ type = "sphere", radius = 0.3, subdivisions = 3 }}
-role = "blocker"
-translate = [0.0, 0.8, 0.0]
-"""
+def lamp_scene(shadows="ssoc", radius=0.08, position=(0.3, 2.5, 0.2), extra=None, grid=96):
+    """A ball over a 2 x 2 ground under one lamp; ``extra`` more keys of the lamp."""
+    lamp = {"name": "lamp", "position": list(position), "radius": radius,
+            "color": [40.0, 40.0, 40.0], "shadows": shadows, **(extra or {})}
+    return scene_text(
+        settings={"order": 3}, lights=[lamp],
+        objects=[ground(size=2.0, subdivisions=grid),
+                 {"name": "ball", "primitive": {"type": "sphere", "radius": 0.3, "subdivisions": 3},
+                  "role": "blocker", "translate": [0.0, 0.8, 0.0]}])
 
 
 def _bake(text, tmp_path, **kw):
@@ -67,14 +53,14 @@ def test_shadows_default_is_shexp_and_keys_are_checked(tmp_path):
     with pytest.raises(InputError, match=r"lights\[0\].shadows: must be one of"):
         parse_scene(lamp_scene(shadows="ssocc"), tmp_path / "s.toml")
     with pytest.raises(InputError, match=r"lights\[0\].ssoc: SSOC map resolution"):
-        parse_scene(lamp_scene(extra="ssoc = { resolution = 9 }"), tmp_path / "s.toml")
+        parse_scene(lamp_scene(extra={"ssoc": {"resolution": 9}}), tmp_path / "s.toml")
     with pytest.raises(InputError, match=r"lights\[0\].ssoc: unknown key 'resolutoin'"):
-        parse_scene(lamp_scene(extra="ssoc = { resolutoin = 512 }"), tmp_path / "s.toml")
+        parse_scene(lamp_scene(extra={"ssoc": {"resolutoin": 512}}), tmp_path / "s.toml")
 
 
 def test_ssoc_bake_matches_the_raytraced_light(tmp_path):
     ssoc = _bake(lamp_scene("ssoc"), tmp_path).radiance
-    truth = _bake(lamp_scene("raytrace", extra="samples = 256"), tmp_path).radiance
+    truth = _bake(lamp_scene("raytrace", extra={"samples": 256}), tmp_path).radiance
     shexp = _bake(lamp_scene("shexp"), tmp_path).radiance
     rel = lambda a: np.sqrt(np.mean((a - truth) ** 2) / np.mean(truth ** 2))  # noqa: E731
     # a 0.08-radius lamp 1.7 above a ball: SSOC carries its model error (<= 0.039 in S)
@@ -118,7 +104,7 @@ class _Shade:
     (dict(radius=0.01, position=(0.0, 0.8, 0.0)),
      "lights[0] ('lamp'): the light centre is inside occluder mesh 0"),
     (dict(radius=0.0), "lights[0].radius: must be > 0"),
-    (dict(extra="ssoc = { resolution = 100000 }"),
+    (dict(extra={"ssoc": {"resolution": 100000}}),
      "lights[0].ssoc: SSOC map resolution must be an integer in 16..8192"),
 ])
 def test_bad_light_is_one_line_and_no_output(tmp_path, kw, message):

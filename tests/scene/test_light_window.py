@@ -5,21 +5,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from helpers.scenes import ground, write_scene
 
 from shtools.data_formats.light import write_light
 
-SCENE = """
-[settings]
-order = 2
-{window}
-[environment]
-light = "sky.h5"
 
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [2, 2], subdivisions = 2 }}
-role = "receiver"
-"""
+def _scene(folder, window=None):
+    """A ground under the light sky.h5, order 2, with ``window`` set or not."""
+    return write_scene(folder / "scene.toml", settings={"order": 2, "window": window},
+                       environment={"light": "sky.h5"}, objects=[ground()])
 
 
 def _sky(path, window):
@@ -30,7 +24,7 @@ def _sky(path, window):
 
 def test_windowed_light_with_a_windowing_scene_is_refused(run_cli, tmp_path):
     _sky(tmp_path / "sky.h5", "cosine")
-    (tmp_path / "scene.toml").write_text(SCENE.format(window=""))
+    _scene(tmp_path)
     out = tmp_path / "b.h5"
     code, _, stderr = run_cli("bake", tmp_path / "scene.toml", "-o", out)
     assert code == 1 and stderr.count("\n") == 1, stderr
@@ -42,10 +36,10 @@ def test_windowed_light_with_a_windowing_scene_is_refused(run_cli, tmp_path):
 
 def test_unwindowed_light_or_unwindowed_scene_bakes(run_cli, tmp_path):
     _sky(tmp_path / "sky.h5", "none")
-    (tmp_path / "scene.toml").write_text(SCENE.format(window=""))
+    _scene(tmp_path)
     code, _, stderr = run_cli("bake", tmp_path / "scene.toml", "-o", tmp_path / "a.h5")
     assert code == 0, stderr
     _sky(tmp_path / "sky.h5", "cosine")
-    (tmp_path / "scene.toml").write_text(SCENE.format(window='window = "none"'))
+    _scene(tmp_path, "none")
     code, _, stderr = run_cli("bake", tmp_path / "scene.toml", "-o", tmp_path / "b.h5")
     assert code == 0, stderr

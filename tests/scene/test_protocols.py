@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers.scenes import ground, scene_text
 
 from shtools import sh
 from shtools.runtime import LogBlocker, ShadowRuntime, ShadowSettings
@@ -13,28 +14,14 @@ from shtools.scene import blockers, shadows
 from shtools.scene.bake import bake_scene
 from shtools.scene.scene import parse_scene
 
-SCENE = """
-[settings]
-order = 3
-acc_order = 5
-exp_method = "exact"
-hierarchy = false
-
-[environment]
-coeffs = [[1.0, 1.0, 1.0], [0, 0.5, 0], [0, 0, 0], [0, 0, 0],
-          [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]
-
-[[objects]]
-name = "ground"
-primitive = { type = "plane", size = [2, 2], subdivisions = 2 }
-role = "receiver"
-
-[[objects]]
-name = "cloud"
-primitive = { type = "box", extents = [0.2, 0.2, 0.2], subdivisions = 1, center = [0, 3, 0] }
-role = "blocker"
-blocker = { capcloud = true, half_angle_deg = 30 }
-"""
+SCENE = scene_text(
+    settings={"order": 3, "acc_order": 5, "exp_method": "exact", "hierarchy": False},
+    environment={"coeffs": [[1.0, 1.0, 1.0], [0, 0.5, 0], *[[0, 0, 0]] * 7]},
+    objects=[ground(),
+             {"name": "cloud", "role": "blocker",
+              "primitive": {"type": "box", "extents": [0.2, 0.2, 0.2], "subdivisions": 1,
+                            "center": [0, 3, 0]},
+              "blocker": {"capcloud": True, "half_angle_deg": 30}}])
 
 HALF_ANGLE = math.radians(30)
 

@@ -5,20 +5,16 @@ objects over one row (the runtime skips each one's spheres there)."""
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
+from helpers.rig import ground_scene_head
 
 from shtools.reference import relative_rmse
 from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker
 from shtools.scene.bake import bake_scene, prepare_scene
 from shtools.scene.scene import load_scene
-
-sys.path.insert(0, str(Path(__file__).parent))
-from rig import ground_scene_head
 
 GROUND = 25 * 25  # vertices of the ground grid below
 

@@ -4,18 +4,14 @@ from __future__ import annotations
 
 import math
 import re
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.rig import GROUND_VERTICES, SKY, tube_scene_text, write_bending_tube
 
 from shtools.reference.metrics import relative_rmse
 from shtools.scene.bake import bake_scene
 from shtools.scene.scene import parse_scene
-
-sys.path.insert(0, str(Path(__file__).parent))
-from rig import GROUND_VERTICES, SKY, tube_scene_text, write_bending_tube
 
 
 def scene_text(blocker: str, frames: int = 2, environment: str = SKY,
@@ -25,17 +21,17 @@ def scene_text(blocker: str, frames: int = 2, environment: str = SKY,
 
 
 @pytest.fixture
-def rig(tmp_path):
+def tube_folder(tmp_path):
     write_bending_tube(tmp_path / "rig.glb")
     return tmp_path
 
 
 @pytest.mark.parametrize("log", ["naive", "eigen"])
-def test_deformable_field_bake_is_closer_to_ray_tracing_than_no_shadow(rig, log):
+def test_deformable_field_bake_is_closer_to_ray_tracing_than_no_shadow(tube_folder, log):
     # log space (the deformable default is product space, which takes no log)
     text = scene_text(f'{{ deformable = true, samples = [8, 12], rays = [8, 16], log = "{log}" }}',
                       settings='field_space = "log"')
-    scene = parse_scene(text, rig / "scene.toml")
+    scene = parse_scene(text, tube_folder / "scene.toml")
     ours = list(bake_scene(scene))
     truth = list(bake_scene(scene, method="raytrace", raytrace_dirs=800))
     assert len(ours) == len(truth) == 2
@@ -50,11 +46,11 @@ def test_deformable_field_bake_is_closer_to_ray_tracing_than_no_shadow(rig, log)
         assert err < 0.5 * relative_rmse(np.asarray(unshadowed), b.radiance[ground])
 
 
-def test_deformable_field_in_product_space_bake(rig):
+def test_deformable_field_in_product_space_bake(tube_folder):
     # bake --method product multiplies the scaled field (no log, no exp): it must
     # match ray tracing of the posed tube as well as log space does.
     text = scene_text("{ deformable = true, samples = [8, 12], rays = [8, 16] }")
-    scene = parse_scene(text, rig / "scene.toml")
+    scene = parse_scene(text, tube_folder / "scene.toml")
     product = list(bake_scene(scene, method="product"))
     truth = list(bake_scene(scene, method="raytrace", raytrace_dirs=800))
     ground = slice(0, GROUND_VERTICES)
@@ -69,8 +65,8 @@ def test_deformable_field_in_product_space_bake(rig):
         assert err < 0.6 * relative_rmse(np.asarray(unshadowed), b.radiance[ground])
 
 
-def test_deformable_needs_a_skin_and_valid_options(rig, run_cli):
-    out = rig / "baked.h5"
+def test_deformable_needs_a_skin_and_valid_options(tube_folder, run_cli):
+    out = tube_folder / "baked.h5"
     bad = {
         "{ deformable = true, alpha_deg = 95 }": r"alpha_deg",
         "{ deformable = true, samples = [8] }": r"samples",
@@ -78,14 +74,14 @@ def test_deformable_needs_a_skin_and_valid_options(rig, run_cli):
         '{ deformable = true, log = "exact" }': r"log.*naive, eigen",
     }
     for blocker, message in bad.items():
-        (rig / "scene.toml").write_text(scene_text(blocker))
-        code, _, err = run_cli("bake", rig / "scene.toml", "-o", out)
+        (tube_folder / "scene.toml").write_text(scene_text(blocker))
+        code, _, err = run_cli("bake", tube_folder / "scene.toml", "-o", out)
         assert code != 0 and err.startswith("error: ") and err.count("\n") == 1, err
         assert re.search(message, err), err
         assert not out.exists()
     rigid = scene_text("{ deformable = true }").replace('skin = { animation = "bend" }', "")
-    (rig / "scene.toml").write_text(rigid)
-    code, _, err = run_cli("bake", rig / "scene.toml", "-o", out)
+    (tube_folder / "scene.toml").write_text(rigid)
+    code, _, err = run_cli("bake", tube_folder / "scene.toml", "-o", out)
     assert code != 0 and "needs a skinned object" in err and err.count("\n") == 1
     assert not out.exists()
 
@@ -94,7 +90,7 @@ def midrange_env(extra: str) -> str:
     return SKY + extra + "\n"
 
 
-def test_midrange_environment_scene_against_direct_scaling(rig):
+def test_midrange_environment_scene_against_direct_scaling(tube_folder):
     from shtools.runtime.scaling import ScalingTable, midrange_lighting
     from shtools.scene.bake import prepare_scene
     from shtools.sh.scaling import build_scaling_table
@@ -102,7 +98,7 @@ def test_midrange_environment_scene_against_direct_scaling(rig):
     env = midrange_env("radius = 5.0\ncenter = [0.0, 1.0, 0.0]")
     scene = parse_scene(scene_text("{ spheres = \"s.h5\" }", frames=1, environment=env)
                         .replace('blocker = { spheres = "s.h5" }\n', "")
-                        .replace('role = "both"', 'role = "receiver"'), rig / "scene.toml")
+                        .replace('role = "both"', 'role = "receiver"'), tube_folder / "scene.toml")
     (frame,) = bake_scene(scene)
     prepared = prepare_scene(scene)
     pts = frame.vertices
@@ -119,8 +115,8 @@ def test_midrange_environment_scene_against_direct_scaling(rig):
     assert relative_rmse(distant, want) > 0.02  # the finite sphere changes the result
 
 
-def test_midrange_bad_inputs(rig, run_cli, tmp_path):
-    out = rig / "baked.h5"
+def test_midrange_bad_inputs(tube_folder, run_cli, tmp_path):
+    out = tube_folder / "baked.h5"
     cases = {
         # the plane's corners are 2.8 from the centre: outside a sphere of radius 2
         "radius = 2.0": r"outside the environment sphere",
@@ -129,22 +125,22 @@ def test_midrange_bad_inputs(rig, run_cli, tmp_path):
         "radius = -1.0": r"radius.*> 0",
     }
     for extra, message in cases.items():
-        (rig / "scene.toml").write_text(
+        (tube_folder / "scene.toml").write_text(
             scene_text("{ deformable = true }", environment=midrange_env(extra)))
-        code, _, err = run_cli("bake", rig / "scene.toml", "-o", out)
+        code, _, err = run_cli("bake", tube_folder / "scene.toml", "-o", out)
         assert code != 0 and err.startswith("error: ") and err.count("\n") == 1, err
         assert re.search(message, err), err
         assert not out.exists()
     # a scaling table of another order than the scene, and one of the wrong kind
     assert run_cli("tables", "scaling", "-n", 2, "--function", "midrange", "--samples", 5,
-                   "-o", rig / "mid2.h5")[0] == 0
+                   "-o", tube_folder / "mid2.h5")[0] == 0
     assert run_cli("tables", "scaling", "-n", 3, "--function", "cone", "--samples", 5,
-                   "-o", rig / "cone3.h5")[0] == 0
+                   "-o", tube_folder / "cone3.h5")[0] == 0
     for asset, message in (("mid2.h5", r"order 2 but the scene's settings.order is 3"),
                            ("cone3.h5", r"plain 'midrange'")):
-        (rig / "scene.toml").write_text(scene_text(
+        (tube_folder / "scene.toml").write_text(scene_text(
             "{ deformable = true }",
             environment=midrange_env(f'radius = 5.0\nscaling = "{asset}"')))
-        code, _, err = run_cli("bake", rig / "scene.toml", "-o", out)
+        code, _, err = run_cli("bake", tube_folder / "scene.toml", "-o", out)
         assert code != 0 and re.search(message, err) and err.count("\n") == 1, err
         assert not out.exists()

@@ -92,7 +92,8 @@ parent = "box"
     assert math.isclose(st.theta_max, math.radians(20))
     box = scene.object("box")
     assert box.mesh == tmp_path / "meshes" / "box.obj"
-    assert box.blocker.kind == "fit" and box.blocker.count == 8 and box.blocker.method == "octree"
+    assert box.blocker.kind == "fit" and box.blocker.count == 8
+    assert box.blocker.options["method"] == "octree"
     # keyframes are sorted by time and inherit the object's static transform
     assert [k.time for k in box.keyframes] == [0.0, 0.5]
     np.testing.assert_allclose(box.keyframes[0].pose.translate, [1, 2, 3])

@@ -4,20 +4,16 @@ result against ray tracing of the real mesh."""
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
+from helpers.rig import ground_scene_head
 
 from shtools.errors import AssetError, InputError
 from shtools.reference import relative_rmse
 from shtools.scene.bake import bake_scene, prepare_scene
 from shtools.scene.scene import load_scene, parse_scene
-
-sys.path.insert(0, str(Path(__file__).parent))
-from rig import ground_scene_head
 
 
 def _write_torus(folder):

@@ -5,20 +5,16 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.rig import GROUND_VERTICES, tube_scene_text, write_bending_tube
 
 from shtools.errors import InputError
 from shtools.reference import relative_rmse
 from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker
 from shtools.scene.bake import bake_scene, prepare_scene
 from shtools.scene.scene import parse_scene
-
-sys.path.insert(0, str(Path(__file__).parent))
-from rig import GROUND_VERTICES, tube_scene_text, write_bending_tube
 
 
 def _scene(folder, blocker: str, settings: str = "", object_key: str = ""):
@@ -27,7 +23,7 @@ def _scene(folder, blocker: str, settings: str = "", object_key: str = ""):
 
 
 @pytest.fixture
-def rig(tmp_path):
+def folded_tube(tmp_path):
     # folded far enough (150 degrees at t = 1 s) for the tip to shadow the base
     write_bending_tube(tmp_path / "rig.glb", bend_degrees=150.0)
     from shtools.data_formats.spheres import write_spheres
@@ -45,12 +41,13 @@ def _tube_rows(scene, **kwargs):
                                                              processes=1, **kwargs)]
 
 
-def test_traced_skinned_object_matches_ray_tracing_of_its_posed_mesh(rig):
-    on = _scene(rig, '{ spheres = "tube.h5" }')
+def test_traced_skinned_object_matches_ray_tracing_of_its_posed_mesh(folded_tube):
+    on = _scene(folded_tube, '{ spheres = "tube.h5" }')
     prepared, got = _tube_rows(on)
     assert prepared.objects[1].traced and prepared.objects[1].local_log is None
     _, ref = _tube_rows(on, method="raytrace", raytrace_dirs=3200)
-    _, spheres = _tube_rows(_scene(rig, '{ spheres = "tube.h5" }', "self_visibility = false"))
+    _, spheres = _tube_rows(_scene(folded_tube, '{ spheres = "tube.h5" }',
+                                   "self_visibility = false"))
     err_on = relative_rmse(np.concatenate(got), np.concatenate(ref))
     err_off = relative_rmse(np.concatenate(spheres), np.concatenate(ref))
     # 32 directions per vertex over its hemisphere against 3,200 over the sphere, both
@@ -59,26 +56,26 @@ def test_traced_skinned_object_matches_ray_tracing_of_its_posed_mesh(rig):
     assert err_on < 0.02
     assert err_off > 5 * err_on
     # more directions converge on the reference (measured 0.14 % at 256)
-    _, fine = _tube_rows(_scene(rig, '{ spheres = "tube.h5" }',
+    _, fine = _tube_rows(_scene(folded_tube, '{ spheres = "tube.h5" }',
                                 "self_visibility_directions = 256"))
     assert relative_rmse(np.concatenate(fine), np.concatenate(ref)) < 0.5 * err_on
 
 
-def test_own_deformable_field_is_skipped_like_own_spheres(rig):
+def test_own_deformable_field_is_skipped_like_own_spheres(folded_tube):
     """With nothing else blocking, the tube's rows get exactly its traced visibility
     whatever its own blocker is: a deformable field (a log blocker) is left out on its
     rows as the spheres are (and it still shadows the ground)."""
     field = "{ deformable = true, samples = [8, 12], rays = [8, 16] }"
-    _, with_field = _tube_rows(_scene(rig, field))
-    _, with_spheres = _tube_rows(_scene(rig, '{ spheres = "tube.h5" }'))
+    _, with_field = _tube_rows(_scene(folded_tube, field))
+    _, with_spheres = _tube_rows(_scene(folded_tube, '{ spheres = "tube.h5" }'))
     for a, b in zip(with_field, with_spheres, strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)  # float32 products
     # without tracing, the field shades the tube's own rows (measured 29 % different)
-    _, field_off = _tube_rows(_scene(rig, field, "self_visibility = false"))
+    _, field_off = _tube_rows(_scene(folded_tube, field, "self_visibility = false"))
     assert relative_rmse(np.concatenate(field_off), np.concatenate(with_field)) > 0.05
 
 
-def test_each_frame_traced_once_and_only_when_shading(rig, monkeypatch):
+def test_each_frame_traced_once_and_only_when_shading(folded_tube, monkeypatch):
     """A bake traces the posed mesh once per frame: the clustering (frame 0) and other
     callers that need only the geometry pose with ``trace=False``."""
     import shtools.scene.transfer as transfer
@@ -88,7 +85,7 @@ def test_each_frame_traced_once_and_only_when_shading(rig, monkeypatch):
     traced = transfer.traced_self_visibility
     monkeypatch.setattr(transfer, "traced_self_visibility",
                         lambda *a, **k: calls.append(1) or traced(*a, **k))
-    scene = _scene(rig, '{ spheres = "tube.h5" }')
+    scene = _scene(folded_tube, '{ spheres = "tube.h5" }')
     prepared = prepare_scene(scene)
     frames = list(bake_scene(scene, prepared=prepared, processes=1, scheduler="inline"))
     assert len(calls) == len(frames) == 2
@@ -102,16 +99,17 @@ def test_each_frame_traced_once_and_only_when_shading(rig, monkeypatch):
     np.testing.assert_array_equal(bare.vertices, full.vertices)
 
 
-def test_switches(rig):
-    off = prepare_scene(_scene(rig, '{ spheres = "tube.h5" }', "", "self_visibility = false"))
+def test_switches(folded_tube):
+    off = prepare_scene(_scene(folded_tube, '{ spheres = "tube.h5" }', "",
+                               "self_visibility = false"))
     assert not off.objects[1].traced and off.objects[1].local_log is None
-    local = prepare_scene(_scene(rig, '{ spheres = "tube.h5" }',
+    local = prepare_scene(_scene(folded_tube, '{ spheres = "tube.h5" }',
                                  "self_visibility = false\nlocal_visibility = true"))
     assert not local.objects[1].traced and local.objects[1].local_log is not None
     with pytest.raises(InputError, match="self_visibility_directions"):
-        _scene(rig, '{ spheres = "tube.h5" }', "self_visibility_directions = 2")
+        _scene(folded_tube, '{ spheres = "tube.h5" }', "self_visibility_directions = 2")
     with pytest.raises(InputError, match="posed mesh traced every frame"):
-        _scene(rig, '{ spheres = "tube.h5" }', "", 'self_visibility = "x.h5"')
+        _scene(folded_tube, '{ spheres = "tube.h5" }', "", 'self_visibility = "x.h5"')
 
 
 def test_runtime_multiplies_a_given_visibility_and_skips_the_own_blocker():
@@ -149,13 +147,13 @@ def test_runtime_multiplies_a_given_visibility_and_skips_the_own_blocker():
             SelfVisibility(None, slice(0, 5), visibility=g_own)])
 
 
-def test_product_method_uses_the_traced_visibility_and_skips_the_own_blocker(rig):
+def test_product_method_uses_the_traced_visibility_and_skips_the_own_blocker(folded_tube):
     """``--method product``: the tube's own rows get its traced posed mesh (its spheres
     or deformable field skipped there), as the SHEXP default does."""
-    on = _scene(rig, '{ spheres = "tube.h5" }')
+    on = _scene(folded_tube, '{ spheres = "tube.h5" }')
     _, ref = _tube_rows(on, method="raytrace", raytrace_dirs=3200)
     _, got = _tube_rows(on, method="product")
-    _, off = _tube_rows(_scene(rig, '{ spheres = "tube.h5" }', "self_visibility = false"),
+    _, off = _tube_rows(_scene(folded_tube, '{ spheres = "tube.h5" }', "self_visibility = false"),
                         method="product")
     err_on = relative_rmse(np.concatenate(got), np.concatenate(ref))
     err_off = relative_rmse(np.concatenate(off), np.concatenate(ref))
@@ -165,13 +163,13 @@ def test_product_method_uses_the_traced_visibility_and_skips_the_own_blocker(rig
     assert err_off > 5 * err_on
     # nothing else blocks the tube: its rows are exactly the traced visibility whatever
     # its own blocker (a deformable field is skipped there like the spheres)
-    _, with_field = _tube_rows(_scene(rig, "{ deformable = true, samples = [8, 12], "
+    _, with_field = _tube_rows(_scene(folded_tube, "{ deformable = true, samples = [8, 12], "
                                            "rays = [8, 16] }"), method="product")
     for a, b in zip(with_field, got, strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
 
 
-def test_deformable_field_in_product_space_shades_the_ground(rig):
+def test_deformable_field_in_product_space_shades_the_ground(folded_tube):
     """``field_space`` applies to deformable fields (product space by default): the
     ground under the folded tube against ray tracing of its posed mesh, both spaces
     (the tube's traced shadow on the ground off, so that the field casts it)."""
@@ -183,11 +181,11 @@ def test_deformable_field_in_product_space_shades_the_ground(rig):
         return np.concatenate([f.radiance[:GROUND_VERTICES] for f in
                                bake_scene(scene, prepared=prepared, processes=1, **kwargs)])
 
-    ref = ground(_scene(rig, field), method="raytrace", raytrace_dirs=3200)
-    log = ground(_scene(rig, field, off + 'field_space = "log"'))
-    prod = ground(_scene(rig, field, off + 'field_space = "product"'))
+    ref = ground(_scene(folded_tube, field), method="raytrace", raytrace_dirs=3200)
+    log = ground(_scene(folded_tube, field, off + 'field_space = "log"'))
+    prod = ground(_scene(folded_tube, field, off + 'field_space = "product"'))
     assert not np.allclose(log, prod, atol=1e-4)  # the setting reaches the field
-    np.testing.assert_array_equal(ground(_scene(rig, field, off)), prod)  # the default
+    np.testing.assert_array_equal(ground(_scene(folded_tube, field, off)), prod)  # the default
     # measured 4.3 % (log) and 3.0 % (product): the cone model between 96 samples
     # (8 x 12, coarser than the default 16 x 24), plus the log round trip in log space
     assert relative_rmse(log, ref) < 0.065
@@ -200,16 +198,16 @@ def _ground_rows(scene, **kwargs):
                            bake_scene(scene, prepared=prepared, processes=1, **kwargs)])
 
 
-def test_traced_shadow_on_the_ground_matches_ray_tracing(rig):
+def test_traced_shadow_on_the_ground_matches_ray_tracing(folded_tube):
     """By default the traced tube also traces its shadow on the receiver-only ground
     (rays inside the cone of its bounding sphere, in the same Embree scene) and its
     spheres no longer shade the ground: against the project's ray tracer of the posed
     mesh at 3,200 directions, far closer than the spheres, converging with more rays."""
     spheres = '{ spheres = "tube.h5" }'
-    ref = _ground_rows(_scene(rig, spheres), method="raytrace", raytrace_dirs=3200)
-    traced = _ground_rows(_scene(rig, spheres))
-    off = _ground_rows(_scene(rig, spheres, "traced_shadows = false"))
-    fine = _ground_rows(_scene(rig, spheres, "traced_shadow_directions = 512"))
+    ref = _ground_rows(_scene(folded_tube, spheres), method="raytrace", raytrace_dirs=3200)
+    traced = _ground_rows(_scene(folded_tube, spheres))
+    off = _ground_rows(_scene(folded_tube, spheres, "traced_shadows = false"))
+    fine = _ground_rows(_scene(folded_tube, spheres, "traced_shadow_directions = 512"))
     err, err_off = relative_rmse(traced, ref), relative_rmse(off, ref)
     err_fine = relative_rmse(fine, ref)
     # 96 rays for a receiver whose hemisphere the tube's bounding sphere fills, fewer for
@@ -221,12 +219,12 @@ def test_traced_shadow_on_the_ground_matches_ray_tracing(rig):
     # 512 rays: measured 0.26 % (16 / 32 / 128 rays: 2.7 / 1.5 / 0.63 %)
     assert err_fine < 0.5 * err
     # the ground's rows skip the tube's blocker: a deformable field gives the same rows
-    field = _ground_rows(_scene(rig, "{ deformable = true, samples = [8, 12], "
+    field = _ground_rows(_scene(folded_tube, "{ deformable = true, samples = [8, 12], "
                                      "rays = [8, 16] }"))
     np.testing.assert_allclose(field, traced, rtol=0, atol=1e-6)  # float32 products
 
 
-def test_every_traced_skinned_object_traces_the_ground(rig):
+def test_every_traced_skinned_object_traces_the_ground(folded_tube):
     """Two traced tubes over the ground: each traces its shadow on the ground in its own
     posed Embree scene and its spheres are skipped there (a row skips several blockers);
     the runtime multiplies the two traced visibilities."""
@@ -239,7 +237,7 @@ def test_every_traced_skinned_object_traces_the_ground(rig):
     def scene(settings=""):
         return parse_scene(tube_scene_text('{ spheres = "tube.h5" }',
                                            settings="frames = 2\n" + settings) + second,
-                           rig / "scene.toml")
+                           folded_tube / "scene.toml")
 
     prepared = prepare_scene(scene())
     state = pose_frame(prepared, 1.0)

@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 import pytest
+from helpers.scenes import ground, scene_text
 
 from shtools.data_formats.bake import read_bake
 from shtools.runtime import SphereLight
@@ -24,28 +25,13 @@ LAMP = np.array([1.4, 2.2, 0.6])
 RADIUS = 0.05
 BALL = np.array([0.0, 0.4, 0.0])
 
-SCENE = f"""
-[settings]
-order = 3
-
-[[lights]]
-name = "lamp"
-position = [{LAMP[0]}, {LAMP[1]}, {LAMP[2]}]
-radius = {RADIUS}
-color = [60.0, 55.0, 45.0]
-shadows = "ssoc"
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [3.0, 3.0], subdivisions = 255 }}
-role = "receiver"
-
-[[objects]]
-name = "ball"
-primitive = {{ type = "sphere", radius = 0.4, subdivisions = 4 }}
-role = "blocker"
-translate = [{BALL[0]}, {BALL[1]}, {BALL[2]}]
-"""
+SCENE = scene_text(
+    settings={"order": 3},
+    lights=[{"name": "lamp", "position": LAMP.tolist(), "radius": RADIUS,
+             "color": [60.0, 55.0, 45.0], "shadows": "ssoc"}],
+    objects=[ground(size=3.0, subdivisions=255),
+             {"name": "ball", "primitive": {"type": "sphere", "radius": 0.4, "subdivisions": 4},
+              "role": "blocker", "translate": BALL.tolist()}])
 
 
 def _exact(points):

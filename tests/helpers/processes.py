@@ -1,0 +1,36 @@
+"""Child processes of a test, read from /proc (Linux): what a stopped or refused
+command may have left running."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, reaped by no one yet, does not)."""
+    try:
+        # the state follows the command name in parentheses, which may hold spaces
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state not in ("Z", "X")
+
+
+def children(pid: int | None = None) -> list[int]:
+    """Live child processes of ``pid`` (default this process), of any of its threads."""
+    pid = os.getpid() if pid is None else pid
+    out = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        with contextlib.suppress(OSError):
+            out += [int(c) for c in (task / "children").read_text().split()]
+    return [c for c in out if alive(c)]
+
+
+def cmdline(pid: int) -> bytes | None:
+    """The NUL-separated command line of ``pid``, or None once it is gone."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return None
