@@ -129,6 +129,11 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                      if v is not None)
     lights = []
     for spec in prepared.scene.lights:
+        if spec.srf is not None:  # a lamp with a source radiance field
+            from shtools.scene.field_light import field_light_pose
+
+            lights.append(field_light_pose(spec, t))
+            continue
         key = light_at(spec, t)
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
