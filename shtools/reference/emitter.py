@@ -112,3 +112,29 @@ def emitter_radiance(points, normals, emitter_vertices, emitter_faces, emissive,
                                        / dist[bi[ok], si[ok]] ** 2)
         out[s:s + step] = contrib.sum(axis=1)
     return (out * area / (n_samples * np.pi))[:, None] * np.asarray(radiance, float)[None, :]
+
+
+def shaded_lamp(bulb_radius: float = 0.13, shade_radii=(0.32, 0.14), shade_z=(-0.2, 0.15),
+                sections: int = 48, subdivisions: int = 2):
+    """A procedural shaded lamp (tests, benchmarks): a closed bulb inside an open conical shade.
+
+    The bulb is an icosphere about the origin; the shade a truncated cone about
+    ``+z``, open at both ends, wider at the bottom (``z = shade_z[0]``), so most
+    light leaves downward (``-z``) and a narrower beam upward.
+
+    Returns
+    -------
+    bulb, shade : trimesh.Trimesh
+    """
+    import trimesh
+
+    a = np.linspace(0, 2 * np.pi, sections, endpoint=False)
+    rings = [np.c_[r * np.cos(a), r * np.sin(a), np.full(sections, z)]
+             for r, z in zip(shade_radii, shade_z, strict=True)]
+    faces = []
+    for i in range(sections):
+        j = (i + 1) % sections
+        faces += [[i, j, sections + j], [i, sections + j, sections + i]]
+    shade = trimesh.Trimesh(np.vstack(rings), np.array(faces), process=False)
+    bulb = trimesh.creation.icosphere(subdivisions, radius=bulb_radius)
+    return bulb, shade

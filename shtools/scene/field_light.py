@@ -132,14 +132,15 @@ def _check_outside(run, light, state, index: int, spec) -> None:
         v = state.vertices[start:start + n]
         start += n
         if o.spec.name not in closed:
-            mesh = trimesh.Trimesh(o.vertices, o.faces, process=False)
+            # vertices merged: primitives repeat them along their seams
+            mesh = trimesh.Trimesh(o.vertices, o.faces, process=True)
             closed[o.spec.name] = len(o.faces) > 0 and len(boundary_edges(mesh)) == 0
         if not closed[o.spec.name]:
             continue
         lo, hi = v.min(axis=0), v.max(axis=0)
         if np.any(c < lo) or np.any(c > hi):
             continue
-        if trimesh.Trimesh(v, o.faces, process=False).contains(c[None, :])[0]:
+        if trimesh.Trimesh(v, o.faces, process=True).contains(c[None, :])[0]:
             raise InputError(f"lights[{index}] ('{spec.name}'): the lamp is inside the "
                              f"receiver '{o.spec.name}', which is closed: no light gets out; "
                              "move the lamp or the object", run.prepared.scene.path)
@@ -149,6 +150,8 @@ class FieldLightShadow(LightShadow):
     """A lamp's source radiance field through the visibility of the nearer blockers."""
 
     name = "field"
+    #: set by ``field = "x.srf.h5"``, never chosen with ``shadows =``
+    implied = True
 
     def radiance(self, run, state, visibility, lights):
         from shtools.runtime.radiance import FieldLight, field_light_radiance

@@ -441,9 +441,6 @@ def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx,
     name = t.name if t.name is not None else f"light{index}"
     if t.field is not None:
         return _field_light(t, name, settings, ctx, base)
-    if t.shadows == "field":
-        raise ctx.sub("shadows").error("'field' is the way of a field light; give the lamp's "
-                                       "field = \"x.srf.h5\" instead of a sphere")
 
     def key_of(time: float, k, first: LightKey | None) -> LightKey:
         pos = np.asarray(k.position, dtype=float) if k.position is not None else first.position

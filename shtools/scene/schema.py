@@ -377,7 +377,9 @@ class LightKeyframe(Table):
 def _light_shadow_names() -> tuple[str, ...]:
     from shtools.scene.shadows import LIGHT_SHADOWS
 
-    return tuple(LIGHT_SHADOWS)
+    # a way set by the light's own kind (a field light's "field") is not a choice
+    return tuple(name for name, way in LIGHT_SHADOWS.items()
+                 if not getattr(way, "implied", False))
 
 
 #: Keys of a spherical light that a field light (``field = "x.srf.h5"``) does not take,
