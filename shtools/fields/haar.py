@@ -69,7 +69,7 @@ def ihaar2(coeffs) -> np.ndarray:
 
 def kept_count(size: int, keep: float) -> int:
     """Coefficients kept per ``size x size`` map: ``round(keep * size**2)``, at least 1."""
-    return max(1, int(round(keep * size * size)))
+    return max(1, round(keep * size * size))
 
 
 def truncate(coeffs, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -217,3 +217,51 @@ def reduce_haar_shell(maps, threshold: float, weights, keep: float = 0.05,
         current, R = new, R // 2
     total = error(current, initial) if R < R0 else 0.0
     return ShellReduction(current, R, errors, total)
+
+
+def haar_shell_sizes(mesh, shells: int = 32, resolution: int = 64, map_size: int = 64,
+                     keep: float = 0.05, threshold: float = 0.01, min_resolution: int = 8,
+                     *, cumulative: bool = False) -> dict:
+    """Per-shell resolutions and bytes of an all-frequency (Haar) field of a mesh.
+
+    Sampling is the occlusion field's (shells around the bounding sphere,
+    cone-culled binary visibility over the ``map_size`` map); each sample's map
+    is stored at the kept fraction and the shell reduced on reconstructed maps.
+
+    Returns
+    -------
+    dict
+        ``resolution`` (list of R_c), ``bytes`` (``sum_c R_c^2 K (1 + 2)``: an 8-bit
+        value and a uint16 index per kept coefficient), ``fixed_bytes`` (every
+        shell at ``resolution``), ``kept`` (K), ``cumulative_error`` (per shell).
+    """
+    from shtools.fields.sampling import (
+        bounding_sphere,
+        direction_map,
+        grid_directions,
+        object_visibility,
+        shell_radii,
+    )
+    from shtools.geometry.raycast import RayCaster
+
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    center, vr = bounding_sphere(v)
+    caster = RayCaster(v, np.asarray(mesh.faces))
+    dirs, weights = direction_map(map_size)
+    sample_dirs = grid_directions(resolution).reshape(-1, 3)
+    K = kept_count(map_size, keep)
+    res, cum = [], []
+    for r in shell_radii(vr, shells):
+        vis = object_visibility(caster, center, vr, center + r * sample_dirs, dirs)
+        maps = np.empty((vis.shape[0], map_size * map_size), dtype=np.float32)
+        for s in range(0, vis.shape[0], 512):
+            chunk = vis[s:s + 512].reshape(-1, map_size, map_size).astype(np.float64)
+            maps[s:s + 512] = truncated_maps(chunk, keep).reshape(chunk.shape[0], -1)
+        red = reduce_haar_shell(maps.reshape(resolution, resolution, -1), threshold, weights,
+                                keep, min_resolution, cumulative=cumulative)
+        res.append(int(red.resolution))
+        cum.append(float(red.cumulative_error))
+    per_sample = K * 3
+    return {"resolution": res, "bytes": sum(r * r for r in res) * per_sample,
+            "fixed_bytes": shells * resolution * resolution * per_sample, "kept": K,
+            "cumulative_error": cum}
