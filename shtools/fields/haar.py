@@ -27,44 +27,9 @@ import math
 
 import numpy as np
 
+from shtools.runtime.haar import HaarField, haar2, ihaar2
 
-def haar2(maps) -> np.ndarray:
-    """Nonstandard 2-D Haar transform of square maps, shape ``(..., N, N)`` (N a power of 2).
-
-    Layout: level by level in place (Mallat order): ``[0, 0]`` is the overall
-    scaling coefficient; at size ``n`` the quadrants ``[:h, h:n]``, ``[h:n, :h]``,
-    ``[h:n, h:n]`` (``h = n/2``) hold the horizontal, vertical and diagonal
-    wavelets of the ``n x n`` level.
-    """
-    out = np.array(maps, dtype=np.float64)
-    n = out.shape[-1]
-    while n > 1:
-        a = out[..., :n, :n]
-        tl, tr = a[..., 0::2, 0::2], a[..., 0::2, 1::2]
-        bl, br = a[..., 1::2, 0::2], a[..., 1::2, 1::2]
-        h = n // 2
-        parts = ((tl + tr + bl + br) / 2, (tl - tr + bl - br) / 2,
-                 (tl + tr - bl - br) / 2, (tl - tr - bl + br) / 2)
-        out[..., :h, :h], out[..., :h, h:n], out[..., h:n, :h], out[..., h:n, h:n] = parts
-        n = h
-    return out
-
-
-def ihaar2(coeffs) -> np.ndarray:
-    """Inverse of :func:`haar2`, shape ``(..., N, N)``."""
-    out = np.array(coeffs, dtype=np.float64)
-    N = out.shape[-1]
-    n = 1
-    while n < N:
-        s, hz = out[..., :n, :n].copy(), out[..., :n, n:2 * n].copy()
-        vt, dg = out[..., n:2 * n, :n].copy(), out[..., n:2 * n, n:2 * n].copy()
-        blk = out[..., :2 * n, :2 * n]
-        blk[..., 0::2, 0::2] = (s + hz + vt + dg) / 2
-        blk[..., 0::2, 1::2] = (s - hz + vt - dg) / 2
-        blk[..., 1::2, 0::2] = (s + hz - vt - dg) / 2
-        blk[..., 1::2, 1::2] = (s - hz - vt + dg) / 2
-        n *= 2
-    return out
+__all__ = ["haar2", "ihaar2"]  # the transform lives with the runtime lookup
 
 
 def kept_count(size: int, keep: float) -> int:
@@ -219,21 +184,20 @@ def reduce_haar_shell(maps, threshold: float, weights, keep: float = 0.05,
     return ShellReduction(current, R, errors, total)
 
 
-def haar_shell_sizes(mesh, shells: int = 32, resolution: int = 64, map_size: int = 64,
+def build_haar_field(mesh, shells: int = 32, resolution: int = 64, map_size: int = 64,
                      keep: float = 0.05, threshold: float = 0.01, min_resolution: int = 8,
-                     *, cumulative: bool = False) -> dict:
-    """Per-shell resolutions and bytes of an all-frequency (Haar) field of a mesh.
+                     *, cumulative: bool = False) -> tuple[HaarField, list]:
+    """Sample, reduce and quantize the all-frequency (Haar) shadow field of a mesh.
 
     Sampling is the occlusion field's (shells around the bounding sphere,
     cone-culled binary visibility over the ``map_size`` map); each sample's map
-    is stored at the kept fraction and the shell reduced on reconstructed maps.
+    is stored at the kept fraction and each shell reduced on reconstructed maps.
 
     Returns
     -------
-    dict
-        ``resolution`` (list of R_c), ``bytes`` (``sum_c R_c^2 K (1 + 2)``: an 8-bit
-        value and a uint16 index per kept coefficient), ``fixed_bytes`` (every
-        shell at ``resolution``), ``kept`` (K), ``cumulative_error`` (per shell).
+    HaarField
+    cumulative_error : list of float
+        Per shell, eq. (1) of the kept samples against the initial ones.
     """
     from shtools.fields.sampling import (
         bounding_sphere,
@@ -250,8 +214,9 @@ def haar_shell_sizes(mesh, shells: int = 32, resolution: int = 64, map_size: int
     dirs, weights = direction_map(map_size)
     sample_dirs = grid_directions(resolution).reshape(-1, 3)
     K = kept_count(map_size, keep)
-    res, cum = [], []
-    for r in shell_radii(vr, shells):
+    radii = shell_radii(vr, shells)
+    res, cum, index, qs, offs, steps = [], [], [], [], [], []
+    for r in radii:
         vis = object_visibility(caster, center, vr, center + r * sample_dirs, dirs)
         maps = np.empty((vis.shape[0], map_size * map_size), dtype=np.float32)
         for s in range(0, vis.shape[0], 512):
@@ -259,9 +224,35 @@ def haar_shell_sizes(mesh, shells: int = 32, resolution: int = 64, map_size: int
             maps[s:s + 512] = truncated_maps(chunk, keep).reshape(chunk.shape[0], -1)
         red = reduce_haar_shell(maps.reshape(resolution, resolution, -1), threshold, weights,
                                 keep, min_resolution, cumulative=cumulative)
-        res.append(int(red.resolution))
+        Rc = int(red.resolution)
+        idx, val = truncate(haar2(red.grid.reshape(-1, map_size, map_size)), K)
+        qv = quantize_sparse(val)
+        res.append(Rc)
         cum.append(float(red.cumulative_error))
-    per_sample = K * 3
-    return {"resolution": res, "bytes": sum(r * r for r in res) * per_sample,
-            "fixed_bytes": shells * resolution * resolution * per_sample, "kept": K,
+        index.append(idx.reshape(Rc, Rc, K))
+        qs.append(qv["q"].reshape(Rc, Rc, K))
+        offs.append(qv["offset"])
+        steps.append(qv["step"])
+    fld = HaarField(center, vr, np.asarray(radii), np.asarray(res, dtype=np.int64), index, qs,
+                    np.stack(offs), np.stack(steps), map_size)
+    return fld, cum
+
+
+def haar_shell_sizes(mesh, shells: int = 32, resolution: int = 64, map_size: int = 64,
+                     keep: float = 0.05, threshold: float = 0.01, min_resolution: int = 8,
+                     *, cumulative: bool = False) -> dict:
+    """Per-shell resolutions and bytes of the Haar field of a mesh (:func:`build_haar_field`).
+
+    Returns
+    -------
+    dict
+        ``resolution`` (list of R_c), ``bytes`` (``sum_c R_c^2 K (1 + 2)``),
+        ``fixed_bytes`` (every shell at ``resolution``), ``kept`` (K),
+        ``cumulative_error`` (per shell).
+    """
+    fld, cum = build_haar_field(mesh, shells, resolution, map_size, keep, threshold,
+                                min_resolution, cumulative=cumulative)
+    K = kept_count(map_size, keep)
+    return {"resolution": [int(r) for r in fld.resolution], "bytes": fld.stored_bytes(),
+            "fixed_bytes": shells * resolution * resolution * K * 3, "kept": K,
             "cumulative_error": cum}
