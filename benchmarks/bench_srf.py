@@ -43,11 +43,11 @@ def _lamp():
     return make_emitter(bulb, (10.0, 9.0, 8.0), [shade])
 
 
-def _sample(em, quick: bool):
+def _sample(em, quick: bool, order: int = 4):
     from shtools.fields import FieldParameters
     from shtools.fields.radiance import sample_radiance_shells
 
-    params = FieldParameters(shells=32, resolution=16 if quick else 64,
+    params = FieldParameters(shells=32, resolution=16 if quick else 64, order=order,
                              map_size=8 if quick else 16, min_resolution=8 if not quick else 4)
     t0 = time.perf_counter()
     sampled = sample_radiance_shells(em, params)
@@ -58,9 +58,10 @@ def part_sizes(em, params, sampled):
     from shtools.fields.radiance import build_radiance_field
 
     R0 = params.resolution
-    fixed32 = 32 * R0 * R0 * 3 * 16
-    fixed16 = 16 * R0 * R0 * 3 * 16
-    print("\n## sizes (shaded lamp, order 4, 8 bits; fixed 32 x R^2 x 48 B)\n")
+    n2 = params.order ** 2
+    fixed32 = 32 * R0 * R0 * 3 * n2
+    fixed16 = 16 * R0 * R0 * 3 * n2
+    print(f"\n## sizes (shaded lamp, order {params.order}, 8 bits; fixed 32 x R^2 x 3 x n^2 B)\n")
     print("| error scale | τ | R_c per shell | bytes | fixed | reduction (32 shells) | "
           "reduction (first 16 shells vs 16-shell fixed) |")
     print("|---|---|---|---|---|---|---|")
@@ -70,7 +71,7 @@ def part_sizes(em, params, sampled):
             params.threshold = tau
             fld, _ = build_radiance_field(sampled, em, params, error_scale=scale)
             fields[(scale, tau)] = fld
-            b16 = sum(int(r) ** 2 for r in fld.resolution[:16]) * 48
+            b16 = sum(int(r) ** 2 for r in fld.resolution[:16]) * 3 * n2
             print(f"| {scale} | {tau} | {compact(fld.resolution)} | {fld.stored_bytes()} | "
                   f"{fixed32} | {100 * (1 - fld.stored_bytes() / fixed32):.1f} % | "
                   f"{100 * (1 - b16 / fixed16):.1f} % |")
@@ -92,7 +93,7 @@ def compact(res) -> str:
 
 SCENE = """
 [settings]
-order = 4
+order = {order}
 frames = 3
 fps = 1
 
@@ -130,7 +131,7 @@ color = [10.0, 9.0, 8.0]
 """
 
 
-def part_ground(em, fields, tmp: Path):
+def part_ground(em, fields, tmp: Path, order: int = 4):
     from shtools.data_formats.srf import write_radiance_field
     from shtools.fields.emitter import Emitter
     from shtools.fields.radiance import emitter_sphere, sample_rcvs
@@ -143,14 +144,14 @@ def part_ground(em, fields, tmp: Path):
     from shtools.scene.prepare import prepare_scene
     from shtools.scene.scene import parse_scene
 
-    print("\n## ground radiance vs the ray-traced emitter (moving lamp + ball, order 4)\n")
+    print(f"\n## ground radiance vs the ray-traced emitter (moving lamp + ball, order {order})\n")
     print("| field | frame | whole ground | ball's shadow (n) | shadow, error / unshadowed | "
-          "unshadowed ground | order-4 truncation alone (unshadowed) |")
+          f"unshadowed ground | order-{order} truncation alone (unshadowed) |")
     print("|---|---|---|---|---|---|---|")
     n = (GRID + 1) ** 2
     for key in (("peak", 0.01), ("emitter", 0.01), ("peak", 0.02)):
         write_radiance_field(tmp / "lamp.srf.h5", fields[key])
-        text = SCENE.format(grid=GRID)
+        text = SCENE.format(grid=GRID, order=order)
         scene = parse_scene(text, tmp / "scene.toml")
         free_scene = parse_scene(text[:text.index('[[objects]]\nname = "ball"')],
                                  tmp / "scene.toml")
@@ -170,10 +171,10 @@ def part_ground(em, fields, tmp: Path):
             wem = Emitter(wv, em.faces, em.emissive, em.radiance, em.normals @ m[:3, :3].T,
                           em.areas)
             c, r = emitter_sphere(wem)
-            exact = sample_rcvs(RayCaster(wv, em.faces), wem, c, r, pts, 32, 4)
-            vis = np.zeros((n, 16))
+            exact = sample_rcvs(RayCaster(wv, em.faces), wem, c, r, pts, 32, order)
+            vis = np.zeros((n, order * order))
             vis[:, 0] = math.sqrt(4 * math.pi)
-            trunc = shade(vis, pts, nrm, np.swapaxes(exact, 1, 2), order=4,
+            trunc = shade(vis, pts, nrm, np.swapaxes(exact, 1, 2), order=order,
                           window_kind=scene.settings.resolved_window(),
                           window_h=scene.settings.window_h)
             print(f"| {key[0]} τ={key[1]} | {frame} | {100 * relative_rmse(got, ref):.1f} % | "
@@ -195,7 +196,7 @@ def part_cost(fields, tmp: Path, quick: bool):
 
     grid = 64 if quick else 160
     write_radiance_field(tmp / "lamp.srf.h5", fields[("peak", 0.01)])
-    text = SCENE.format(grid=grid)
+    text = SCENE.format(grid=grid, order=4)
     sphere = text.replace(text[text.index("[[lights]]"):text.index("[[objects]]")],
                           SPHERE_LIGHT + "\n")
     print(f"\n## frame cost, one process ({(grid + 1) ** 2} ground vertices + ball)\n")
@@ -215,18 +216,20 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--part", default="sizes,ground,cost")
+    ap.add_argument("--order", type=int, default=4,
+                    help="SH order of the field and the scene (cost: order 4 only)")
     args = ap.parse_args(argv)
     parts = set(args.part.split(","))
     em = _lamp()
-    params, sampled, secs = _sample(em, args.quick)
+    params, sampled, secs = _sample(em, args.quick, args.order)
     print(f"# bench_srf: shaded lamp, 32 shells, R = {params.resolution}, "
           f"{params.map_size}^2 directions per sample: {sampled.rays / 1e6:.1f} M rays in "
           f"{secs:.1f} s")
     fields = part_sizes(em, params, sampled)
     with tempfile.TemporaryDirectory() as tmp:
         if "ground" in parts:
-            part_ground(em, fields, Path(tmp))
-        if "cost" in parts:
+            part_ground(em, fields, Path(tmp), args.order)
+        if "cost" in parts and args.order == 4:
             part_cost(fields, Path(tmp), args.quick)
 
 
