@@ -114,7 +114,7 @@ class HaarField:
         return out
 
     def visibility_maps(self, points) -> np.ndarray:
-        """Visibility maps at object-frame points, shape ``(P, N*N)`` float64.
+        """Visibility maps at object-frame points, shape ``(P, N*N)`` float64, in [0, 1].
 
         Cell ``(s, t)`` of a map is the direction ``theta_s = (s + 1/2) pi / N``
         from ``+z``, ``phi_t = (t + 1/2) 2 pi / N`` (the field's direction map).
@@ -149,7 +149,9 @@ class HaarField:
                     np.add.at(coeff, (rows[sel][:, None], kidx[idx[:, k]]),
                               vals[idx[:, k]] * w[:, None])
         maps = ihaar2(coeff.reshape(-1, N, N)).reshape(p.shape[0], -1)
-        return maps + fade[:, None]  # beyond the fade: unoccluded (1 everywhere)
+        # beyond the fade: unoccluded (1 everywhere); truncation rings slightly outside
+        # [0, 1], which a visibility cannot be (and products must not amplify)
+        return np.clip(maps + fade[:, None], 0.0, 1.0)
 
 
 def haar_radiance(visibility_maps, env_map, normals, dirs, weights) -> np.ndarray:
