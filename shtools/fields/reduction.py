@@ -73,10 +73,12 @@ def l1_error(a, b, degree: int = ERROR_QUAD_DEGREE, channels: int = 1) -> np.nda
         With several channels the error of a row is the largest of theirs.
     """
     diff = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
-    diff = diff.reshape((*diff.shape[:-1], channels, diff.shape[-1] // channels))
-    n = math.isqrt(diff.shape[-1])
+    n = math.isqrt(diff.shape[-1] // channels)
     dirs, w = sphere_quadrature(degree)
     y = basis(dirs, n)
+    if channels == 1:
+        return np.abs(diff @ y.T) @ w / (4 * math.pi)
+    diff = diff.reshape((*diff.shape[:-1], channels, n * n))
     return (np.abs(diff @ y.T) @ w / (4 * math.pi)).max(axis=-1)
 
 
