@@ -146,8 +146,9 @@ class HaarField:
                 kidx = np.asarray(self.index[shell], np.int64).reshape(vals.shape)
                 for k in range(4):
                     w = wb[:, k] * wshell[sel] * (1 - fade[sel])
-                    np.add.at(coeff, (rows[sel][:, None], kidx[idx[:, k]]),
-                              vals[idx[:, k]] * w[:, None])
+                    # one sample's kept indices are distinct: no repeated (row, index)
+                    # pair within one corner, so a buffered += is exact
+                    coeff[rows[sel][:, None], kidx[idx[:, k]]] += vals[idx[:, k]] * w[:, None]
         maps = ihaar2(coeff.reshape(-1, N, N)).reshape(p.shape[0], -1)
         # beyond the fade: unoccluded (1 everywhere); truncation rings slightly outside
         # [0, 1], which a visibility cannot be (and products must not amplify)
