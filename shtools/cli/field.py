@@ -43,10 +43,19 @@ def field():
                    "--order, 6 at order 4].")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Recorded for reproducibility (sampling is deterministic).")
+@click.option("--radiance", "emission", default=None, type=click.Path(dir_okay=False),
+              help="EMISSION table (TOML: radiance = [r, g, b], fixture = [meshes]): sample "
+                   "the source radiance field of a lamp whose closed emitter is MESH into an "
+                   "srf asset, instead of an occlusion field (docs/formats.md).")
+@click.option("--error-scale", default="peak", show_default=True,
+              type=click.Choice(["peak", "emitter"]),
+              help="With --radiance: eq. (1) relative to each shell's largest radiance "
+                   "(peak) or to the emitter's radiance (emitter: smaller, less exact).")
 @scheduler_options("shells")
 @json_option
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
-           bits, cumulative, no_self_visibility, self_order, seed, scheduler, workers, as_json):
+           bits, cumulative, no_self_visibility, self_order, seed, emission, error_scale,
+           scheduler, workers, as_json):
     """Sample the shadow field of MESH into a field asset.
 
     Per shell, the object's binary visibility over the direction map at R x R
@@ -72,6 +81,13 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         raise InputError(exc.message, mesh_path) from None
     from shtools.cli._outputs import guard_outputs
 
+    if emission is not None:
+        from shtools.fields.emitter import read_emission
+
+        guard_outputs({"-o": output}, [mesh_path, emission, *read_emission(emission)[1]])
+        _sample_radiance(mesh_path, emission, output, params, error_scale, scheduler, workers,
+                         as_json)
+        return
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
     sv = None
@@ -117,4 +133,49 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     if not fld.attrs["closed"]:
         human += (f"; open mesh ({fld.attrs['boundary_edges']} boundary edges): rays leak "
                   "through its holes")
+    report(summary, as_json, human)
+
+
+def _sample_radiance(mesh_path, emission, output, params, error_scale, scheduler, workers,
+                     as_json):
+    """``field sample MESH --radiance EMISSION``: a lamp's source radiance field."""
+    from shtools.data_formats.srf import write_radiance_field
+    from shtools.errors import InputError
+    from shtools.fields.emitter import load_emitter
+    from shtools.fields.radiance import sample_radiance_field
+
+    emitter = load_emitter(mesh_path, emission)
+    R0 = params.resolution
+    with progress(total=params.shells * R0 * R0, desc="radiance samples") as bar:
+        try:
+            fld, rep = sample_radiance_field(emitter, params, error_scale=error_scale,
+                                             progress=bar.update, scheduler=scheduler,
+                                             workers=workers)
+        except InputError as exc:
+            raise InputError(exc.message, exc.path or mesh_path) from None
+    parameters = {k: getattr(params, k) for k in (
+        "shells", "resolution", "map_size", "order", "threshold", "min_resolution", "bits",
+        "cumulative", "seed")}
+    parameters["error_scale"] = error_scale
+    write_radiance_field(output, fld, inputs={"mesh": mesh_path, "emission": emission},
+                         parameters=parameters)
+    fixed = params.shells * R0 * R0 * 3 * params.order ** 2
+    summary = {
+        "output": output,
+        "shells": params.shells,
+        "resolution": [int(r) for r in fld.resolution],
+        "bytes": fld.stored_bytes(),
+        "fixed_bytes": fixed,
+        "reduction_percent": round(100 * (1 - fld.stored_bytes() / fixed), 2),
+        "cumulative_error": [round(float(e), 6) for e in fld.reduction_error],
+        "bounding_radius": fld.bounding_radius,
+        "emitter_radius": fld.emitter_radius,
+        "radiance": [float(x) for x in fld.radiance],
+        "rays": rep.rays,
+        "seconds": {k: round(v, 3) for k, v in rep.seconds.items()},
+    }
+    human = (f"wrote {output}: source radiance field, {params.shells} shells, R_c "
+             f"{summary['resolution']}, {summary['bytes']} B "
+             f"({summary['reduction_percent']:.1f} % below fixed), "
+             f"{rep.rays / 1e6:.1f} M rays in {rep.seconds['total']:.1f} s")
     report(summary, as_json, human)

@@ -130,7 +130,8 @@ def register(schema: Schema) -> Schema:
 
 #: Every asset kind (docs/formats.md); each has a module ``shtools.data_formats.<kind>``
 #: that registers its :class:`Schema` on import.
-KINDS = ("spheres", "tree", "bound", "tables", "scaling", "field", "light", "bake", "transfer")
+KINDS = ("spheres", "tree", "bound", "tables", "scaling", "field", "srf", "light", "bake",
+         "transfer")
 
 
 def get_schema(kind: str) -> Schema | None:

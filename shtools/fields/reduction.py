@@ -59,20 +59,27 @@ class ShellReduction:
     cumulative_error: float = 0.0
 
 
-def l1_error(a, b, degree: int = ERROR_QUAD_DEGREE) -> np.ndarray:
+def l1_error(a, b, degree: int = ERROR_QUAD_DEGREE, channels: int = 1) -> np.ndarray:
     """Eq. (1): ``(1/4 pi) int |(a - b) . y(s)| ds`` per row, shape ``(...)``.
 
     Parameters
     ----------
-    a, b : array_like, shape (..., n*n)
+    a, b : array_like, shape (..., channels*n*n)
+        ``channels`` SH vectors per row, channel-major (an RGB radiance vector
+        is its red, green and blue coefficients in turn).
     degree : int
         Quadrature degree.
+    channels : int
+        With several channels the error of a row is the largest of theirs.
     """
     diff = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
-    n = math.isqrt(diff.shape[-1])
+    n = math.isqrt(diff.shape[-1] // channels)
     dirs, w = sphere_quadrature(degree)
     y = basis(dirs, n)
-    return np.abs(diff @ y.T) @ w / (4 * math.pi)
+    if channels == 1:
+        return np.abs(diff @ y.T) @ w / (4 * math.pi)
+    diff = diff.reshape((*diff.shape[:-1], channels, n * n))
+    return (np.abs(diff @ y.T) @ w / (4 * math.pi)).max(axis=-1)
 
 
 def box2(grid) -> np.ndarray:
@@ -90,13 +97,14 @@ def upsample(coarse, res: int) -> np.ndarray:
 
 
 def reduce_shell(grid, threshold: float, min_resolution: int = 8, *,
-                 cumulative: bool = False, degree: int = ERROR_QUAD_DEGREE) -> ShellReduction:
+                 cumulative: bool = False, degree: int = ERROR_QUAD_DEGREE,
+                 channels: int = 1) -> ShellReduction:
     """Halve one shell's resolution while eq. (1) stays below ``threshold`` everywhere.
 
     Parameters
     ----------
-    grid : array_like, shape (R, R, n*n)
-        Initial OCVs, R a power of two.
+    grid : array_like, shape (R, R, channels*n*n)
+        Initial OCVs (or RCVs, one SH vector per colour channel), R a power of two.
     threshold : float
         > 0 (Tamura et al. use 0.01).
     min_resolution : int
@@ -105,6 +113,9 @@ def reduce_shell(grid, threshold: float, min_resolution: int = 8, *,
         Compare every level with the initial samples instead of the previous level.
     degree : int
         Quadrature degree of eq. (1).
+    channels : int
+        SH vectors per sample (3 for an RGB radiance field; the error is the
+        largest channel's).
 
     Returns
     -------
@@ -117,12 +128,12 @@ def reduce_shell(grid, threshold: float, min_resolution: int = 8, *,
     while R > min_resolution and R % 2 == 0:
         new = box2(current)
         ref, res = (initial, R0) if cumulative else (current, R)
-        err = float(l1_error(upsample(new, res), ref, degree).max())
+        err = float(l1_error(upsample(new, res), ref, degree, channels).max())
         errors.append(err)
         if not err < threshold:
             break
         current, R = new, R // 2
     total = 0.0
     if R < R0:
-        total = float(l1_error(upsample(current, R0), initial, degree).max())
+        total = float(l1_error(upsample(current, R0), initial, degree, channels).max())
     return ShellReduction(current, R, errors, total)

@@ -165,7 +165,9 @@ class FieldTable:
     def __init__(self, fld):
         self.field = fld
         self.order = int(fld.order)
-        K = self.order ** 2
+        #: SH vectors per sample (3 for an RGB source radiance field), channel-major
+        self.channels = int(getattr(fld, "channels", 1))
+        K = self.order ** 2 * self.channels
         self.center = np.asarray(fld.center, dtype=np.float64)
         self.radii = np.asarray(fld.shell_radii, dtype=np.float64)
         self.res = np.asarray(fld.resolution, dtype=np.int64)
@@ -177,10 +179,9 @@ class FieldTable:
         self._step = float(steps[0]) if C > 1 else 1.0
         #: equally spaced shells (the default): the shell index is arithmetic, no search
         self._uniform = C > 1 and bool(np.allclose(steps, self._step, rtol=1e-9, atol=0))
-        self._data = {
-            "ocv": _flatten(fld.ocv, fld.offset, fld.step, K),
-            "log": _flatten(fld.log_ocv, fld.log_offset, fld.log_step, K),
-        }
+        self._data = {"ocv": _flatten(fld.ocv, fld.offset, fld.step, K)}
+        if getattr(fld, "log_ocv", None) is not None:  # radiance fields have no log
+            self._data["log"] = _flatten(fld.log_ocv, fld.log_offset, fld.log_step, K)
 
     def __getstate__(self):
         # worker processes get the lookup tables only, not the stored (quantized) field
@@ -189,7 +190,7 @@ class FieldTable:
         return state
 
     def lookup(self, points, space: str = "ocv") -> np.ndarray:
-        """Field value at object-frame points (no rotation), shape ``(P, n*n)`` float32.
+        """Field value at object-frame points (no rotation), shape ``(P, channels*n*n)`` float32.
 
         Parameters
         ----------
@@ -199,7 +200,7 @@ class FieldTable:
             The visibility vectors or their SH logs.
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        K = self.order ** 2
+        K = self.order ** 2 * self.channels
         out = np.empty((p.shape[0], K), dtype=np.float32)
         for s in range(0, p.shape[0], LOOKUP_CHUNK):
             out[s:s + LOOKUP_CHUNK] = self._lookup_chunk(p[s:s + LOOKUP_CHUNK], space)

@@ -22,6 +22,10 @@ def scene_eval_inputs(path, frame: int = 0, order: int | None = None) -> EvalInp
     from shtools.scene.scene import load_scene
 
     scene = load_scene(path)
+    if any(spec.srf is not None for spec in scene.lights):
+        raise InputError("the scene has a field light (field = ...): `shtools eval` compares "
+                         "visibility methods under spherical lights and the environment; bake "
+                         "it with `shtools bake` instead, or remove the field light", path)
     st = scene.settings
     if frame >= st.frames:
         raise InputError(f"--frame {frame} is outside the scene's frames 0..{st.frames - 1}",

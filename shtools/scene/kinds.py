@@ -11,4 +11,5 @@ schema and the baker see it:
 # blocker = { deformable = true } (deformable shadow fields, skinned objects)
 import shtools.scene.deformable
 import shtools.scene.field_blocker  # registers blocker = { field = ... }
+import shtools.scene.field_light  # [[lights]] field = "x.srf.h5" (source radiance fields)
 import shtools.scene.light_shadows  # noqa: F401  (shadows = "ssoc" | "raytrace" | "auto")

@@ -133,11 +133,22 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
 
 
 def pose_lights(scene, t: float) -> list:
-    """The scene's ``[[lights]]`` at time ``t``, as runtime SphereLights (one per light)."""
+    """The scene's ``[[lights]]`` at time ``t``, one per light: a runtime SphereLight, or
+    the pose of a lamp with a source radiance field
+    (:func:`shtools.scene.field_light.field_light_pose`)."""
     from shtools.runtime import SphereLight
 
-    return [SphereLight(position=key.position, radius=float(key.radius), color=key.color)
-            for key in (light_at(spec, t) for spec in scene.lights)]
+    lights = []
+    for spec in scene.lights:
+        if spec.srf is not None:  # a lamp with a source radiance field
+            from shtools.scene.field_light import field_light_pose
+
+            lights.append(field_light_pose(spec, t))
+            continue
+        key = light_at(spec, t)
+        lights.append(SphereLight(position=key.position, radius=float(key.radius),
+                                  color=key.color))
+    return lights
 
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters=None):

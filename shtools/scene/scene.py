@@ -172,6 +172,12 @@ class SphereLightSpec:
     samples: int = 64
     #: ``SSOCSettings`` of ``shadows = "ssoc"``/``"auto"`` (None: the defaults)
     ssoc: Any = None
+    #: a field light: its ``srf`` asset (``shadows`` is then ``"field"``) ...
+    srf: Path | None = None
+    #: ... its keyed lamp poses (translate = position; rotation, uniform scale) ...
+    poses: list[Keyframe] = field(default_factory=list)
+    #: ... and the factor on the asset's radiance
+    intensity: float = 1.0
 
 
 @dataclass
@@ -385,8 +391,33 @@ def _environment(t: schema.Environment, settings: Settings, ctx: _Ctx,
     return env
 
 
-def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx) -> SphereLightSpec:
+def _field_light(t: schema.Light, name: str, settings: Settings, ctx: _Ctx,
+                 base: Path) -> SphereLightSpec:
+    """A ``[[lights]]`` table with ``field = "x.srf.h5"``: keyed lamp poses."""
+    from types import SimpleNamespace
+
+    path = _file(t.field, base, ctx.sub("field"), (".h5",))
+
+    def pose_of(k, first: Pose | None) -> Pose:
+        scale = None if k.scale is None else [float(k.scale)] * 3
+        return _pose(SimpleNamespace(translate=k.position, rotate=k.rotate,
+                                     quaternion=k.quaternion, scale=scale), first)
+
+    first = pose_of(t, None)
+    poses = [Keyframe(0.0, first)]
+    if t.keyframes is not None:
+        poses = _sorted_keys([Keyframe(_key_time(k, settings.fps), pose_of(k, first))
+                              for k in t.keyframes], ctx.sub("keyframes"))
+    keys = [LightKey(k.time, k.pose.translate, 0.0, np.zeros(3)) for k in poses]
+    return SphereLightSpec(str(name), keys, t.loop, "field", srf=path, poses=poses,
+                           intensity=float(t.intensity))
+
+
+def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx,
+           base: Path | None = None) -> SphereLightSpec:
     name = t.name if t.name is not None else f"light{index}"
+    if t.field is not None:
+        return _field_light(t, name, settings, ctx, base)
 
     def key_of(time: float, k, first: LightKey | None) -> LightKey:
         pos = np.asarray(k.position, dtype=float) if k.position is not None else first.position
@@ -454,7 +485,8 @@ def parse_scene(text: str, path: str | os.PathLike = "scene.toml") -> Scene:
     if not any(o.receives for o in objects):
         raise ctx.error("no receivers; give at least one object role = \"receiver\" or \"both\"")
     environment = _environment(file.environment, settings, ctx.sub("environment"), base)
-    lights = [_light(t, i, settings, ctx.sub(f"lights[{i}]")) for i, t in enumerate(file.lights)]
+    lights = [_light(t, i, settings, ctx.sub(f"lights[{i}]"), base)
+              for i, t in enumerate(file.lights)]
     if environment.kind is None and not lights:
         raise ctx.error("no light; add an [environment] or a [[lights]] table")
     return Scene(path, settings, objects, environment, lights)

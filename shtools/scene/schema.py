@@ -354,13 +354,17 @@ Radius = Annotated[float, BeforeValidator(_radius)]
 
 
 class LightKeyframe(Table):
-    """``[[lights.keyframes]]``: a time or frame and any of position, radius, colour."""
+    """``[[lights.keyframes]]``: a time or frame and any of position, radius, colour
+    (a field light: position, rotate or quaternion, scale)."""
 
     time: Number | None = None
     frame: Number | None = None
     position: vector(3) | None = None
     radius: Radius | None = None
     color: vector(3, nonnegative=True) | None = None
+    rotate: vector(3) | None = None
+    quaternion: vector(4) | None = None
+    scale: Annotated[Number, Field(gt=0)] | None = None
 
     @model_validator(mode="before")
     @classmethod
@@ -373,16 +377,29 @@ class LightKeyframe(Table):
 def _light_shadow_names() -> tuple[str, ...]:
     from shtools.scene.shadows import LIGHT_SHADOWS
 
-    return tuple(LIGHT_SHADOWS)
+    # a way set by the light's own kind (a field light's "field") is not a choice
+    return tuple(name for name, way in LIGHT_SHADOWS.items()
+                 if not getattr(way, "implied", False))
+
+
+#: Keys of a spherical light that a field light (``field = "x.srf.h5"``) does not take,
+#: and keys only a field light takes.
+SPHERE_ONLY = ("radius", "color", "shadows", "samples", "ssoc")
+FIELD_ONLY = ("rotate", "quaternion", "scale")
 
 
 class Light(Table):
-    """``[[lights]]``: a spherical light, optionally keyframed."""
+    """``[[lights]]``: a spherical light or a field light (a lamp's source radiance
+    field, ``field = "x.srf.h5"``), optionally keyframed."""
 
     name: str | None = None
     position: vector(3)
-    radius: Radius
-    color: vector(3, nonnegative=True)
+    radius: Radius | None = None
+    color: vector(3, nonnegative=True) | None = None
+    field: FilePath | None = None
+    rotate: vector(3) | None = None
+    quaternion: vector(4) | None = None
+    scale: Annotated[Number, Field(gt=0)] | None = None
     intensity: Annotated[Number, Field(ge=0)] = 1.0
     keyframes: Annotated[list[LightKeyframe], Field(min_length=1)] | None = None
     loop: StrictBool = False
@@ -396,9 +413,22 @@ class Light(Table):
     @classmethod
     def _known_keys(cls, data):
         data = Table._known_keys.__func__(cls, data)
-        for key in ("position", "radius", "color"):
+        is_field = "field" in data
+        for key in ("position",) if is_field else ("position", "radius", "color"):
             if key not in data:
                 raise fail(f"missing key '{key}'")
+        keys = [data] + (data["keyframes"] if isinstance(data.get("keyframes"), list) else [])
+        for table in keys:
+            if not isinstance(table, dict):
+                continue
+            for key in (SPHERE_ONLY if is_field else FIELD_ONLY):
+                if key in table:
+                    why = ("a field light's shape, colour and shadows are in its field "
+                           "(scale it with 'intensity')" if is_field else
+                           "only a field light (field = \"x.srf.h5\") has an orientation")
+                    raise fail(f"'{key}' does not apply: {why}", key)
+            if "rotate" in table and "quaternion" in table:
+                raise fail("give either 'rotate' (Euler degrees) or 'quaternion', not both")
         if "keyframes" in data and (not isinstance(data["keyframes"], list)
                                     or not data["keyframes"]):
             raise fail("must be a non-empty array of tables", "keyframes")
