@@ -23,6 +23,30 @@ json_option = click.option(
 )
 
 
+@contextlib.contextmanager
+def naming(path):
+    """A one-line error raised in the block without a file names ``path`` (the scene, the
+    mesh): deep library code (a pose, a blocker) knows the object, not the file."""
+    from shtools.errors import ShtoolsError
+
+    try:
+        yield
+    except ShtoolsError as exc:
+        if exc.path is not None or path is None:
+            raise
+        raise type(exc)(exc.message, path) from None
+
+
+def _checked_scheduler(ctx, param, value):
+    """``--scheduler``: checked while the options are parsed, before anything starts."""
+    from shtools.errors import InputError
+    from shtools.tasks import check_scheduler
+
+    try:
+        check_scheduler(value)
+    except InputError as exc:
+        raise click.BadParameter(exc.one_line(), ctx, param) from None
+    return value
 
 
 def scheduler_options(unit: str):
@@ -37,6 +61,7 @@ def scheduler_options(unit: str):
                  "the other in this process); with --scheduler local, the cluster's size.")(f)
         return click.option(
             "--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
+            callback=_checked_scheduler,
             help=f"Run {unit} on Dask: 'local' starts a LocalCluster here, an address or a "
                  "scheduler file joins an existing cluster (pip install "
                  "'shtools[distributed]'; docs/scale-out.md).  Default: worker processes on "
@@ -251,6 +276,10 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "gap": FiniteRange(0, 100),
     "frame": click.IntRange(0, None),
     "n_dirs": click.IntRange(16, 100_000),
+    # transfer: ray directions per vertex (rays and memory have their own limits,
+    # shtools.cli._limits) and the visibility floor of the log
+    "transfer_n_dirs": click.IntRange(16, 1_000_000),
+    "floor": FiniteRange(0.0, 0.5),
     # spheres fit / tree / bind: round budget, starts, tree fan-out, skin weights
     "iterations": click.IntRange(1, 100_000),
     "restarts": click.IntRange(1, 1000),

@@ -6,6 +6,7 @@ import click
 
 from shtools.cli._common import (
     json_option,
+    naming,
     output_option,
     progress,
     report,
@@ -54,13 +55,14 @@ def bake(scene, output, frames_text, method, store_visibility, processes, schedu
     from shtools.scene.scene import load_scene
 
     guard_outputs({"-o": output}, [scene])
-    parsed = load_scene(scene)
-    guard_outputs({"-o": output}, scene_files(parsed))
-    frames = parse_frames(frames_text, parsed.settings.frames, scene)
-    summary = bake_to_file(parsed, output, frames=frames, method=method,
-                           store_visibility=store_visibility, processes=processes,
-                           scheduler=scheduler, workers=workers, progress=progress, force=force,
-                           split_frames=split_frames)
+    with naming(scene):
+        parsed = load_scene(scene)
+        guard_outputs({"-o": output}, scene_files(parsed))
+        frames = parse_frames(frames_text, parsed.settings.frames, scene)
+        summary = bake_to_file(parsed, output, frames=frames, method=method,
+                               store_visibility=store_visibility, processes=processes,
+                               scheduler=scheduler, workers=workers, progress=progress,
+                               force=force, split_frames=split_frames)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

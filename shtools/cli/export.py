@@ -7,11 +7,8 @@ from pathlib import Path
 import click
 
 from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._limits import MAX_PIXELS, check_pixels  # noqa: F401  (MAX_PIXELS: re-export)
 from shtools.export.tonemap import CURVES
-
-#: Largest image (or contact-sheet tile) in pixels: 8192 x 8192, ~1 GiB of raster
-#: buffers (colour, depth, weights at ~16 bytes a pixel).
-MAX_PIXELS = 8192 * 8192
 
 
 @click.command("export")
@@ -58,27 +55,29 @@ def export(baked, output, frame, frames_text, quantity, target, rig, distance, e
     stage, a vertex animation texture (.exr + .glb), PNG previews, a contact
     sheet or an animated GIF.
     """
-    from shtools.cli._outputs import guard_outputs
+    from shtools.cli._outputs import guard_outputs, planned
     from shtools.data_formats.bake import read_bake
     from shtools.errors import InputError
     from shtools.export.png import View
-    from shtools.export.writer import FORMATS, export_bake
+    from shtools.export.writer import FORMATS, export_bake, planned_files
 
     if rig is not None:
         name, sep, rig_path = rig.partition("=")
         if not sep or not name or not rig_path:
             raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
         rig = (name, rig_path)
-    guard_outputs({"-o": output}, [baked, rig[1] if rig else None])
+    inputs = [baked, rig[1] if rig else None]
+    guard_outputs({"-o": output}, inputs)
     suffix = Path(output).suffix.lower()
     if suffix not in FORMATS:
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
                          f"{', '.join(FORMATS)}", output)
-    if size is not None and size[0] * size[1] > MAX_PIXELS:
-        raise InputError(f"--size {size[0]} {size[1]} is {size[0] * size[1]:,} pixels "
-                         f"({size[0] * size[1] * 16 / 2**30:.1f} GiB of raster buffers), above "
-                         f"the limit of {MAX_PIXELS:,}; use a smaller image", output)
+    if size is not None:
+        check_pixels("--size", *size, path=output)
     bake_asset = read_bake(baked)
+    # every file the export writes (a sequence's frames, a VAT's companions), before work
+    guard_outputs(planned("-o", output, planned_files(
+        bake_asset, output, frame=frame, frames_text=frames_text, rig=rig)), inputs)
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
                 auto_exposure=not fixed_exposure, curve=curve, distance=distance)
     summary = export_bake(bake_asset, output, frame=frame, frames_text=frames_text, view=view,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import json_option, output_option, progress, report, scheduler_options
+from shtools.cli._limits import force_option
 
 
 @click.group("field")
@@ -44,9 +45,11 @@ def field():
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Recorded for reproducibility (sampling is deterministic).")
 @scheduler_options("shells")
+@force_option("4 GiB of memory, 2e10 rays")
 @json_option
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
-           bits, cumulative, no_self_visibility, self_order, seed, scheduler, workers, as_json):
+           bits, cumulative, no_self_visibility, self_order, seed, scheduler, workers, force,
+           as_json):
     """Sample the shadow field of MESH into a field asset.
 
     Per shell, the object's binary visibility over the direction map at R x R
@@ -70,8 +73,17 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         params.validate()
     except InputError as exc:
         raise InputError(exc.message, mesh_path) from None
+    from shtools.cli._limits import check_memory, check_rays
     from shtools.cli._outputs import guard_outputs
+    from shtools.fields.build import planned_cost
+    from shtools.tasks import default_workers
 
+    cost = planned_cost(params, workers or (1 if scheduler == "inline" else default_workers()))
+    fix = "lower --shells, --resolution, --map or --order"
+    check_memory("field sample", cost["bytes"], cost["formula"], fix, force=force,
+                 path=mesh_path)
+    check_rays("field sample", cost["rays"], f"{shells} shells x {resolution}^2 samples x "
+               f"{map_size}^2 directions", fix, force=force, path=mesh_path)
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
     sv = None

@@ -70,6 +70,16 @@ def _write_exr(path, image: np.ndarray) -> None:
         f.write(str(path))
 
 
+def vat_paths(bake: Bake, path: str | os.PathLike,
+              positions: list[int]) -> tuple[Path, Path | None]:
+    """The companion files of the VAT ``path``: ``NAME.glb`` and ``NAME.pos.exr`` (or None
+    when no vertex moves over asset frames ``positions``)."""
+    out = Path(path)
+    moving = bake.vertices.ndim == 3 and bool(
+        np.any(bake.vertices[positions] != bake.vertices[positions[0]]))
+    return out.with_suffix(".glb"), (out.with_name(out.stem + ".pos.exr") if moving else None)
+
+
 def write_vat(
     path: str | os.PathLike,
     bake: Bake,
@@ -97,8 +107,8 @@ def write_vat(
     V, T = bake.n_vertices, len(positions)
     lay = layout(V, T)
     values = np.empty((T, V, 3), dtype=np.float32)
-    moving = bake.vertices.ndim == 3 and bool(
-        np.any(bake.vertices[positions] != bake.vertices[positions[0]]))
+    glb, pos_path = vat_paths(bake, out, positions)
+    moving = pos_path is not None
     points = np.empty((T, V, 3), dtype=np.float32) if moving else None
     with (progress or silent)(total=T, desc="vat", unit="frames") as bar:
         for k, t in enumerate(positions):
@@ -107,8 +117,6 @@ def write_vat(
             if moving:
                 points[k] = bake.frame_vertices(t)
             bar.update(1)
-    glb = out.with_suffix(".glb")
-    pos_path = out.with_name(out.stem + ".pos.exr") if moving else None
     extras = {"shtools_vat": {
         **lay, "frames": [int(bake.frame_index[t]) for t in positions],
         "fps": float(bake.attrs.get("fps", 24.0)), "quantity": quantity,

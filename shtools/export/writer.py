@@ -96,6 +96,27 @@ def sequence_paths(output: str | os.PathLike, frames: list[int]) -> list[Path]:
     return [out.with_name(f"{out.stem}.{f:04d}{out.suffix}") for f in frames]
 
 
+def planned_files(bake: Bake, output: str | os.PathLike, *, frame: int | None = None,
+                  frames_text: str | None = None, rig=None) -> list[Path]:
+    """Every file :func:`export_bake` will write for these options, ``output`` first.
+
+    A numbered ``.glb``/``.ply`` sequence, or a VAT's ``NAME.glb`` and
+    ``NAME.pos.exr``, besides the one ``output`` of the other formats; the
+    command checks them all before any work (:func:`shtools.cli._outputs.guard_outputs`).
+    """
+    suffix = Path(output).suffix.lower()
+    if suffix not in FORMATS:
+        return [Path(output)]
+    positions = _positions(bake, suffix, frame, frames_text)
+    if rig is None and suffix in (".ply", ".glb"):
+        return sequence_paths(output, [int(bake.frame_index[t]) for t in positions])
+    if suffix == ".exr":
+        from shtools.export.vat import vat_paths
+
+        return [Path(output), *(p for p in vat_paths(bake, output, positions) if p)]
+    return [Path(output)]
+
+
 def mesh_objects(bake: Bake, t: int, quantity: str, scale: float, curve: str, uv1=None):
     """The bake's receiver objects at asset frame ``t`` as :class:`GlbObject` s."""
     from shtools.export.gltf import GlbObject

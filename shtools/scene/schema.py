@@ -370,6 +370,31 @@ class LightKeyframe(Table):
         return data
 
 
+def _ssoc_choices(name: str):
+    def allowed() -> tuple[str, ...]:
+        from shtools.runtime import ssoc
+
+        return getattr(ssoc, name)
+    return allowed
+
+
+class SSOCTable(Table):
+    """A light's ``ssoc = { ... }`` table: the types here, the ranges in
+    :class:`shtools.runtime.ssoc.SSOCSettings` (checked by the semantic pass)."""
+
+    resolution: StrictInt | None = None
+    camera: choice(_ssoc_choices("CAMERAS")) | None = None
+    guard: Number | None = None
+    max_steps: StrictInt | None = None
+    falloff: choice(_ssoc_choices("FALLOFFS")) | None = None
+    filter: StrictBool | None = None
+    corners: choice(_ssoc_choices("CORNERS")) | None = None
+
+    def settings(self) -> dict:
+        """The keys the scene set, as :class:`SSOCSettings` keywords."""
+        return self.model_dump(exclude_unset=True)
+
+
 def _light_shadow_names() -> tuple[str, ...]:
     from shtools.scene.shadows import LIGHT_SHADOWS
 
@@ -390,7 +415,7 @@ class Light(Table):
     #: strata per receiver of shadows = "raytrace" (shtools.scene.light_shadows)
     samples: Annotated[int, Field(strict=True, ge=1, le=65536)] = 64
     #: occlusion-camera settings of shadows = "ssoc" / "auto" (checked by the semantic pass)
-    ssoc: dict | None = None
+    ssoc: SSOCTable | None = None
 
     @model_validator(mode="before")
     @classmethod
