@@ -46,9 +46,9 @@ def _check_rig(bake: Bake, name: str, rig_path: Path):
     # file is not, whatever its name (the bake records every input's sha256)
     recorded = bake.attrs.get("inputs") or {}
     if recorded and sha256_file(rig_path) not in recorded.values():
-        raise InputError(f"is not the rig this bake used (its sha256 matches none of the "
-                         f"bake's inputs: {', '.join(sorted(recorded))}); give the rig the "
-                         "scene used", rig_path)
+        raise InputError(f"is not the rig this bake used (its hash differs from the sha256 "
+                         f"of every input the bake recorded: {', '.join(sorted(recorded))}); "
+                         "give the rig the scene used", rig_path)
     model = load_skinned_gltf(rig_path)
     o = bake.object_names.index(name)
     count = int(bake.object_offsets[o + 1] - bake.object_offsets[o])
