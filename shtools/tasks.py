@@ -52,6 +52,7 @@ import json
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -137,10 +138,34 @@ def worker_context():
 
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(list(WORKER_PRELOAD))  # no effect once the server runs
+    _quiet_resource_tracker()
     # start the server now (once): outside start_worker's held signals, so that Ctrl-C
     # during its imports stops the caller at once
     forkserver.ensure_running()
     return context
+
+
+#: Warning filter of the resource tracker: after ``kill -9`` of the parent it frees the
+#: pools' semaphores (its job) and would print a two-line UserWarning saying so.
+TRACKER_WARNINGS = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
+def _quiet_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (once) with :data:`TRACKER_WARNINGS`.
+
+    The tracker is a separate process started with this interpreter's ``-W``
+    options; the filter is added to them only while it starts.
+    """
+    from multiprocessing import resource_tracker
+
+    added = TRACKER_WARNINGS not in sys.warnoptions
+    if added:
+        sys.warnoptions.append(TRACKER_WARNINGS)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        if added:
+            sys.warnoptions.remove(TRACKER_WARNINGS)
 
 
 #: Signals :func:`start_worker` holds back (the CLI's stop signals and Ctrl-C).
