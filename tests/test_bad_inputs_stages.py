@@ -103,7 +103,7 @@ class StageKit(Kit):
         # inputs named like the outputs a command derives from its -o
         for name, src in (("v.glb", "baked.h5"), ("s.0000.glb", "baked.h5"),
                           ("s.0001.ply", "baked.h5"), ("m.pos.exr", "moving.h5"),
-                          ("sp.png", "spheres.h5")):
+                          ("sp.png", "spheres.h5"), ("field.png", "mesh.field.h5")):
             shutil.copyfile(k / src, k / name)
         for name, text in (("garbage.json", "garbage{"), ("empty.json", ""),
                            ("list.json", "[1, 2]"), ("number.json", '{"address": 5}'),
@@ -157,6 +157,10 @@ CASES = [
      ["--floor"]),
     ("transfer-floor-negative", ["transfer", "{k}/mesh.obj", "-o", "{o}/t.h5", "--floor",
                                  "-0.1"], 2, ["--floor"]),
+    ("field-seed-negative", ["field", "sample", "{k}/mesh.obj", "-o", "{o}/f.h5", "--seed",
+                             "-1"], 2, ["--seed"]),
+    ("eval-png-is-field", ["eval", "--mesh", "{k}/mesh.obj", "--field", "{k}/field.png", "--png",
+                           "{k}/field.png"], 1, ["field.png", "also an input"]),
     # --- sizes: refused with the size and the way out
     ("field-resolution-huge", ["field", "sample", "{k}/mesh.obj", "-o", "{o}/f.h5", "--shells",
                                "1", "--resolution", "1048576", "--map", "4"], 1,
@@ -246,7 +250,7 @@ def open_folder(kit):
     try:
         folder.chmod(0o755)
         (folder / "in").mkdir(mode=0o755)
-        for name in ("baked.h5", "moving.h5", "mesh.obj", "spheres.h5"):
+        for name in ("baked.h5", "moving.h5", "mesh.obj", "latin1.obj", "spheres.h5"):
             shutil.copyfile(kit.root / name, folder / "in" / name)
             (folder / "in" / name).chmod(0o644)
         (folder / "out").mkdir()
@@ -263,7 +267,12 @@ def open_folder(kit):
     (["export", "{k}/moving.h5", "-o", "{o}/m.exr"], "m.pos.exr"),
     (["export", "{k}/baked.h5", "-o", "{o}/x.png"], "x.png"),
     (["spheres", "preview", "{k}/mesh.obj", "{k}/spheres.h5", "-o", "{o}/p.png"], "p.png"),
-], ids=["vat-glb", "sequence-glb", "sequence-ply", "vat-pos", "png", "preview"])
+    (["spheres", "fit", "{k}/mesh.obj", "{k}/latin1.obj", "-n", "2", "--method", "kmeans", "-o",
+      "{o}"], "latin1.spheres.h5"),
+    (["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5", "--grid", "4",
+      "--n-dirs", "16", "--methods", "auto", "--png", "{o}/e.png"], "e.png"),
+], ids=["vat-glb", "sequence-glb", "sequence-ply", "vat-pos", "png", "preview", "fit-batch",
+        "eval-png"])
 def test_read_only_companions_are_refused(argv, target, open_folder):
     prefix = _as_nobody()
     out = open_folder / "out"
@@ -323,6 +332,28 @@ def test_ssoc_filter_must_be_a_bool(value, kit, tmp_path):
     code, stdout, err = _run("bake", scene, "-o", out, "--processes", 1, "--workers", 1)
     check_refused(code, stdout, err, want_code=1,
                   named=["lamp.toml", "lights[0].ssoc.filter", "true or false"], outputs=[out],
+                  kit=kit, folders=[tmp_path])
+
+
+@pytest.mark.parametrize("old, new, named", [
+    ("radius = 0.1", "radius = 1e308", "lights[0].radius"),
+    ("radius = 0.1", "radius = inf", "lights[0].radius"),
+    ("position = [0.3, 2.5, 0.2]", "position = [1e308, 2.5, 0.2]", "lights[0].position"),
+    ("color = [1, 1, 1]", "color = [1e308, 1, 1]", "lights[0].color"),
+    ('name = "lamp"', 'name = "lamp"\nintensity = 1e300', "lights[0].intensity"),
+])
+def test_light_values_are_bounded(old, new, named, kit, tmp_path):
+    """Finite but huge light values overflowed the float32 runtime (an internal error, or
+    a bake refused as 'NaN radiance' naming the output): refused at parse time."""
+    scene = tmp_path / "lamp.toml"
+    text = SCENE.format(frames=1, subdivisions=2) + LAMP.replace("FILTER", "true")
+    for name in ("mesh.obj", "spheres.h5", "light.h5"):
+        text = text.replace(f'"{name}"', f'"{kit.root / name}"')
+    assert old in text
+    scene.write_text(text.replace(old, new, 1))
+    out = tmp_path / "b.h5"
+    code, stdout, err = _run("bake", scene, "-o", out, "--processes", 1, "--workers", 1)
+    check_refused(code, stdout, err, want_code=1, named=["lamp.toml", named], outputs=[out],
                   kit=kit, folders=[tmp_path])
 
 

@@ -76,7 +76,7 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
 
         _check_png_path(png_path)
         guard_outputs({"--png": png_path},
-                      [scene, mesh, spheres_path, tree_path, light_path])
+                      [scene, mesh, spheres_path, tree_path, field_path, light_path])
     if scene is not None:
         if mesh or spheres_path or field_path:
             raise InputError("give either a scene file or --mesh/--spheres/--field, not both",

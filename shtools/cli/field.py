@@ -8,7 +8,14 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report, scheduler_options
+from shtools.cli._common import (
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+    scheduler_options,
+)
 from shtools.cli._limits import force_option
 
 
@@ -42,7 +49,7 @@ def field():
 @click.option("--self-order", default=None, type=int,
               help="SH order of the stored O_v [default: the bake's accumulation order at "
                    "--order, 6 at order 4].")
-@click.option("--seed", default=0, show_default=True, type=int,
+@click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Recorded for reproducibility (sampling is deterministic).")
 @scheduler_options("shells")
 @force_option("4 GiB of memory, 2e10 rays")
