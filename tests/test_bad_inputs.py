@@ -320,7 +320,7 @@ CASES = [
          ["--alpha", "nan"], "--alpha"),
     ]],
     ("opt-export-pixels", ["export", "{k}/baked.h5", "-o", "{o}/x.png", "--size", "16000",
-                           "16000"], 1, ["x.png", "pixels"]),
+                           "16000"], 2, ["--size", "256,000,000 pixels", "GiB"]),
     ("opt-sph-huge-levels", ["spheres", "import", "{k}/huge.sph", "-o", "{o}/s.h5"], 1,
      ["huge.sph", "levels"]),
 ]

@@ -11,6 +11,8 @@ import sys
 import click
 import numpy as np
 
+from shtools.cli._limits import ImageSize
+
 output_option = click.option(
     "-o",
     "--output",
@@ -254,8 +256,8 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "fps": FiniteRange(0.1, 100),
     "seed": click.IntRange(0, 2**32 - 1),
     "columns": click.IntRange(1, 1000),
-    # one image side; the pixel count has its own limit (shtools.cli.export)
-    "size": click.IntRange(8, 16384),
+    # an image's W H: sides >= 8, pixels limited (shtools.cli._limits.MAX_PIXELS)
+    "size": ImageSize(),
     # sphere count: the fit itself says when N exceeds what the mesh's samples allow
     "count": click.IntRange(1, None),
     "level": click.IntRange(0, 64),

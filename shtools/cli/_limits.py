@@ -90,13 +90,27 @@ def check_rays(what: str, rays: float, formula: str, fix: str, *, force: bool = 
                      f"{limit:.3g}; {fix}, or pass --force to run anyway", path)
 
 
-def check_pixels(option: str, width: int, height: int, *, count: int = 1,
-                 path: str | os.PathLike | None = None) -> None:
-    """Refuse images of ``width x height`` (``count`` of them held at once) past
-    :data:`MAX_PIXELS` each: a hard limit, named by ``option``."""
+def pixel_problem(width: int, height: int) -> str | None:
+    """Why an image of ``width x height`` is refused (past :data:`MAX_PIXELS`), or None."""
     pixels = width * height
     if pixels <= MAX_PIXELS:
-        return
-    raise InputError(f"{option} {width} {height} is {pixels:,} pixels "
-                     f"({_gib(count * pixels * PIXEL_BYTES)} of raster buffers), above the "
-                     f"limit of {MAX_PIXELS:,}; use a smaller image", path)
+        return None
+    return (f"{width} x {height} is {pixels:,} pixels ({_gib(pixels * PIXEL_BYTES)} of raster "
+            f"buffers), above the limit of {MAX_PIXELS:,} (8192 x 8192); use a smaller image")
+
+
+class ImageSize(click.Tuple):
+    """``--size W H`` of an image: sides of at least 8 pixels and at most :data:`MAX_PIXELS`
+    pixels in all, refused while parsing with the size the image would take."""
+
+    name = "image size"
+
+    def __init__(self):
+        super().__init__([click.IntRange(8, None), click.IntRange(8, None)])
+
+    def convert(self, value, param, ctx):
+        width, height = super().convert(value, param, ctx)
+        problem = pixel_problem(width, height)
+        if problem:
+            self.fail(problem, param, ctx)
+        return width, height

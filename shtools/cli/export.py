@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from shtools.cli._common import json_option, option_type, output_option, progress, report
-from shtools.cli._limits import MAX_PIXELS, check_pixels  # noqa: F401  (MAX_PIXELS: re-export)
+from shtools.cli._limits import MAX_PIXELS  # noqa: F401  (re-exported: the image limit)
 from shtools.export.tonemap import CURVES
 
 
@@ -72,8 +72,6 @@ def export(baked, output, frame, frames_text, quantity, target, rig, distance, e
     if suffix not in FORMATS:
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
                          f"{', '.join(FORMATS)}", output)
-    if size is not None:
-        check_pixels("--size", *size, path=output)
     bake_asset = read_bake(baked)
     # every file the export writes (a sequence's frames, a VAT's companions), before work
     guard_outputs(planned("-o", output, planned_files(

@@ -157,7 +157,7 @@ def export_cmd(spheres_path, output, as_json):
 @output_option
 @click.option("--size", nargs=2, type=option_type("size"), default=(480, 360),
               show_default=True, metavar="W H",
-              help="Size of each of the two PNG panels (at most 8192 x 8192 pixels).")
+              help="Size of each of the two PNG panels (at most 8192 x 8192 pixels in all).")
 @click.option("--elevation", type=option_type("elevation"), default=20.0, show_default=True,
               help="Camera elevation, degrees.")
 @click.option("--azimuth", type=option_type("azimuth"), default=35.0, show_default=True,
@@ -171,7 +171,6 @@ def preview(mesh_path, spheres_path, output, size, elevation, azimuth, as_json):
     """
     from pathlib import Path
 
-    from shtools.cli._limits import check_pixels
     from shtools.cli._outputs import guard_outputs
     from shtools.errors import InputError
     from shtools.export.spheres import render_spheres_png, write_spheres_glb
@@ -182,8 +181,6 @@ def preview(mesh_path, spheres_path, output, size, elevation, azimuth, as_json):
     if suffix not in (".png", ".glb"):
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use .png or .glb",
                          output)
-    if suffix == ".png":  # two panels side by side
-        check_pixels("--size", *size, count=2, path=output)
     centers, radii = _blocker_spheres(spheres_path)
     mesh = load_mesh(mesh_path)
     if suffix == ".png":
