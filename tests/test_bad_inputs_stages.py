@@ -186,6 +186,9 @@ CASES = [
                          "10000", "-o", "{o}/s.h5"], 1, ["s.h5", "GiB", "--force"]),
     ("scaling-nodes", ["tables", "scaling", "-n", "8", "--function", "midrange", "--nodes",
                        "100000", "-o", "{o}/s.h5"], 1, ["s.h5", "GiB", "--force"]),
+    ("eval-references", ["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5",
+                         "--grid", "1024", "--n-dirs", "100000"], 1,
+     ["mesh.obj", "GiB", "--force"]),
     # --- schedulers: checked while parsing, before anything starts
     *[(f"scheduler-{cmd}-{i}", [*argv, "--scheduler", value], 2, ["--scheduler"])
       for cmd, argv in SCHEDULED.items() for i, value in enumerate(SCHEDULERS)],
