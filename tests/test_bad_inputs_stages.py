@@ -161,6 +161,12 @@ CASES = [
                              "-1"], 2, ["--seed"]),
     ("eval-png-is-field", ["eval", "--mesh", "{k}/mesh.obj", "--field", "{k}/field.png", "--png",
                            "{k}/field.png"], 1, ["field.png", "also an input"]),
+    ("eval-methods-typo", ["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5",
+                           "--methods", "zz"], 1, ["--methods", "zz"]),
+    ("eval-methods-order", ["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5",
+                            "--methods", "auto@99"], 1, ["--methods", "auto@99"]),
+    ("plot-not-png", ["tables", "log", "-n", "2", "-o", "{o}/t.h5", "--plot", "{o}/p.txt"], 1,
+     ["p.txt", "--plot", ".png"]),
     # --- sizes: refused with the size and the way out
     ("field-resolution-huge", ["field", "sample", "{k}/mesh.obj", "-o", "{o}/f.h5", "--shells",
                                "1", "--resolution", "1048576", "--map", "4"], 1,

@@ -75,7 +75,10 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
         parse_methods,
     )
 
-    parse_methods(methods)  # fail early on a typo
+    try:
+        parse_methods(methods)  # fail early on a typo
+    except InputError as exc:
+        raise InputError(f"--methods: {exc.message}", exc.path) from None
     if png_path is not None:
         from shtools.cli._outputs import guard_outputs
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from pathlib import Path
 
 import click
 
@@ -49,6 +50,8 @@ def log_cmd(order, output, samples, plot_path, as_json):
     from shtools.sh.tables import build_log_tables
 
     guard_outputs({"-o": output, "--plot": plot_path})
+    if plot_path and Path(plot_path).suffix.lower() != ".png":
+        raise InputError("--plot writes a PNG; give a file name ending in .png", plot_path)
     if plot_path and order < 2:
         raise InputError("order 1 has no band above DC, so there are no OL curves to plot; "
                          "use --order 2 or more with --plot", plot_path)
