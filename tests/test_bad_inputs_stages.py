@@ -389,10 +389,12 @@ def test_pose_error_names_the_scene(kit, tmp_path):
         text = text.replace(f'"{name}"', f'"{kit.root / name}"')
     scene.write_text(text)
     out = tmp_path / "b.h5"
-    code, stdout, err = _run("bake", scene, "-o", out, "--processes", 1, "--workers", 1)
-    check_refused(code, stdout, err, want_code=1,
-                  named=["stretched.toml", "'block'", "rigid pose"], outputs=[out], kit=kit,
-                  folders=[tmp_path])
+    for argv in (["bake", scene, "-o", out, "--processes", 1, "--workers", 1],
+                 ["eval", scene, "--n-dirs", 16, "--methods", "auto"]):
+        code, stdout, err = _run(*argv)
+        check_refused(code, stdout, err, want_code=1,
+                      named=["stretched.toml", "'block'", "rigid pose"], outputs=[out], kit=kit,
+                      folders=[tmp_path])
 
 
 def test_defaults_are_within_the_limits():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
@@ -37,6 +38,18 @@ def naming(path):
         if exc.path is not None or path is None:
             raise
         raise type(exc)(exc.message, path) from None
+
+
+def errors_name(param: str):
+    """Decorator of a command: a one-line error without a file names the file given as
+    its parameter ``param`` (see :func:`naming`)."""
+    def decorate(f):
+        @functools.wraps(f)
+        def wrapper(*args, **kwargs):
+            with naming(kwargs.get(param)):
+                return f(*args, **kwargs)
+        return wrapper
+    return decorate
 
 
 def _checked_scheduler(ctx, param, value):

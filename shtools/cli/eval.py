@@ -18,7 +18,7 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, option_type, report, setting_type
+from shtools.cli._common import errors_name, json_option, option_type, report, setting_type
 from shtools.cli._limits import check_memory, check_rays, force_option
 from shtools.errors import InputError
 
@@ -63,6 +63,7 @@ REFERENCE_BYTES = 17
               help="Write a false-colour side-by-side comparison image.")
 @force_option("4 GiB of memory, 2e10 rays")
 @json_option
+@errors_name("scene")
 def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, light_path, grid,
              gap, frame, methods, order, acc_order, no_hierarchy, no_window, n_dirs, png_path,
              force, as_json):

@@ -6,7 +6,14 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
 from shtools.cli._limits import MAX_PIXELS  # noqa: F401  (re-exported: the image limit)
 from shtools.export.tonemap import CURVES
 
@@ -49,6 +56,7 @@ from shtools.export.tonemap import CURVES
 @click.option("--fps", type=option_type("fps"), default=None,
               help="GIF frame rate (default the bake's).")
 @json_option
+@errors_name("baked")
 def export(baked, output, frame, frames_text, quantity, target, rig, distance, exposure,
            fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, as_json):
     """Export a bake: PLY/GLB frames (one named mesh per object), a time-sampled USD

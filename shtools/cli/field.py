@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import (
+    errors_name,
     json_option,
     option_type,
     output_option,
@@ -54,6 +55,7 @@ def field():
 @scheduler_options("shells")
 @force_option("4 GiB of memory, 2e10 rays")
 @json_option
+@errors_name("mesh_path")
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
            bits, cumulative, no_self_visibility, self_order, seed, scheduler, workers, force,
            as_json):

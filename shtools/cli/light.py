@@ -7,7 +7,14 @@ import time
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, option_type, output_option, report, setting_type
+from shtools.cli._common import (
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    report,
+    setting_type,
+)
 
 
 @click.group()
@@ -35,6 +42,7 @@ def light():
               metavar="EV",
               help="Scale radiance by 2**EV.")
 @json_option
+@errors_name("image")
 def project(image, order, output, window, window_h, rotate_y, mirror, exposure, as_json):
     """Project a lat-long (equirectangular) HDR IMAGE to RGB radiance SH.
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 
 from shtools.cli._common import (
+    errors_name,
     json_option,
     option_type,
     output_option,
@@ -109,6 +110,7 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
 @click.option("--mesh", "mesh_path", type=click.Path(dir_okay=False), default=None,
               help="Mesh the spheres bound: used to compute outside_volume_ratio.")
 @json_option
+@errors_name("sph_path")
 def import_cmd(sph_path, output, level, mesh_path, as_json):
     """Convert a spheretree .sph file into a 'spheres' asset."""
     from shtools.cli._outputs import guard_outputs
@@ -138,6 +140,7 @@ def import_cmd(sph_path, output, level, mesh_path, as_json):
 @click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
 @output_option
 @json_option
+@errors_name("spheres_path")
 def export_cmd(spheres_path, output, as_json):
     """Write a 'spheres' asset as a two-level spheretree .sph file."""
     from shtools.cli._outputs import guard_outputs

@@ -10,7 +10,14 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
 from shtools.cli._outputs import guard_outputs
 from shtools.geometry.fit_methods import SPHERE_SPACES
 
@@ -23,6 +30,7 @@ from shtools.geometry.fit_methods import SPHERE_SPACES
 @click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Seed of the Lloyd clustering (same seed -> identical tree).")
 @json_option
+@errors_name("spheres_path")
 def tree(spheres_path, output, branching, seed, as_json):
     """Build a bounding-sphere hierarchy over the spheres of SPHERES (bottom-up Lloyd).
 

@@ -10,7 +10,14 @@ import time
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
 from shtools.cli._limits import check_memory, check_rays, force_option
 
 #: Bytes per ray direction held for the whole run besides its SH row (direction, weight)
@@ -30,6 +37,7 @@ DIRECTION_BYTES, RAY_BYTES = 32, 64
               help="Visibility floor of the log (fully blocked directions keep this much).")
 @force_option("4 GiB of memory, 2e10 rays")
 @json_option
+@errors_name("mesh_path")
 def transfer(mesh_path, output, order, n_dirs, floor, force, as_json):
     """Ray-trace MESH's self-visibility on its own vertices, projected to SH.
 
