@@ -260,7 +260,8 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "exposure": FiniteRange(-60, 60),
     "elevation": FiniteRange(-90, 90),
     "azimuth": FiniteRange(-360, 360),
-    "distance": FiniteRange(0, None, min_open=True),
+    # camera distance, scene units: within the scene's coordinate range (float32 runtime)
+    "distance": FiniteRange(0, 1e18, min_open=True),
     "rotate_y": FiniteRange(-360, 360),
     "zoom": FiniteRange(0, 1000, min_open=True),
     "window_h": FiniteRange(0, 1000, min_open=True),

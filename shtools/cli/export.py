@@ -14,7 +14,6 @@ from shtools.cli._common import (
     progress,
     report,
 )
-from shtools.cli._limits import MAX_PIXELS  # noqa: F401  (re-exported: the image limit)
 from shtools.export.tonemap import CURVES
 
 
