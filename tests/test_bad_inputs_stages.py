@@ -408,3 +408,20 @@ def test_defaults_are_within_the_limits():
     # the estimate counts the float64 samples of every shell: a lower bound by construction
     p = FieldParameters(shells=3, resolution=8, map_size=4, order=2)
     assert planned_cost(p)["bytes"] >= np.empty((3, 8, 8, 4)).nbytes
+
+
+def test_out_of_memory_is_one_line(kit, tmp_path, monkeypatch):
+    """Past the limits with --force, a MemoryError is one line naming the command (exit 1),
+    not an internal error."""
+    import shtools.sh.scaling as scaling
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(scaling, "build_scaling_table", exhausted)
+    out = tmp_path / "s.h5"
+    code, stdout, err = _run("tables", "scaling", "-n", "2", "--function", "cone", "-o", out,
+                             "--force")
+    check_refused(code, stdout, err, want_code=1,
+                  named=["out of memory", "tables scaling", "--force"], outputs=[out], kit=kit,
+                  folders=[tmp_path])

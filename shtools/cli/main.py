@@ -219,8 +219,9 @@ def _run(argv: list[str], debug: bool) -> int:
         # past the size limits with --force, or a machine smaller than the limits assume
         if debug:
             raise
-        click.echo("error: out of memory; lower the sizes given to the command (its size "
-                   "limits are in --help)", err=True)
+        command = " ".join(a for a in argv[:3] if not a.startswith("-")) or "shtools"
+        click.echo(f"error: out of memory in '{command}'; lower the sizes given to it (the "
+                   "size limits that --force goes past are in its --help)", err=True)
         return 1
     except Exception as exc:  # a bug: one line unless --debug
         if debug:
