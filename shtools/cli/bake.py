@@ -5,8 +5,8 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import (
+    errors_name,
     json_option,
-    naming,
     output_option,
     progress,
     report,
@@ -41,6 +41,7 @@ from shtools.scene.shadows import bake_method_names
 @click.option("--force", is_flag=True,
               help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option
+@errors_name("scene")
 def bake(scene, output, frames_text, method, store_visibility, processes, scheduler, workers,
          split_frames, force, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.
@@ -55,14 +56,13 @@ def bake(scene, output, frames_text, method, store_visibility, processes, schedu
     from shtools.scene.scene import load_scene
 
     guard_outputs({"-o": output}, [scene])
-    with naming(scene):
-        parsed = load_scene(scene)
-        guard_outputs({"-o": output}, scene_files(parsed))
-        frames = parse_frames(frames_text, parsed.settings.frames, scene)
-        summary = bake_to_file(parsed, output, frames=frames, method=method,
-                               store_visibility=store_visibility, processes=processes,
-                               scheduler=scheduler, workers=workers, progress=progress,
-                               force=force, split_frames=split_frames)
+    parsed = load_scene(scene)
+    guard_outputs({"-o": output}, scene_files(parsed))
+    frames = parse_frames(frames_text, parsed.settings.frames, scene)
+    summary = bake_to_file(parsed, output, frames=frames, method=method,
+                           store_visibility=store_visibility, processes=processes,
+                           scheduler=scheduler, workers=workers, progress=progress, force=force,
+                           split_frames=split_frames)
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

@@ -79,14 +79,15 @@ def _check_cost(n_vertices: int, order: int, n_dirs: int, force: bool, mesh_path
     """Refuse a transfer past the memory or ray limit (:mod:`shtools.cli._limits`).
 
     Memory: the projection matrix (Q, n*n) and the quadrature, one batch of rays
-    (at least one vertex's Q rays), and the visibility and its log (V, n*n);
+    (at least one vertex's Q rays, at most all V x Q), and the visibility and its log
+    (V, n*n);
     rays: V x Q.  Q is at least ``--n-dirs``.
     """
     from shtools.fields.self_visibility import RAYS_PER_STEP
 
     n2 = order * order
-    nbytes = (n_dirs * (n2 * 8 + DIRECTION_BYTES) + max(RAYS_PER_STEP, n_dirs) * RAY_BYTES
-              + 2 * n_vertices * n2 * 8)
+    batch = min(n_vertices * n_dirs, max(RAYS_PER_STEP, n_dirs))
+    nbytes = n_dirs * (n2 * 8 + DIRECTION_BYTES) + batch * RAY_BYTES + 2 * n_vertices * n2 * 8
     fix = "lower --n-dirs or --order"
     check_memory("transfer", nbytes, f"{n_dirs} directions x {n2} SH coefficients, "
                  f"{n_vertices} vertices", fix, force=force, path=mesh_path)
