@@ -425,3 +425,27 @@ def test_out_of_memory_is_one_line(kit, tmp_path, monkeypatch):
     check_refused(code, stdout, err, want_code=1,
                   named=["out of memory", "tables scaling", "--force"], outputs=[out], kit=kit,
                   folders=[tmp_path])
+
+
+@pytest.mark.parametrize("argv", [
+    ["tables", "log", "-n", "2", "-o", "{o}/t.h5"],
+    ["spheres", "fit", "{k}/mesh.obj", "-n", "2", "-o", "{o}/s.h5"],
+    ["export", "{k}/baked.h5", "-o", "{o}/x.exr"],
+    ["spheres", "preview", "{k}/mesh.obj", "{k}/spheres.h5", "-o", "{o}/p.png"],
+], ids=["tables", "fit", "vat", "preview"])
+def test_read_only_folder_is_refused_as_nobody(argv, open_folder):
+    """A folder this user may not write is refused before any work (root may write any
+    folder, so this runs as ``nobody``)."""
+    prefix = _as_nobody()
+    out = open_folder / "out"
+    out.chmod(0o555)
+    argv = [a.replace("{k}", str(open_folder / "in")).replace("{o}", str(out)) for a in argv]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", HOME=str(open_folder),
+               MPLCONFIGDIR=str(open_folder))
+    done = subprocess.run([*prefix, sys.executable, "-m", "shtools", *argv],
+                          capture_output=True, text=True, env=env, timeout=300,
+                          cwd=open_folder)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 1, done.stderr
+    assert len(lines) == 1 and "cannot write to the output folder" in lines[0], done.stderr
+    assert list(out.iterdir()) == []
