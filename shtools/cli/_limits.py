@@ -6,14 +6,15 @@ vertex count once it is read), before any long work, and refuses a request
 past the stated limit with one line giving the size, the limit and the way
 out::
 
-    error: mesh.obj: field sample needs 512.0 GiB of memory (256 shells x 4096^2
-    samples x 16 SH coefficients x 8 bytes), above the limit of 4.0 GiB; lower
-    --shells/--resolution/--order, or pass --force to run anyway
+    error: mesh.obj: field sample needs 1,056.0 GiB of memory (256 shells x 4096^2
+    samples x 16 SH coefficients x 16 bytes, plus ...), above the limit of 4.0 GiB;
+    lower --shells, --resolution, --map or --order, or pass --force to run anyway
 
-``--force`` (:data:`force_option`) goes past the memory and ray limits, as
+``--force`` (:func:`force_option`) goes past the memory and ray limits, as
 ``bake --force`` does for the bake's size; an estimate that is still too big
 for the machine then ends in the one-line "out of memory" error of
-:mod:`shtools.cli.main`.  Image sizes have a hard limit (:data:`MAX_PIXELS`).
+:mod:`shtools.cli.main`.  Image sizes have a hard limit (:data:`MAX_PIXELS`,
+:class:`ImageSize`).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import click
 from shtools.errors import InputError
 
 #: Working memory a stage may plan without --force: well inside a laptop's RAM, far
-#: above what the defaults need (a default field sample plans ~0.1 GiB).
+#: above what the defaults plan (tests/test_bad_inputs_stages.py checks the field's).
 MEMORY_LIMIT = 4 * 2**30
 #: Rays a stage may cast without --force: hours of ray casting on a few cores.
 RAY_LIMIT = 2 * 10**10
