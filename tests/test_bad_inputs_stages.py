@@ -167,6 +167,12 @@ CASES = [
                             "--methods", "auto@99"], 1, ["--methods", "auto@99"]),
     ("plot-not-png", ["tables", "log", "-n", "2", "-o", "{o}/t.h5", "--plot", "{o}/p.txt"], 1,
      ["p.txt", "--plot", ".png"]),
+    *[(f"empty-input-{'-'.join(argv[:2])}", argv, 2, ["is empty"]) for argv in (
+        ["transfer", "", "-o", "{o}/t.h5"], ["spheres", "fit", "", "-n", "2", "-o", "{o}/s.h5"],
+        ["bake", "", "-o", "{o}/b.h5"], ["light", "project", "", "-n", "2", "-o", "{o}/l.h5"],
+        ["export", "", "-o", "{o}/x.png"], ["info", ""],
+        ["spheres", "preview", "{k}/mesh.obj", "", "-o", "{o}/p.png"],
+        ["eval", "--mesh", "", "--spheres", "{k}/spheres.h5"])],
     # --- sizes: refused with the size and the way out
     ("field-resolution-huge", ["field", "sample", "{k}/mesh.obj", "-o", "{o}/f.h5", "--shells",
                                "1", "--resolution", "1048576", "--map", "4"], 1,

@@ -21,6 +21,19 @@ output_option = click.option(
     type=click.Path(dir_okay=False, writable=True),
     help="Output file (written atomically).",
 )
+class InputPath(click.Path):
+    """A file the command reads: not a folder, not an empty string (which would name the
+    current folder); whether it exists and what it holds, its reader checks."""
+
+    def __init__(self):
+        super().__init__(dir_okay=False)
+
+    def convert(self, value, param, ctx):
+        if not str(value).strip():
+            self.fail("is empty; give a file path", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 json_option = click.option(
     "--json", "as_json", is_flag=True, help="Print a machine-readable JSON summary on stdout."
 )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import (
+    InputPath,
     errors_name,
     json_option,
     output_option,
@@ -17,7 +18,7 @@ from shtools.scene.shadows import bake_method_names
 
 
 @click.command("bake")
-@click.argument("scene", type=click.Path(dir_okay=False))
+@click.argument("scene", type=InputPath())
 @output_option
 @click.option("--frames", "frames_text", metavar="A:B",
               help="Frames to bake, half-open like Python (A:B, A:, :B or one frame A); "

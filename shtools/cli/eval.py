@@ -18,7 +18,14 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import errors_name, json_option, option_type, report, setting_type
+from shtools.cli._common import (
+    InputPath,
+    errors_name,
+    json_option,
+    option_type,
+    report,
+    setting_type,
+)
 from shtools.cli._limits import check_memory, check_rays, force_option
 from shtools.errors import InputError
 
@@ -29,18 +36,18 @@ REFERENCE_BYTES = 17
 
 
 @click.command("eval")
-@click.argument("scene", required=False, type=click.Path(dir_okay=False))
-@click.option("--mesh", type=click.Path(dir_okay=False), help="Blocker mesh (built-in form).")
-@click.option("--spheres", "spheres_path", type=click.Path(dir_okay=False),
+@click.argument("scene", required=False, type=InputPath())
+@click.option("--mesh", type=InputPath(), help="Blocker mesh (built-in form).")
+@click.option("--spheres", "spheres_path", type=InputPath(),
               help="Sphere set of the mesh (spheres asset).")
-@click.option("--tree", "tree_path", type=click.Path(dir_okay=False),
+@click.option("--tree", "tree_path", type=InputPath(),
               help="Sphere tree of the set (tree asset); enables the hierarchy.")
-@click.option("--field", "field_path", type=click.Path(dir_okay=False),
+@click.option("--field", "field_path", type=InputPath(),
               help="Shadow field of the mesh (field asset), instead of --spheres.")
 @click.option("--field-space", type=click.Choice(["log", "product"]), default=None,
               help="How shadow fields combine in the runtime methods (default: log, or "
                    "the scene's).")
-@click.option("--light", "light_path", type=click.Path(dir_okay=False),
+@click.option("--light", "light_path", type=InputPath(),
               help="Environment light asset (default: a procedural sky).")
 @click.option("--grid", default=64, show_default=True, type=option_type("grid"),
               help="Ground receivers per side (built-in form).")

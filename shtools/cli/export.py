@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from shtools.cli._common import (
+    InputPath,
     errors_name,
     json_option,
     option_type,
@@ -18,7 +19,7 @@ from shtools.export.tonemap import CURVES
 
 
 @click.command("export")
-@click.argument("baked", type=click.Path(dir_okay=False))
+@click.argument("baked", type=InputPath())
 @output_option
 @click.option("--frame", type=option_type("frame"), default=None,
               help="Scene frame number to export (default the bake's first).")

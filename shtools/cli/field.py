@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import (
+    InputPath,
     errors_name,
     json_option,
     option_type,
@@ -26,7 +27,7 @@ def field():
 
 
 @field.command("sample")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
+@click.argument("mesh_path", metavar="MESH", type=InputPath())
 @output_option
 @click.option("--shells", default=32, show_default=True, type=int,
               help="Shells C; radius r_c = 0.2 V_r (1 + c), V_r the bounding-sphere radius.")

@@ -8,6 +8,7 @@ import click
 import numpy as np
 
 from shtools.cli._common import (
+    InputPath,
     errors_name,
     json_option,
     option_type,
@@ -23,7 +24,7 @@ def light():
 
 
 @light.command("project")
-@click.argument("image", type=click.Path(dir_okay=False))
+@click.argument("image", type=InputPath())
 @click.option("--order", "-n", type=setting_type("order"), required=True,
               help="SH order n (the scene's settings.order).")
 @output_option

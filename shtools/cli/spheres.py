@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 
 from shtools.cli._common import (
+    InputPath,
     errors_name,
     json_option,
     option_type,
@@ -30,7 +31,7 @@ def spheres():
 
 @spheres.command("fit")
 @click.argument("mesh_paths", metavar="MESH...", nargs=-1, required=True,
-                type=click.Path(dir_okay=False))
+                type=InputPath())
 @click.option("-n", "--count", "count", type=option_type("count"), required=True,
               help="Number of spheres N (>= 1).")
 @click.option("-o", "--output", required=True, type=click.Path(writable=True),
@@ -103,11 +104,11 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
 
 
 @spheres.command("import")
-@click.argument("sph_path", metavar="FILE.sph", type=click.Path(dir_okay=False))
+@click.argument("sph_path", metavar="FILE.sph", type=InputPath())
 @output_option
 @click.option("--level", type=option_type("level"), default=None,
               help="Tree level to import (0 = root); default the deepest non-empty level.")
-@click.option("--mesh", "mesh_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--mesh", "mesh_path", type=InputPath(), default=None,
               help="Mesh the spheres bound: used to compute outside_volume_ratio.")
 @json_option
 @errors_name("sph_path")
@@ -137,7 +138,7 @@ def import_cmd(sph_path, output, level, mesh_path, as_json):
 
 
 @spheres.command("export")
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
 @output_option
 @json_option
 @errors_name("spheres_path")
@@ -155,8 +156,8 @@ def export_cmd(spheres_path, output, as_json):
 
 
 @spheres.command("preview")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@click.argument("mesh_path", metavar="MESH", type=InputPath())
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
 @output_option
 @click.option("--size", nargs=2, type=option_type("size"), default=(480, 360),
               show_default=True, metavar="W H",

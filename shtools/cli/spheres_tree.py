@@ -11,6 +11,7 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import (
+    InputPath,
     errors_name,
     json_option,
     option_type,
@@ -23,7 +24,7 @@ from shtools.geometry.fit_methods import SPHERE_SPACES
 
 
 @click.command("tree")
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
 @output_option
 @click.option("--branching", default=4, show_default=True, type=option_type("branching"),
               help="Target average number of children per inner node.")
@@ -53,8 +54,8 @@ def tree(spheres_path, output, branching, seed, as_json):
 
 
 @click.command("bind")
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
-@click.argument("rig_path", metavar="RIGGED", type=click.Path(dir_okay=False))
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
+@click.argument("rig_path", metavar="RIGGED", type=InputPath())
 @output_option
 @click.option("--bones-per-sphere", default=4, show_default=True,
               type=option_type("bones_per_sphere"),

@@ -11,6 +11,7 @@ import time
 import click
 
 from shtools.cli._common import (
+    InputPath,
     errors_name,
     json_option,
     option_type,
@@ -26,7 +27,7 @@ DIRECTION_BYTES, RAY_BYTES = 32, 64
 
 
 @click.command("transfer")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
+@click.argument("mesh_path", metavar="MESH", type=InputPath())
 @output_option
 @click.option("--order", default=6, show_default=True, type=click.IntRange(1, 10),
               help="SH order; the scene's accumulation order (6 for the default shading "
