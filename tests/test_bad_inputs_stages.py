@@ -455,3 +455,20 @@ def test_read_only_folder_is_refused_as_nobody(argv, open_folder):
     assert done.returncode == 1, done.stderr
     assert len(lines) == 1 and "cannot write to the output folder" in lines[0], done.stderr
     assert list(out.iterdir()) == []
+
+
+def test_field_self_visibility_rays_are_costed(kit, tmp_path, monkeypatch):
+    """The stored O_v casts every vertex's rays too: counted against the ray limit (lowered
+    so the 8-vertex box's 8 x 3200 rays exceed it), with --no-self-visibility as a way out."""
+    import shtools.cli._limits as limits
+
+    monkeypatch.setattr(limits, "RAY_LIMIT", 10_000)
+    out = tmp_path / "f.h5"
+    argv = ["field", "sample", kit.root / "mesh.obj", "-o", out, "--shells", 2, "--resolution",
+            4, "--min-resolution", 2, "--map", 4, "--order", 2, "--workers", 1]
+    code, stdout, err = _run(*argv)
+    check_refused(code, stdout, err, want_code=1,
+                  named=["mesh.obj", "self-visibility", "8 vertices x 3200", "--force"],
+                  outputs=[out], kit=kit, folders=[tmp_path])
+    code, _, err = _run(*argv, "--no-self-visibility")
+    assert code == 0, err

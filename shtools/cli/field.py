@@ -99,9 +99,16 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     sv = None
     if not no_self_visibility:
         try:
+            from shtools.fields.self_visibility import DEFAULT_DIRECTIONS
             from shtools.fields.self_visibility import self_visibility as sv
         except ImportError:  # not in this build: the field is stored without O_v
             sv = None
+        else:  # O_v: every vertex's rays besides the shells'
+            n = len(mesh.vertices)
+            check_rays("field sample (self-visibility)", n * DEFAULT_DIRECTIONS,
+                       f"{n} vertices x {DEFAULT_DIRECTIONS} directions",
+                       "pass --no-self-visibility (or use a `transfer` asset)", force=force,
+                       path=mesh_path)
     with progress(total=shells * resolution * resolution, desc="field samples") as bar:
         try:
             fld, rep = sample_field(mesh, params, self_visibility=sv, progress=bar.update,
