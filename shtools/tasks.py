@@ -48,9 +48,11 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import json
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -136,10 +138,34 @@ def worker_context():
 
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(list(WORKER_PRELOAD))  # no effect once the server runs
+    _quiet_resource_tracker()
     # start the server now (once): outside start_worker's held signals, so that Ctrl-C
     # during its imports stops the caller at once
     forkserver.ensure_running()
     return context
+
+
+#: Warning filter of the resource tracker: after ``kill -9`` of the parent it frees the
+#: pools' semaphores (its job) and would print a two-line UserWarning saying so.
+TRACKER_WARNINGS = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
+def _quiet_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (once) with :data:`TRACKER_WARNINGS`.
+
+    The tracker is a separate process started with this interpreter's ``-W``
+    options; the filter is added to them only while it starts.
+    """
+    from multiprocessing import resource_tracker
+
+    added = TRACKER_WARNINGS not in sys.warnoptions
+    if added:
+        sys.warnoptions.append(TRACKER_WARNINGS)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        if added:
+            sys.warnoptions.remove(TRACKER_WARNINGS)
 
 
 #: Signals :func:`start_worker` holds back (the CLI's stop signals and Ctrl-C).
@@ -621,14 +647,65 @@ def _is_dask(scheduler: str | None) -> bool:
     return scheduler is not None and scheduler not in ("inline", "processes")
 
 
+#: Dask's network schemes a cluster can be joined by (``inproc`` is in-process only).
+SCHEMES = ("tcp", "tls", "ucx", "ws", "wss")
+#: A scheduler file is a small JSON object; anything bigger is not one.
+MAX_SCHEDULER_FILE = 1 << 20
+
+
+def _address_problem(address: object) -> str | None:
+    """Why ``address`` is not ``SCHEME://HOST:PORT``, or None when it is."""
+    if not isinstance(address, str):
+        return f"the address must be a string, got {address!r}"
+    scheme, sep, rest = address.partition("://")
+    if not sep or scheme not in SCHEMES:
+        return (f"'{address}' is not an address SCHEME://HOST:PORT with SCHEME one of "
+                f"{', '.join(SCHEMES)}")
+    host, colon, port = rest.rpartition(":")
+    if not colon or not host.strip("[]") or not port:
+        return f"'{address}' needs a host and a port (e.g. tcp://10.0.0.5:8786)"
+    if not (port.isdigit() and 1 <= int(port) <= 65535):
+        return f"'{address}': the port must be a number in 1..65535, got '{port}'"
+    return None
+
+
 def check_scheduler(scheduler: str | None) -> None:
-    """Refuse a scheduler value that is neither a name, an address nor an existing file."""
-    if scheduler is None or scheduler in LOCAL_NAMES or "://" in scheduler:
+    """Refuse a scheduler value before anything starts (a one-line :class:`InputError`).
+
+    Valid: None, a local name (:data:`LOCAL_NAMES`), an address
+    ``SCHEME://HOST:PORT`` (:data:`SCHEMES`, a port in 1..65535), or a Dask
+    scheduler file (JSON, as ``dask scheduler --scheduler-file`` writes it) whose
+    ``address`` is such an address.  Whether the cluster answers is known only
+    when joining it (:func:`task_pool`).
+    """
+    if scheduler is None or scheduler in LOCAL_NAMES:
         return
-    if not Path(scheduler).is_file():
+    if not isinstance(scheduler, str) or not scheduler.strip():
+        raise InputError("the scheduler is empty; give 'local', tcp://HOST:PORT or a "
+                         "scheduler file")
+    if "://" in scheduler:
+        problem = _address_problem(scheduler)
+        if problem:
+            raise InputError(problem)
+        return
+    path = Path(scheduler)
+    if not path.is_file():
         raise InputError(
-            "is neither 'local', a scheduler address (tcp://HOST:PORT) nor an existing "
-            "scheduler file", scheduler)
+            "is neither 'local', a scheduler address (tcp://HOST:PORT) nor an "
+            "existing scheduler file", scheduler)
+    what = ("is not a Dask scheduler file (JSON with the scheduler's 'address', as "
+            "`dask scheduler --scheduler-file` writes it)")
+    try:
+        if path.stat().st_size > MAX_SCHEDULER_FILE:
+            raise ValueError("too big")
+        info = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        raise InputError(what, scheduler) from None
+    if not isinstance(info, dict) or "address" not in info:
+        raise InputError(what, scheduler)
+    problem = _address_problem(info["address"])
+    if problem:
+        raise InputError(f"in the scheduler file, {problem}", scheduler)
 
 
 @contextmanager
@@ -687,7 +764,7 @@ def task_pool(scheduler: str | None = None, workers: int | None = None, *,
             client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
         else:
             client = distributed.Client(scheduler_file=scheduler, timeout=CONNECT_TIMEOUT)
-    except (OSError, TimeoutError) as exc:
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
         if cluster is not None:
             cluster.close()
         raise InputError(f"cannot reach the Dask scheduler ({type(exc).__name__}); "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
@@ -11,6 +12,8 @@ import sys
 import click
 import numpy as np
 
+from shtools.cli._limits import ImageSize
+
 output_option = click.option(
     "-o",
     "--output",
@@ -18,11 +21,60 @@ output_option = click.option(
     type=click.Path(dir_okay=False, writable=True),
     help="Output file (written atomically).",
 )
+class InputPath(click.Path):
+    """A file the command reads: not a folder, not an empty string (which would name the
+    current folder); whether it exists and what it holds, its reader checks."""
+
+    def __init__(self):
+        super().__init__(dir_okay=False)
+
+    def convert(self, value, param, ctx):
+        if not str(value).strip():
+            self.fail("is empty; give a file path", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 json_option = click.option(
     "--json", "as_json", is_flag=True, help="Print a machine-readable JSON summary on stdout."
 )
 
 
+@contextlib.contextmanager
+def naming(path):
+    """A one-line error raised in the block without a file names ``path`` (the scene, the
+    mesh): deep library code (a pose, a blocker) knows the object, not the file."""
+    from shtools.errors import ShtoolsError
+
+    try:
+        yield
+    except ShtoolsError as exc:
+        if exc.path is not None or path is None:
+            raise
+        raise type(exc)(exc.message, path) from None
+
+
+def errors_name(param: str):
+    """Decorator of a command: a one-line error without a file names the file given as
+    its parameter ``param`` (see :func:`naming`)."""
+    def decorate(f):
+        @functools.wraps(f)
+        def wrapper(*args, **kwargs):
+            with naming(kwargs.get(param)):
+                return f(*args, **kwargs)
+        return wrapper
+    return decorate
+
+
+def _checked_scheduler(ctx, param, value):
+    """``--scheduler``: checked while the options are parsed, before anything starts."""
+    from shtools.errors import InputError
+    from shtools.tasks import check_scheduler
+
+    try:
+        check_scheduler(value)
+    except InputError as exc:
+        raise click.BadParameter(exc.one_line(), ctx, param) from None
+    return value
 
 
 def scheduler_options(unit: str):
@@ -37,6 +89,7 @@ def scheduler_options(unit: str):
                  "the other in this process); with --scheduler local, the cluster's size.")(f)
         return click.option(
             "--scheduler", default=None, metavar="local|tcp://HOST:PORT|FILE",
+            callback=_checked_scheduler,
             help=f"Run {unit} on Dask: 'local' starts a LocalCluster here, an address or a "
                  "scheduler file joins an existing cluster (pip install "
                  "'shtools[distributed]'; docs/scale-out.md).  Default: worker processes on "
@@ -220,7 +273,8 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "exposure": FiniteRange(-60, 60),
     "elevation": FiniteRange(-90, 90),
     "azimuth": FiniteRange(-360, 360),
-    "distance": FiniteRange(0, None, min_open=True),
+    # camera distance, scene units: within the scene's coordinate range (float32 runtime)
+    "distance": FiniteRange(0, 1e18, min_open=True),
     "rotate_y": FiniteRange(-360, 360),
     "zoom": FiniteRange(0, 1000, min_open=True),
     "window_h": FiniteRange(0, 1000, min_open=True),
@@ -229,8 +283,8 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "fps": FiniteRange(0.1, 100),
     "seed": click.IntRange(0, 2**32 - 1),
     "columns": click.IntRange(1, 1000),
-    # one image side; the pixel count has its own limit (shtools.cli.export)
-    "size": click.IntRange(8, 16384),
+    # an image's W H: sides >= 8, pixels limited (shtools.cli._limits.MAX_PIXELS)
+    "size": ImageSize(),
     # sphere count: the fit itself says when N exceeds what the mesh's samples allow
     "count": click.IntRange(1, None),
     "level": click.IntRange(0, 64),
@@ -251,6 +305,10 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "gap": FiniteRange(0, 100),
     "frame": click.IntRange(0, None),
     "n_dirs": click.IntRange(16, 100_000),
+    # transfer: ray directions per vertex (rays and memory have their own limits,
+    # shtools.cli._limits) and the visibility floor of the log
+    "transfer_n_dirs": click.IntRange(16, 1_000_000),
+    "floor": FiniteRange(0.0, 0.5),
     # spheres fit / tree / bind: round budget, starts, tree fan-out, skin weights
     "iterations": click.IntRange(1, 100_000),
     "restarts": click.IntRange(1, 1000),

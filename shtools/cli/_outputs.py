@@ -1,12 +1,14 @@
 """Refuse unusable output paths before any work: one call at the top of a command.
 
-Every command that writes files calls :func:`guard_outputs` first, with every
-path it will write and every file it reads (for ``bake``: the scene *and* the
-files the scene names)::
+Every command that writes files calls :func:`guard_outputs` first, with EVERY
+path it will write -- the ``-o`` file and its companions (a VAT's ``.glb`` and
+``.pos.exr``, a numbered sequence ``NAME.0000.glb``) -- and every file it reads
+(for ``bake``: the scene *and* the files the scene names)::
 
-    from shtools.cli._outputs import guard_outputs
+    from shtools.cli._outputs import guard_outputs, planned
 
     guard_outputs({"-o": output, "--plot": plot_path}, inputs=[mesh_path])
+    guard_outputs(planned("-o", output, files), inputs=[baked])  # companions too
 
 It raises :class:`~shtools.errors.InputError` (one line naming the output) when
 an output
@@ -17,6 +19,8 @@ an output
 * is the same file as an input (``os.path.samefile`` where both exist, the
   resolved path otherwise) — writing it would destroy the input;
 * is the same file as another output (``tables log --plot`` equal to ``-o``);
+* exists and cannot be written by this user (a read-only file: the atomic
+  rename would silently replace it);
 * lies in a folder that does not exist or that this process cannot write
   (read-only mount, no permission) — found in a second, not after minutes of
   fitting.
@@ -43,6 +47,34 @@ def _same_file(a: Path, b: Path) -> bool:
     except OSError:
         pass
     return os.path.realpath(a) == os.path.realpath(b)
+
+
+def planned(option: str, output: str | os.PathLike,
+            files: Iterable[str | os.PathLike]) -> dict[str, Path]:
+    """The outputs of an option that writes several files, labelled for :func:`guard_outputs`.
+
+    Parameters
+    ----------
+    option : str
+        The option naming the files (``"-o"``).
+    output : path-like
+        The path the user gave.
+    files : iterable of path-like
+        Every file the command will write for it (e.g. the planning function of
+        ``export``, :func:`shtools.export.writer.output_files`), ``output`` itself
+        included when it is written.
+
+    Returns
+    -------
+    dict of str to Path
+        ``{"-o": output, "-o (companion v.glb)": ...}`` in the order given.
+    """
+    out: dict[str, Path] = {}
+    for f in files:
+        f = Path(f)
+        label = option if f == Path(output) else f"{option} (companion {f.name})"
+        out.setdefault(label, f)
+    return out
 
 
 def guard_outputs(outputs: Mapping[str, str | os.PathLike | None],
@@ -78,6 +110,9 @@ def guard_outputs(outputs: Mapping[str, str | os.PathLike | None],
             # the atomic rename would replace a device (/dev/null) or a pipe by a file
             raise InputError(f"is not a regular file (a device, pipe or socket); {option} "
                              "needs a file path", out)
+        if out.exists() and not os.access(out, os.W_OK):
+            raise InputError(f"exists and is read-only; make it writable (chmod u+w) or "
+                             f"choose another {option} path", out)
         for src in ins:
             if _same_file(out, src):
                 raise InputError(f"is also an input ({src}); writing it would destroy the "

@@ -12,14 +12,14 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, option_type, report
+from shtools.cli._common import InputPath, json_option, option_type, report
 from shtools.data_formats import read_asset
 from shtools.data_formats.compare import compare_assets, frame_numbers, short, summarize_asset
 from shtools.errors import AssetError
 
 
 def _asset_arg(name):
-    return click.argument(name, type=click.Path(dir_okay=False))
+    return click.argument(name, type=InputPath())
 
 
 # ---------------------------------------------------------------------------- info

@@ -5,6 +5,8 @@ from __future__ import annotations
 import click
 
 from shtools.cli._common import (
+    InputPath,
+    errors_name,
     json_option,
     output_option,
     progress,
@@ -16,7 +18,7 @@ from shtools.scene.shadows import bake_method_names
 
 
 @click.command("bake")
-@click.argument("scene", type=click.Path(dir_okay=False))
+@click.argument("scene", type=InputPath())
 @output_option
 @click.option("--frames", "frames_text", metavar="A:B",
               help="Frames to bake, half-open like Python (A:B, A:, :B or one frame A); "
@@ -40,6 +42,7 @@ from shtools.scene.shadows import bake_method_names
 @click.option("--force", is_flag=True,
               help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
 @json_option
+@errors_name("scene")
 def bake(scene, output, frames_text, method, store_visibility, processes, scheduler, workers,
          split_frames, force, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.

@@ -18,25 +18,36 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, option_type, report, setting_type
+from shtools.cli._common import (
+    InputPath,
+    errors_name,
+    json_option,
+    option_type,
+    report,
+    setting_type,
+)
+from shtools.cli._limits import check_memory, check_rays, force_option
 from shtools.errors import InputError
 
 DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
+#: Bytes per receiver and ray direction of the ray-traced references: the binary
+#: visibility, its float64 copy for the projection, and the sphere set's pass.
+REFERENCE_BYTES = 17
 
 
 @click.command("eval")
-@click.argument("scene", required=False, type=click.Path(dir_okay=False))
-@click.option("--mesh", type=click.Path(dir_okay=False), help="Blocker mesh (built-in form).")
-@click.option("--spheres", "spheres_path", type=click.Path(dir_okay=False),
+@click.argument("scene", required=False, type=InputPath())
+@click.option("--mesh", type=InputPath(), help="Blocker mesh (built-in form).")
+@click.option("--spheres", "spheres_path", type=InputPath(),
               help="Sphere set of the mesh (spheres asset).")
-@click.option("--tree", "tree_path", type=click.Path(dir_okay=False),
+@click.option("--tree", "tree_path", type=InputPath(),
               help="Sphere tree of the set (tree asset); enables the hierarchy.")
-@click.option("--field", "field_path", type=click.Path(dir_okay=False),
+@click.option("--field", "field_path", type=InputPath(),
               help="Shadow field of the mesh (field asset), instead of --spheres.")
 @click.option("--field-space", type=click.Choice(["log", "product"]), default=None,
               help="How shadow fields combine in the runtime methods (default: log, or "
                    "the scene's).")
-@click.option("--light", "light_path", type=click.Path(dir_okay=False),
+@click.option("--light", "light_path", type=InputPath(),
               help="Environment light asset (default: a procedural sky).")
 @click.option("--grid", default=64, show_default=True, type=option_type("grid"),
               help="Ground receivers per side (built-in form).")
@@ -57,10 +68,12 @@ DEFAULT_METHODS = "auto,hyb@4,ps*@4,ol@4,product@4,product@6"
               help="Ray-tracing directions per vertex.")
 @click.option("--png", "png_path", type=click.Path(dir_okay=False),
               help="Write a false-colour side-by-side comparison image.")
+@force_option("4 GiB of memory, 2e10 rays")
 @json_option
+@errors_name("scene")
 def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, light_path, grid,
              gap, frame, methods, order, acc_order, no_hierarchy, no_window, n_dirs, png_path,
-             as_json):
+             force, as_json):
     """Compare shadowing methods with ray tracing (relative RMSE of radiance, time)."""
     from shtools.reference.evaluation import (
         eval_settings,
@@ -70,13 +83,16 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
         parse_methods,
     )
 
-    parse_methods(methods)  # fail early on a typo
+    try:
+        parse_methods(methods)  # fail early on a typo
+    except InputError as exc:
+        raise InputError(f"--methods: {exc.message}", exc.path) from None
     if png_path is not None:
         from shtools.cli._outputs import guard_outputs
 
         _check_png_path(png_path)
         guard_outputs({"--png": png_path},
-                      [scene, mesh, spheres_path, tree_path, light_path])
+                      [scene, mesh, spheres_path, tree_path, field_path, light_path])
     if scene is not None:
         if mesh or spheres_path or field_path:
             raise InputError("give either a scene file or --mesh/--spheres/--field, not both",
@@ -94,6 +110,7 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
         else:
             data = mesh_eval_inputs(mesh, spheres_path, tree_path, light_path, grid=grid,
                                     gap=gap, order=order or 4)
+    _check_cost(len(data.vertices), n_dirs, force, scene or mesh)
     settings = eval_settings(data, order=order, acc_order=acc_order, window=not no_window,
                              hierarchy=not no_hierarchy, field_space=field_space)
     clusters = None
@@ -169,6 +186,18 @@ def _table(summary: dict) -> str:
     if "png" in summary:
         lines.append(f"\nwrote {summary['png']}")
     return "\n".join(lines)
+
+
+def _check_cost(n_receivers: int, n_dirs: int, force: bool, path) -> None:
+    """Refuse references past the memory or ray limit (:mod:`shtools.cli._limits`): the
+    mesh and the sphere set are each ray traced from every receiver in ``--n-dirs``
+    directions."""
+    fix = "lower --n-dirs or --grid"
+    formula = f"{n_receivers} receivers x {n_dirs} directions"
+    check_memory("eval", n_receivers * n_dirs * REFERENCE_BYTES,
+                 f"{formula} x {REFERENCE_BYTES} bytes", fix, force=force, path=path)
+    check_rays("eval", 2 * n_receivers * n_dirs, f"{formula}, mesh and spheres", fix,
+               force=force, path=path)
 
 
 def _check_png_path(path):

@@ -6,16 +6,20 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    InputPath,
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
 from shtools.export.tonemap import CURVES
-
-#: Largest image (or contact-sheet tile) in pixels: 8192 x 8192, ~1 GiB of raster
-#: buffers (colour, depth, weights at ~16 bytes a pixel).
-MAX_PIXELS = 8192 * 8192
 
 
 @click.command("export")
-@click.argument("baked", type=click.Path(dir_okay=False))
+@click.argument("baked", type=InputPath())
 @output_option
 @click.option("--frame", type=option_type("frame"), default=None,
               help="Scene frame number to export (default the bake's first).")
@@ -57,13 +61,14 @@ MAX_PIXELS = 8192 * 8192
 @click.option("--fps", type=option_type("fps"), default=None,
               help="GIF frame rate (default the bake's).")
 @json_option
+@errors_name("baked")
 def export(baked, output, frame, frames_text, sequence, quantity, target, rig, distance, exposure,
            fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, as_json):
     """Export a bake: a GLB (one named mesh per object; a frame range plays as one
     animated file), PLY frames, a time-sampled USD stage, a vertex animation
     texture (.exr + .glb), PNG previews, a contact sheet or an animated GIF.
     """
-    from shtools.cli._outputs import guard_outputs
+    from shtools.cli._outputs import guard_outputs, planned
     from shtools.data_formats.bake import read_bake
     from shtools.errors import InputError
     from shtools.export.png import View
@@ -74,20 +79,17 @@ def export(baked, output, frame, frames_text, sequence, quantity, target, rig, d
         if not sep or not name or not rig_path:
             raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
         rig = (name, rig_path)
-    guard_outputs({"-o": output}, [baked, rig[1] if rig else None])
+    inputs = [baked, rig[1] if rig else None]
+    guard_outputs({"-o": output}, inputs)
     suffix = Path(output).suffix.lower()
     if suffix not in FORMATS:
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
                          f"{', '.join(FORMATS)}", output)
-    if size is not None and size[0] * size[1] > MAX_PIXELS:
-        raise InputError(f"--size {size[0]} {size[1]} is {size[0] * size[1]:,} pixels "
-                         f"({size[0] * size[1] * 16 / 2**30:.1f} GiB of raster buffers), above "
-                         f"the limit of {MAX_PIXELS:,}; use a smaller image", output)
     bake_asset = read_bake(baked)
-    inputs = [baked, rig[1] if rig else None]
-    for path in output_files(bake_asset, output, frame=frame, frames_text=frames_text,
-                             sequence=sequence, rig=rig):
-        guard_outputs({"-o": path}, inputs)
+    # every file the export writes (a sequence's frames, a VAT's companions), before work
+    guard_outputs(planned("-o", output, output_files(
+        bake_asset, output, frame=frame, frames_text=frames_text, sequence=sequence,
+        rig=rig)), inputs)
     view = View(elevation=elevation, azimuth=azimuth, zoom=zoom, exposure=exposure,
                 auto_exposure=not fixed_exposure, curve=curve, distance=distance)
     summary = export_bake(bake_asset, output, frame=frame, frames_text=frames_text, view=view,

@@ -8,7 +8,17 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report, scheduler_options
+from shtools.cli._common import (
+    InputPath,
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+    scheduler_options,
+)
+from shtools.cli._limits import force_option
 
 
 @click.group("field")
@@ -17,7 +27,7 @@ def field():
 
 
 @field.command("sample")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
+@click.argument("mesh_path", metavar="MESH", type=InputPath())
 @output_option
 @click.option("--shells", default=32, show_default=True, type=int,
               help="Shells C; radius r_c = 0.2 V_r (1 + c), V_r the bounding-sphere radius.")
@@ -41,7 +51,7 @@ def field():
 @click.option("--self-order", default=None, type=int,
               help="SH order of the stored O_v [default: the bake's accumulation order at "
                    "--order, 6 at order 4].")
-@click.option("--seed", default=0, show_default=True, type=int,
+@click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Recorded for reproducibility (sampling is deterministic).")
 @click.option("--radiance", "emission", default=None, type=click.Path(dir_okay=False),
               help="EMISSION table (TOML: radiance = [r, g, b], fixture = [meshes]): sample "
@@ -52,10 +62,12 @@ def field():
               help="With --radiance: eq. (1) relative to each shell's largest radiance "
                    "(peak) or to the emitter's radiance (emitter: smaller, less exact).")
 @scheduler_options("shells")
+@force_option("4 GiB of memory, 2e10 rays")
 @json_option
+@errors_name("mesh_path")
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
            bits, cumulative, no_self_visibility, self_order, seed, emission, error_scale,
-           scheduler, workers, as_json):
+           scheduler, workers, force, as_json):
     """Sample the shadow field of MESH into a field asset.
 
     Per shell, the object's binary visibility over the direction map at R x R
@@ -79,8 +91,17 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         params.validate()
     except InputError as exc:
         raise InputError(exc.message, mesh_path) from None
+    from shtools.cli._limits import check_memory, check_rays
     from shtools.cli._outputs import guard_outputs
+    from shtools.fields.build import planned_cost
+    from shtools.tasks import default_workers
 
+    cost = planned_cost(params, workers or (1 if scheduler == "inline" else default_workers()))
+    fix = "lower --shells, --resolution, --map or --order"
+    check_memory("field sample", cost["bytes"], cost["formula"], fix, force=force,
+                 path=mesh_path)
+    check_rays("field sample", cost["rays"], f"{shells} shells x {resolution}^2 samples x "
+               f"{map_size}^2 directions", fix, force=force, path=mesh_path)
     if emission is not None:
         from shtools.fields.emitter import read_emission
 
@@ -93,9 +114,16 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     sv = None
     if not no_self_visibility:
         try:
+            from shtools.fields.self_visibility import DEFAULT_DIRECTIONS
             from shtools.fields.self_visibility import self_visibility as sv
         except ImportError:  # not in this build: the field is stored without O_v
             sv = None
+        else:  # O_v: every vertex's rays besides the shells'
+            n = len(mesh.vertices)
+            check_rays("field sample (self-visibility)", n * DEFAULT_DIRECTIONS,
+                       f"{n} vertices x {DEFAULT_DIRECTIONS} directions",
+                       "pass --no-self-visibility (or use a `transfer` asset)", force=force,
+                       path=mesh_path)
     with progress(total=shells * resolution * resolution, desc="field samples") as bar:
         try:
             fld, rep = sample_field(mesh, params, self_visibility=sv, progress=bar.update,

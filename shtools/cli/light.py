@@ -7,7 +7,15 @@ import time
 import click
 import numpy as np
 
-from shtools.cli._common import json_option, option_type, output_option, report, setting_type
+from shtools.cli._common import (
+    InputPath,
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    report,
+    setting_type,
+)
 
 
 @click.group()
@@ -16,7 +24,7 @@ def light():
 
 
 @light.command("project")
-@click.argument("image", type=click.Path(dir_okay=False))
+@click.argument("image", type=InputPath())
 @click.option("--order", "-n", type=setting_type("order"), required=True,
               help="SH order n (the scene's settings.order).")
 @output_option
@@ -35,6 +43,7 @@ def light():
               metavar="EV",
               help="Scale radiance by 2**EV.")
 @json_option
+@errors_name("image")
 def project(image, order, output, window, window_h, rotate_y, mirror, exposure, as_json):
     """Project a lat-long (equirectangular) HDR IMAGE to RGB radiance SH.
 

@@ -9,7 +9,8 @@ Ctrl-C (SIGINT), SIGTERM and SIGHUP stop a command the same way: the signal
 becomes an exception, so atomic writers remove their temporary files and worker
 processes are stopped, and the command prints one line and exits 128 + signal
 (130, 143, 129).  A full disk, an exceeded quota or a read-only file system
-(``ENOSPC``, ``EDQUOT``, ``EROFS``, ``EFBIG``) is a one-line error, exit 1.
+(``ENOSPC``, ``EDQUOT``, ``EROFS``, ``EFBIG``) is a one-line error, exit 1, and so
+is running out of memory (a request past its size limits with ``--force``).
 """
 
 from __future__ import annotations
@@ -216,6 +217,14 @@ def _run(argv: list[str], debug: bool) -> int:
         _STOPPING = None
         click.echo("error: interrupted; no output was written", err=True)
         return 130
+    except MemoryError:
+        # past the size limits with --force, or a machine smaller than the limits assume
+        if debug:
+            raise
+        command = " ".join(a for a in argv[:3] if not a.startswith("-")) or "shtools"
+        click.echo(f"error: out of memory in '{command}'; lower the sizes given to it (the "
+                   "size limits that --force goes past are in its --help)", err=True)
+        return 1
     except Exception as exc:  # a bug: one line unless --debug
         if debug:
             raise

@@ -12,6 +12,8 @@ from pathlib import Path
 import click
 
 from shtools.cli._common import (
+    InputPath,
+    errors_name,
     json_option,
     option_type,
     output_option,
@@ -29,7 +31,7 @@ def spheres():
 
 @spheres.command("fit")
 @click.argument("mesh_paths", metavar="MESH...", nargs=-1, required=True,
-                type=click.Path(dir_okay=False))
+                type=InputPath())
 @click.option("-n", "--count", "count", type=option_type("count"), required=True,
               help="Number of spheres N (>= 1).")
 @click.option("-o", "--output", required=True, type=click.Path(writable=True),
@@ -102,13 +104,14 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
 
 
 @spheres.command("import")
-@click.argument("sph_path", metavar="FILE.sph", type=click.Path(dir_okay=False))
+@click.argument("sph_path", metavar="FILE.sph", type=InputPath())
 @output_option
 @click.option("--level", type=option_type("level"), default=None,
               help="Tree level to import (0 = root); default the deepest non-empty level.")
-@click.option("--mesh", "mesh_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--mesh", "mesh_path", type=InputPath(), default=None,
               help="Mesh the spheres bound: used to compute outside_volume_ratio.")
 @json_option
+@errors_name("sph_path")
 def import_cmd(sph_path, output, level, mesh_path, as_json):
     """Convert a spheretree .sph file into a 'spheres' asset."""
     from shtools.cli._outputs import guard_outputs
@@ -135,9 +138,10 @@ def import_cmd(sph_path, output, level, mesh_path, as_json):
 
 
 @spheres.command("export")
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
 @output_option
 @json_option
+@errors_name("spheres_path")
 def export_cmd(spheres_path, output, as_json):
     """Write a 'spheres' asset as a two-level spheretree .sph file."""
     from shtools.cli._outputs import guard_outputs
@@ -152,14 +156,15 @@ def export_cmd(spheres_path, output, as_json):
 
 
 @spheres.command("preview")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@click.argument("mesh_path", metavar="MESH", type=InputPath())
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
 @output_option
-@click.option("--size", nargs=2, type=click.IntRange(min=16), default=(480, 360),
-              show_default=True, metavar="W H", help="Size of each of the two PNG panels.")
-@click.option("--elevation", type=float, default=20.0, show_default=True,
+@click.option("--size", nargs=2, type=option_type("size"), default=(480, 360),
+              show_default=True, metavar="W H",
+              help="Size of each of the two PNG panels (at most 8192 x 8192 pixels in all).")
+@click.option("--elevation", type=option_type("elevation"), default=20.0, show_default=True,
               help="Camera elevation, degrees.")
-@click.option("--azimuth", type=float, default=35.0, show_default=True,
+@click.option("--azimuth", type=option_type("azimuth"), default=35.0, show_default=True,
               help="Camera azimuth of the left panel, degrees (the right one is +90).")
 @json_option
 def preview(mesh_path, spheres_path, output, size, elevation, azimuth, as_json):
@@ -170,10 +175,12 @@ def preview(mesh_path, spheres_path, output, size, elevation, azimuth, as_json):
     """
     from pathlib import Path
 
+    from shtools.cli._outputs import guard_outputs
     from shtools.errors import InputError
     from shtools.export.spheres import render_spheres_png, write_spheres_glb
     from shtools.geometry.mesh import load_mesh
 
+    guard_outputs({"-o": output}, [mesh_path, spheres_path])
     suffix = Path(output).suffix.lower()
     if suffix not in (".png", ".glb"):
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use .png or .glb",

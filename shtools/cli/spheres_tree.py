@@ -10,19 +10,28 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    InputPath,
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
 from shtools.cli._outputs import guard_outputs
 from shtools.geometry.fit_methods import SPHERE_SPACES
 
 
 @click.command("tree")
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
 @output_option
 @click.option("--branching", default=4, show_default=True, type=option_type("branching"),
               help="Target average number of children per inner node.")
 @click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Seed of the Lloyd clustering (same seed -> identical tree).")
 @json_option
+@errors_name("spheres_path")
 def tree(spheres_path, output, branching, seed, as_json):
     """Build a bounding-sphere hierarchy over the spheres of SPHERES (bottom-up Lloyd).
 
@@ -45,8 +54,8 @@ def tree(spheres_path, output, branching, seed, as_json):
 
 
 @click.command("bind")
-@click.argument("spheres_path", metavar="SPHERES", type=click.Path(dir_okay=False))
-@click.argument("rig_path", metavar="RIGGED", type=click.Path(dir_okay=False))
+@click.argument("spheres_path", metavar="SPHERES", type=InputPath())
+@click.argument("rig_path", metavar="RIGGED", type=InputPath())
 @output_option
 @click.option("--bones-per-sphere", default=4, show_default=True,
               type=option_type("bones_per_sphere"),

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import time
+from pathlib import Path
 
 import click
 
 from shtools.cli._common import json_option, option_type, output_option, report, setting_type
+from shtools.cli._limits import check_memory, force_option
 from shtools.errors import InputError
 
 
@@ -48,6 +50,8 @@ def log_cmd(order, output, samples, plot_path, as_json):
     from shtools.sh.tables import build_log_tables
 
     guard_outputs({"-o": output, "--plot": plot_path})
+    if plot_path and Path(plot_path).suffix.lower() != ".png":
+        raise InputError("--plot writes a PNG; give a file name ending in .png", plot_path)
     if plot_path and order < 2:
         raise InputError("order 1 has no band above DC, so there are no OL curves to plot; "
                          "use --order 2 or more with --plot", plot_path)
@@ -104,9 +108,10 @@ def log_cmd(order, output, samples, plot_path, as_json):
               help="Gauss-Legendre nodes in theta per matrix entry [default: 400, doubled "
               "until the estimated error is below 1e-12].")
 @output_option
+@force_option("4 GiB of memory")
 @json_option
 def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
-                interpolation, nodes, output, as_json):
+                interpolation, nodes, output, force, as_json):
     """Write SH scaling matrices M(k) sampled in k (Wang et al. 2005).
 
     Each M(k) keeps m; the asset stores its n(2n^2+1)/3 allowed entries per k,
@@ -126,6 +131,7 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
     if k_range is not None and not k_range[0] < k_range[1]:
         raise InputError(f"--k-range {k_range[0]:g} {k_range[1]:g} is inverted or empty; "
                          "give LO < HI", output)
+    _check_scaling_memory(order, samples, nodes, force, output)
     start = time.perf_counter()
     try:
         table = build_scaling_table(
@@ -152,6 +158,26 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
              f"{len(table['rows'])} entries, quadrature error {table['quadrature_error']:.1e} "
              f"in {seconds:.2f} s")
     report(summary, as_json, human)
+
+
+def _check_scaling_memory(order: int, samples: int, nodes: int | None, force: bool,
+                          output) -> None:
+    """Refuse a scaling table past the memory limit (:mod:`shtools.cli._limits`).
+
+    Each quadrature pass holds, per sampled k and node, the Legendre parts of
+    the n^2 coefficients and of the n(2n^2+1)/3 pattern entries (float64), about
+    twice over while they are combined; the estimate takes the error check's
+    pass at twice the starting nodes (the automatic doubling can go higher).
+    """
+    from shtools.sh.scaling import DEFAULT_NODES
+
+    q = 2 * (nodes or DEFAULT_NODES)
+    entries = order * (2 * order * order + 1) // 3
+    nbytes = 2 * samples * q * (order * order + entries) * 8
+    check_memory("tables scaling", nbytes,
+                 f"{samples} samples x {q} quadrature nodes x {order * order + entries} "
+                 "values x 16 bytes", "lower --samples, --nodes or --order", force=force,
+                 path=output)
 
 
 #: ||f_hat|| up to which the paper finds OL accurate at order 4 (Section 4.2).

@@ -10,21 +10,36 @@ import time
 
 import click
 
-from shtools.cli._common import json_option, output_option, progress, report
+from shtools.cli._common import (
+    InputPath,
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
+from shtools.cli._limits import check_memory, check_rays, force_option
+
+#: Bytes per ray direction held for the whole run besides its SH row (direction, weight)
+#: and per ray in flight (origin, direction, hit flag and its float copy).
+DIRECTION_BYTES, RAY_BYTES = 32, 64
 
 
 @click.command("transfer")
-@click.argument("mesh_path", metavar="MESH", type=click.Path(dir_okay=False))
+@click.argument("mesh_path", metavar="MESH", type=InputPath())
 @output_option
 @click.option("--order", default=6, show_default=True, type=click.IntRange(1, 10),
               help="SH order; the scene's accumulation order (6 for the default shading "
                    "order 4).  A higher order is re-logged at bake time.")
-@click.option("--n-dirs", default=3200, show_default=True, type=click.IntRange(16),
+@click.option("--n-dirs", default=3200, show_default=True, type=option_type("transfer_n_dirs"),
               help="Minimum ray directions per vertex (Gauss-Legendre x uniform rule).")
-@click.option("--floor", default=0.01, show_default=True, type=click.FloatRange(0.0, 0.5),
+@click.option("--floor", default=0.01, show_default=True, type=option_type("floor"),
               help="Visibility floor of the log (fully blocked directions keep this much).")
+@force_option("4 GiB of memory, 2e10 rays")
 @json_option
-def transfer(mesh_path, output, order, n_dirs, floor, as_json):
+@errors_name("mesh_path")
+def transfer(mesh_path, output, order, n_dirs, floor, force, as_json):
     """Ray-trace MESH's self-visibility on its own vertices, projected to SH.
 
     The baker uses it in place of the object's own spheres on the object's
@@ -38,6 +53,7 @@ def transfer(mesh_path, output, order, n_dirs, floor, as_json):
 
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
+    _check_cost(len(mesh.vertices), order, n_dirs, force, mesh_path)
     start = time.perf_counter()
     bar = progress(total=len(mesh.vertices), desc="transfer", unit="vertices")
 
@@ -58,3 +74,23 @@ def transfer(mesh_path, output, order, n_dirs, floor, as_json):
     report(summary, as_json,
            f"wrote {output}: {len(g)} vertices, order {order}, {params['n_dirs']} directions, "
            f"{100 * shadowed:.1f} % of vertices self-shadowed, {seconds:.1f} s")
+
+
+def _check_cost(n_vertices: int, order: int, n_dirs: int, force: bool, mesh_path) -> None:
+    """Refuse a transfer past the memory or ray limit (:mod:`shtools.cli._limits`).
+
+    Memory: the projection matrix (Q, n*n) and the quadrature, one batch of rays
+    (at least one vertex's Q rays, at most all V x Q), and the visibility and its log
+    (V, n*n);
+    rays: V x Q.  Q is at least ``--n-dirs``.
+    """
+    from shtools.fields.self_visibility import RAYS_PER_STEP
+
+    n2 = order * order
+    batch = min(n_vertices * n_dirs, max(RAYS_PER_STEP, n_dirs))
+    nbytes = n_dirs * (n2 * 8 + DIRECTION_BYTES) + batch * RAY_BYTES + 2 * n_vertices * n2 * 8
+    fix = "lower --n-dirs or --order"
+    check_memory("transfer", nbytes, f"{n_dirs} directions x {n2} SH coefficients, "
+                 f"{n_vertices} vertices", fix, force=force, path=mesh_path)
+    check_rays("transfer", n_vertices * n_dirs, f"{n_vertices} vertices x {n_dirs} directions",
+               fix, force=force, path=mesh_path)

@@ -49,9 +49,12 @@ def _check_rig(bake: Bake, name: str, rig_path: Path):
                          f"{', '.join(bake.object_names)}", bake.path)
     if rig_path.suffix.lower() != ".glb":
         raise InputError("--rig needs the binary glTF (.glb) the scene used", rig_path)
-    recorded = (bake.attrs.get("inputs") or {}).get(rig_path.name)
-    if recorded is not None and recorded != sha256_file(rig_path):
-        raise InputError(f"is not the file baked as '{rig_path.name}' (its hash differs); "
+    # by content, not by name: a renamed copy of the baked rig is that rig, and an edited
+    # file is not, whatever its name (the bake records every input's sha256)
+    recorded = bake.attrs.get("inputs") or {}
+    if recorded and sha256_file(rig_path) not in recorded.values():
+        raise InputError(f"is not the rig this bake used (its hash differs from the sha256 "
+                         f"of every input the bake recorded: {', '.join(sorted(recorded))}); "
                          "give the rig the scene used", rig_path)
     model = load_skinned_gltf(rig_path)
     o = bake.object_names.index(name)

@@ -99,6 +99,37 @@ class FieldParameters:
                              f"least --order), got {self.self_order!r}")
 
 
+#: Bytes per cast ray while a batch is in flight: origin and direction (float64 x 6),
+#: the cone mask, the hit flag and its float32 copy for the projection.
+RAY_BYTES = 56
+
+
+def planned_cost(params: FieldParameters, workers: int = 1) -> dict:
+    """What sampling ``params`` will cost, from the options alone (before any work).
+
+    Peak memory: the initial samples of every shell and their SH logs (float64,
+    ``2 x C x R^2 x n^2``), plus per worker one shell's samples and one batch of
+    :data:`~shtools.fields.sampling.POINT_CHUNK` points' rays over the
+    ``MAP x MAP`` direction map.  Rays: every sample's full map (the cone cull
+    only lowers it).
+
+    Returns
+    -------
+    dict
+        ``bytes``, ``rays`` and ``formula`` (the estimate in words, for a message).
+    """
+    from shtools.fields.sampling import POINT_CHUNK
+
+    c, r2, n2, q = params.shells, params.resolution ** 2, params.order ** 2, params.map_size ** 2
+    w = max(1, min(int(workers), c))
+    shells = 2 * c * r2 * n2 * 8
+    worker = r2 * n2 * 8 + POINT_CHUNK * q * RAY_BYTES
+    return {"bytes": shells + w * worker, "rays": c * r2 * q,
+            "formula": f"{c} shells x {params.resolution}^2 samples x {n2} SH coefficients x "
+                       f"16 bytes, plus {w} worker(s) x {POINT_CHUNK} points x {q} directions "
+                       f"x {RAY_BYTES} bytes"}
+
+
 @dataclass
 class FieldReport:
     """What sampling did: per-shell resolutions and errors, rays, time."""

@@ -434,7 +434,7 @@ def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx,
     from shtools.scene.light_shadows import ssoc_settings
 
     try:
-        ssoc = ssoc_settings(t.ssoc)
+        ssoc = ssoc_settings(None if t.ssoc is None else t.ssoc.settings())
     except InputError as exc:
         raise ctx.sub("ssoc").error(exc.message) from None
     return SphereLightSpec(str(name), keys, t.loop, t.shadows, t.samples, ssoc)

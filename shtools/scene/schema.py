@@ -102,7 +102,8 @@ def validation_error(exc: ValidationError, data: Any, path, prefix: tuple = ()) 
         loc, key = loc[:-1], loc[-1]
         text = f"unknown key '{key}'"
     elif kind in _TEMPLATES:
-        text = _TEMPLATES[kind].format(**ctx) + f", got {err['input']!r}"
+        bounds = {k: f"{v:g}" if isinstance(v, float) else v for k, v in ctx.items()}
+        text = _TEMPLATES[kind].format(**bounds) + f", got {err['input']!r}"
     else:  # a pydantic message we have no wording for: still one line, still located
         text = err["msg"]
     where = _where(loc, data)
@@ -118,8 +119,16 @@ def _number(value):
     return float(value)
 
 
-def vector(n: int, *, positive=False, nonnegative=False, scalar_ok=False):
-    """An array of ``n`` finite numbers (``scalar_ok``: a number means ``[x] * n``)."""
+#: Largest magnitude of a light's position or radius: the runtime works in float32,
+#: whose squares overflow above ~1.8e19 (as posed vertices, shtools.scene.pose).
+MAX_LENGTH = 1e18
+#: Largest light colour or intensity: their product stays far inside float32.
+MAX_RADIANCE = 1e15
+
+
+def vector(n: int, *, positive=False, nonnegative=False, scalar_ok=False, limit=None):
+    """An array of ``n`` finite numbers (``scalar_ok``: a number means ``[x] * n``;
+    ``limit``: the largest magnitude allowed)."""
     def check(value):
         if scalar_ok and isinstance(value, int | float) and not isinstance(value, bool):
             value = [value] * n
@@ -134,6 +143,8 @@ def vector(n: int, *, positive=False, nonnegative=False, scalar_ok=False):
             raise fail(f"must be positive, got {value!r}")
         if nonnegative and any(x < 0 for x in value):
             raise fail(f"must not be negative, got {value!r}")
+        if limit is not None and any(abs(x) > limit for x in value):
+            raise fail(f"must be within +-{limit:g}, got {value!r}")
         return [float(x) for x in value]
     return Annotated[list[float], BeforeValidator(check)]
 
@@ -161,6 +172,10 @@ FilePath = Annotated[str, BeforeValidator(_file_string)]
 Number = Annotated[float, BeforeValidator(_number)]
 StrictInt = Annotated[int, Field(strict=True)]
 StrictBool = Annotated[bool, Field(strict=True)]
+#: a light's position, colour and intensity (lights and the environment)
+Position = vector(3, limit=MAX_LENGTH)
+Color = vector(3, nonnegative=True, limit=MAX_RADIANCE)
+Intensity = Annotated[Number, Field(ge=0, le=MAX_RADIANCE)]
 
 
 # --------------------------------------------------------------------------- tables
@@ -320,7 +335,7 @@ class Environment(Table):
     light: FilePath | None = None
     image: FilePath | None = None
     coeffs: list[vector(3)] | None = None
-    intensity: Annotated[Number, Field(ge=0)] = 1.0
+    intensity: Intensity = 1.0
     rotate_deg: Number = 0.0
     # mid-range lighting (Wang et al. Sec. 3.2): the environment on a finite sphere
     radius: Annotated[Number, Field(gt=0)] | None = None
@@ -347,7 +362,11 @@ def _radius(value):
     value = _number(value)
     if value <= 0:
         raise fail(f"must be > 0 (a zero-area light emits nothing), got {value!r}")
+    if value > MAX_LENGTH:
+        raise fail(f"must be <= {MAX_LENGTH:g}, got {value!r}")
     return value
+
+
 
 
 Radius = Annotated[float, BeforeValidator(_radius)]
@@ -359,9 +378,9 @@ class LightKeyframe(Table):
 
     time: Number | None = None
     frame: Number | None = None
-    position: vector(3) | None = None
+    position: Position | None = None
     radius: Radius | None = None
-    color: vector(3, nonnegative=True) | None = None
+    color: Color | None = None
     rotate: vector(3) | None = None
     quaternion: vector(4) | None = None
     scale: Annotated[Number, Field(gt=0)] | None = None
@@ -372,6 +391,31 @@ class LightKeyframe(Table):
         data = Table._known_keys.__func__(cls, data)
         exactly_one(data, ("time", "frame"), "give exactly one of 'time' (seconds) or 'frame'")
         return data
+
+
+def _ssoc_choices(name: str):
+    def allowed() -> tuple[str, ...]:
+        from shtools.runtime import ssoc
+
+        return getattr(ssoc, name)
+    return allowed
+
+
+class SSOCTable(Table):
+    """A light's ``ssoc = { ... }`` table: the types here, the ranges in
+    :class:`shtools.runtime.ssoc.SSOCSettings` (checked by the semantic pass)."""
+
+    resolution: StrictInt | None = None
+    camera: choice(_ssoc_choices("CAMERAS")) | None = None
+    guard: Number | None = None
+    max_steps: StrictInt | None = None
+    falloff: choice(_ssoc_choices("FALLOFFS")) | None = None
+    filter: StrictBool | None = None
+    corners: choice(_ssoc_choices("CORNERS")) | None = None
+
+    def settings(self) -> dict:
+        """The keys the scene set, as :class:`SSOCSettings` keywords."""
+        return self.model_dump(exclude_unset=True)
 
 
 def _light_shadow_names() -> tuple[str, ...]:
@@ -393,21 +437,21 @@ class Light(Table):
     field, ``field = "x.srf.h5"``), optionally keyframed."""
 
     name: str | None = None
-    position: vector(3)
+    position: Position
     radius: Radius | None = None
-    color: vector(3, nonnegative=True) | None = None
+    color: Color | None = None
     field: FilePath | None = None
     rotate: vector(3) | None = None
     quaternion: vector(4) | None = None
     scale: Annotated[Number, Field(gt=0)] | None = None
-    intensity: Annotated[Number, Field(ge=0)] = 1.0
+    intensity: Intensity = 1.0
     keyframes: Annotated[list[LightKeyframe], Field(min_length=1)] | None = None
     loop: StrictBool = False
     shadows: choice(_light_shadow_names) = "shexp"
     #: strata per receiver of shadows = "raytrace" (shtools.scene.light_shadows)
     samples: Annotated[int, Field(strict=True, ge=1, le=65536)] = 64
     #: occlusion-camera settings of shadows = "ssoc" / "auto" (checked by the semantic pass)
-    ssoc: dict | None = None
+    ssoc: SSOCTable | None = None
 
     @model_validator(mode="before")
     @classmethod
