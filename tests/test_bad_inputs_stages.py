@@ -29,23 +29,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_bad_inputs import SCENE, Kit, _sha, check_refused
 
 from shtools.cli.main import main
 
 TESTS = Path(__file__).resolve().parent
 
 
-@contextlib.contextmanager
-def _on_path(folder: Path):
-    sys.path.insert(0, str(folder))
-    try:
-        yield
-    finally:
-        sys.path.remove(str(folder))
-
-
-with _on_path(TESTS):
-    from test_bad_inputs import SCENE, Kit, _sha, check_refused
 
 #: A receiver that moves: its VAT export has a positions texture NAME.pos.exr.
 MOVING_SCENE = """
@@ -140,8 +130,8 @@ CASES = [
      ["v.glb", "also an input"]),
     ("vat-pos-is-input", ["export", "{k}/m.pos.exr", "-o", "{k}/m.exr"], 1,
      ["m.pos.exr", "also an input"]),
-    ("sequence-glb-is-input", ["export", "{k}/s.0000.glb", "--frames", "0:2", "-o",
-                               "{k}/s.glb"], 1, ["s.0000.glb", "also an input"]),
+    ("sequence-glb-is-input", ["export", "{k}/s.0000.glb", "--frames", "0:2", "--sequence",
+                               "-o", "{k}/s.glb"], 1, ["s.0000.glb", "also an input"]),
     ("sequence-ply-is-input", ["export", "{k}/s.0001.ply", "--frames", "0:2", "-o",
                                "{k}/s.ply"], 1, ["s.0001.ply", "also an input"]),
     ("preview-over-mesh", ["spheres", "preview", "{k}/mesh.glb", "{k}/spheres.h5", "-o",
@@ -280,7 +270,8 @@ def open_folder(kit):
 
 @pytest.mark.parametrize("argv, target", [
     (["export", "{k}/baked.h5", "-o", "{o}/out.exr"], "out.glb"),
-    (["export", "{k}/baked.h5", "--frames", "0:2", "-o", "{o}/s.glb"], "s.0000.glb"),
+    (["export", "{k}/baked.h5", "--frames", "0:2", "--sequence", "-o", "{o}/s.glb"],
+     "s.0000.glb"),
     (["export", "{k}/baked.h5", "--frames", "0:2", "-o", "{o}/s.ply"], "s.0001.ply"),
     (["export", "{k}/moving.h5", "-o", "{o}/m.exr"], "m.pos.exr"),
     (["export", "{k}/baked.h5", "-o", "{o}/x.png"], "x.png"),
@@ -313,8 +304,8 @@ def test_read_only_companions_are_refused(argv, target, open_folder):
 def test_rig_is_checked_by_content_not_by_name(kit, tmp_path):
     """A modified rig under another name is refused; the baked rig under another name is
     the baked rig."""
-    with _on_path(TESTS / "scene"):
-        from rig import write_bending_tube
+    from helpers.rig import write_bending_tube
+
     write_bending_tube(tmp_path / "tube.glb")
     (tmp_path / "scene.toml").write_text(
         '[settings]\norder = 2\nframes = 1\n\n[environment]\ncoeffs = [[3.5, 3.5, 3.5], '
