@@ -39,9 +39,10 @@ VOLTERRA_DEGREE = (4, 6)
 #: The projection onto class k of f * g collects f_i g_j with i XOR j == k.
 _CLASS_PAIRS = tuple(tuple((i, i ^ k) for i in range(4)) for k in range(4))
 #: From this order on, products use the 4 parity classes (4x fewer matrix flops
-#: for ~4x more elementwise work: 1.3-1.6x faster at order 6, measured in
-#: benchmarks/bench_runtime.py); below it the plain full quadrature is faster.
-SPLIT_MIN_ORDER = 5
+#: for ~4x more elementwise work).  Up to order 6 the plain full quadrature is
+#: faster: its two matrix products run near the BLAS peak, while the split's
+#: sixteen elementwise passes per square are bound by memory traffic.
+SPLIT_MIN_ORDER = 8
 
 
 @functools.lru_cache(maxsize=16)
@@ -242,7 +243,7 @@ class QuadratureProducts:
 
 
 def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None = None,
-             chunk: int = 4096, threads: int = 1, out_order: int | None = None,
+             chunk: int = 2048, threads: int = 1, out_order: int | None = None,
              workspaces: list | None = None) -> np.ndarray:
     """SH exponential of many vectors (``"hyb"``, ``"ps*"``, ``"ol"`` or ``"volterra"``).
 
@@ -261,7 +262,8 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
         PS*-p series degree (default :data:`shtools.sh.exponential.DEFAULT_DEGREE`).
     chunk : int
         Vectors per block (bounds memory: the reused scratch is about
-        ``chunk * 1 KB`` at order 6).
+        ``chunk * 1 KB`` at order 6; blocks whose scratch fits the core's L2
+        cache run fastest).
     threads : int
         Blocks evaluated concurrently (NumPy/BLAS release the GIL).
     out_order : int, optional
