@@ -288,10 +288,11 @@ class BlockKernel:
         """``bands[l] = u * G_l(cell of u)`` (the ratio table; no interpolation)."""
         tbl = self.table
         np.multiply(u, tbl.ratio_cells, out=cell)
-        np.minimum(cell, tbl.ratio_cells - 1, out=cell)
         np.copyto(idx, cell, casting="unsafe")  # truncation == floor since >= 0
         for l in range(self.order):
-            np.take(tbl.ratios[l], idx, out=bands[l])
+            # 0 <= u <= 1: "clip" takes u = 1 to the last cell, and unlike the
+            # default mode it gathers straight into ``out`` without a buffer copy
+            np.take(tbl.ratios[l], idx, out=bands[l], mode="clip")
             bands[l] *= u
 
     def _accumulate(self, bands, x, y, z, scratch, out):
