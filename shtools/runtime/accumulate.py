@@ -45,7 +45,7 @@ FULL_BLOCK_RULES_FRACTION = 0.1
 
 
 def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weights=None,
-                   self_shadow: bool = True, chunk_pairs: int = 1 << 16,
+                   self_shadow: bool = True, chunk_pairs: int = 1 << 15,
                    out: np.ndarray | None = None, kernel: BlockKernel | None = None
                    ) -> np.ndarray:
     """Sum of sphere log-visibility vectors at each receiver (float32), one sphere list.

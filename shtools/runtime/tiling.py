@@ -33,7 +33,7 @@ _CURVED_TILES_PER_CHUNK = 256
 
 def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_centers,
                         sphere_radii, sphere_weights, cut_sizes, table: CapLogTable, *,
-                        self_shadow: bool = True, chunk_pairs: int = 1 << 16,
+                        self_shadow: bool = True, chunk_pairs: int = 1 << 15,
                         threads: int = 1, kernels: list[BlockKernel] | None = None,
                         stats: dict | None = None) -> np.ndarray:
     """Eq. 38 log sums for receivers grouped in clusters with per-cluster sphere lists.
