@@ -17,6 +17,7 @@ exponential with a lighter quadrature.  Tests check it against
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 
 import numpy as np
@@ -45,6 +46,49 @@ _CLASS_PAIRS = tuple(tuple((i, i ^ k) for i in range(4)) for k in range(4))
 SPLIT_MIN_ORDER = 8
 
 
+#: Lebedev rules (V. I. Lebedev and D. N. Laikov, "A quadrature formula for the
+#: sphere of the 131st algebraic order of accuracy", Doklady Mathematics 59, 1999)
+#: by degree of exactness: orbits as (generator, weight), each orbit every signed
+#: permutation of its generator; weights sum to 4 pi.  Exact to the same degree
+#: with fewer nodes than the product Gauss rule (38 vs 50, 86 vs 128), so the
+#: products of orders 4 and 6 cost that much fewer flops.
+_LEBEDEV = {
+    9: (((1.0, 0.0, 0.0), 0.11967972013675403),
+        ((0.5773502691896257, 0.5773502691896257, 0.5773502691896257), 0.4039190554615448),
+        ((0.8880738339771153, 0.4597008433809831, 0.0), 0.35903916041026207)),
+    15: (((1.0, 0.0, 0.0), 0.14506632743848968),
+         ((0.5773502691896257, 0.5773502691896257, 0.5773502691896257),
+          0.15009158815708187),
+         ((0.6943540066026664, 0.6943540066026664, 0.18906355288539498),
+          0.1492445168690702),
+         ((0.8525183117012676, 0.3696028464541502, 0.3696028464541502),
+          0.13961936079092707),
+         ((0.9273306571511725, 0.3742430390903412, 0.0), 0.1484377866929852)),
+}
+
+
+def lebedev_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes ``(Q, 3)`` and weights ``(Q,)`` of the Lebedev rule exact to ``degree``
+    (one of :data:`_LEBEDEV`), nodes in a fixed order."""
+    dirs, weights = [], []
+    for generator, weight in _LEBEDEV[degree]:
+        points = set()
+        for perm in itertools.permutations(generator):
+            for signs in itertools.product((1.0, -1.0), repeat=3):
+                points.add(tuple(sg * c if c else 0.0 for sg, c in zip(signs, perm,
+                                                                       strict=True)))
+        dirs.extend(sorted(points))
+        weights.extend([weight] * len(points))
+    return np.array(dirs), np.array(weights)
+
+
+def _product_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """The fewest-node rule exact to ``degree`` that this module knows."""
+    rules = [sphere_quadrature(degree)]
+    rules += [lebedev_rule(d) for d in _LEBEDEV if d >= degree]
+    return min(rules, key=lambda rule: rule[1].shape[0])  # the first of equal sizes
+
+
 @functools.lru_cache(maxsize=16)
 def _split_operators(order: int, dtype_name: str):
     """Class-split quadrature operators of an exact order-``n`` product.
@@ -70,7 +114,7 @@ def _split_operators(order: int, dtype_name: str):
     """
     degree = max(0, 3 * (order - 1))
     if order < SPLIT_MIN_ORDER:
-        dirs, w = sphere_quadrature(degree)
+        dirs, w = _product_rule(degree)
         cls = np.zeros(order * order, dtype=np.int64)
         n_classes, sq_factor = 1, (1.0,)
     else:
