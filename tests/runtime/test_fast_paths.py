@@ -27,23 +27,6 @@ def test_quadrature_products_match_triple_tensor_products(order):
     np.testing.assert_allclose(ops.square(f), square(f), atol=1e-11)
 
 
-@pytest.mark.parametrize("degree", [9, 15])
-def test_lebedev_rules_are_scipys(degree):
-    from scipy.integrate import lebedev_rule as scipy_rule
-
-    from shtools.runtime.fast_exp import lebedev_rule
-
-    dirs, w = lebedev_rule(degree)
-    ref_dirs, ref_w = scipy_rule(degree)
-    ref_dirs = ref_dirs.T
-    # the same node set and weights (the runtime stays NumPy only, so its orbit
-    # constants are written out; 1e-14: they are printed to double precision)
-    match = np.argmin(np.linalg.norm(dirs[:, None] - ref_dirs[None], axis=2), axis=1)
-    assert sorted(match) == list(range(ref_dirs.shape[0]))
-    np.testing.assert_allclose(dirs, ref_dirs[match], atol=1e-14)
-    np.testing.assert_allclose(w, ref_w[match], rtol=1e-13)
-
-
 @pytest.mark.parametrize("method,order", [("ps*", 6), ("hyb", 6), ("ps*", 5), ("hyb", 4)])
 def test_exp_with_out_order_is_the_truncated_exp(method, order):
     rng = np.random.default_rng(7)
