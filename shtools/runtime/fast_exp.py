@@ -43,7 +43,7 @@ _CLASS_PAIRS = tuple(tuple((i, i ^ k) for i in range(4)) for k in range(4))
 #: for ~4x more elementwise work).  Up to order 6 the plain full quadrature is
 #: faster: its two matrix products run near the BLAS peak, while the split's
 #: sixteen elementwise passes per square are bound by memory traffic.
-SPLIT_MIN_ORDER = 8
+SPLIT_MIN_ORDER = 7
 
 
 #: Lebedev rules (V. I. Lebedev and D. N. Laikov, "A quadrature formula for the
