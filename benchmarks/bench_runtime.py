@@ -2,6 +2,9 @@
 accumulation order, log space vs product space, peak memory.
 
 ``python -m benchmarks -k runtime`` or ``python benchmarks/bench_runtime.py [--quick]``.
+With ``--baseline DIR`` (or ``SHTOOLS_BASELINE=DIR``; DIR a checkout of an earlier
+commit, e.g. ``git worktree add /tmp/base 98bedba``) it first times the battle frame
+side by side with that checkout and prints the ratio per stage.
 
 Scenes are procedural (capsule-built characters and columns over a ground grid,
 sphere sets bounding the capsules exactly), so the figures do not depend on
@@ -410,7 +413,7 @@ def _markdown(rows: list[dict]) -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small scenes, few frames")
-    parser.add_argument("--baseline", metavar="DIR",
+    parser.add_argument("--baseline", metavar="DIR", default=os.environ.get("SHTOOLS_BASELINE"),
                         help="a checkout of the baseline commit: time the battle frame "
                              "side by side with it (child processes, PYTHONPATH=DIR)")
     parser.add_argument("--rounds", type=int, default=2,
