@@ -1,11 +1,13 @@
-r"""The runtime's product backend: parity-split quadrature SH products in float32 on BLAS.
+r"""The runtime's product backend: quadrature SH products in float32 on BLAS.
 
 Every truncated SH product :math:`(\mathbf f * \mathbf g)_i = \int f g\, y_i` is
 evaluated as two small matrix products through a quadrature that integrates
 the degree :math:`3(n-1)` integrand exactly: reconstruct ``f`` and ``g`` at the
-``Q`` directions, multiply pointwise, project back.  For tens of thousands of
-vectors this runs on BLAS in float32 and is far faster than contracting the
-sparse triple-product tensor.
+``Q`` directions, multiply pointwise, project back.  Up to order 6 the rule is
+the one with the fewest nodes known here (Lebedev's for orders 4-6); from order
+7 on, the products are split by parity over a quarter of a product Gauss rule.
+For tens of thousands of vectors this runs on BLAS in float32 and is far faster
+than contracting the sparse triple-product tensor.
 
 :class:`QuadratureProducts` is a :class:`shtools.sh.exponential.ProductBackend`;
 :func:`fast_exp` runs the one exp driver of :mod:`shtools.sh.exponential`
