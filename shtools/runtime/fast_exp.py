@@ -101,7 +101,8 @@ def _split_operators(order: int, dtype_name: str):
     the 4 images of a base point are ``a +- b +- c +- d`` of the 4 class
     reconstructions at that point, and a product needs reconstructions at a
     quarter of the nodes only (odd classes vanish at z = 0).  Below
-    :data:`SPLIT_MIN_ORDER` there is one class (all coefficients) on the full rule.
+    :data:`SPLIT_MIN_ORDER` there is one class (all coefficients) on the fewest-node
+    rule exact to that degree (:func:`_product_rule`).
 
     Returns
     -------
