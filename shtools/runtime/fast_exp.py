@@ -213,18 +213,18 @@ class QuadratureProducts:
 
     def _values(self, parts, ws=None):
         if ws is None:
-            return [p @ r for p, r in zip(parts, self.recon, strict=True)]
+            return [_matmul(p, r) for p, r in zip(parts, self.recon, strict=True)]
         rows = parts[0].shape[0]
-        return [np.matmul(p, r, out=w[:rows])
+        return [_matmul(p, r, out=w[:rows])
                 for p, r, w in zip(parts, self.recon, ws, strict=False)]
 
     def _project(self, vals, rows=slice(None), sizes=None, square=False, out=None):
         mats = self.proj_sq if square else self.proj
         sizes = sizes or [p.shape[1] for p in mats]
         if out is None:
-            return [v[rows] @ p[:, :s] for v, p, s in zip(vals, mats, sizes, strict=True)]
+            return [_matmul(v[rows], p[:, :s]) for v, p, s in zip(vals, mats, sizes, strict=True)]
         for v, p, s, o in zip(vals, mats, sizes, out, strict=True):
-            np.matmul(v[rows], p[:, :s], out=o)
+            _matmul(v[rows], p[:, :s], out=o)
         return out
 
     def square_values(self, parts, ws=None):
@@ -287,6 +287,34 @@ class QuadratureProducts:
         """``f * g``, shape ``(B, n*n)``."""
         return self.merge(self.product_split(self.split(f, copy=False),
                                              self.split(g, copy=False)))
+
+
+#: Rows per matrix product, and the multiple a product's rows are padded to with
+#: zero rows.  BLAS libraries run small products on other kernels than large
+#: ones (OpenBLAS's small-matrix path below about 2^20 multiply-adds, its
+#: matrix-vector path for one row, edge kernels for a ragged row count), which
+#: sum in another order, so a vector's product would change in its last bits
+#: with the number of vectors beside it (e.g. when other receivers skip every
+#: blocker).  Blocks of 256 rows stay on one kernel at the orders the runtime
+#: uses and run as fast as one large product.
+PRODUCT_BLOCK_ROWS = 256
+PRODUCT_ROW_MULTIPLE = 8
+
+
+def _matmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``a @ b`` (into ``out``), the same bytes per row whatever the number of rows."""
+    rows = a.shape[0]
+    if out is None:
+        out = np.empty((rows, b.shape[1]), dtype=np.result_type(a, b))
+    whole = rows - rows % PRODUCT_ROW_MULTIPLE
+    for start in range(0, whole, PRODUCT_BLOCK_ROWS):
+        stop = min(whole, start + PRODUCT_BLOCK_ROWS)
+        np.matmul(a[start:stop], b, out=out[start:stop])
+    if whole < rows:
+        padded = np.zeros((PRODUCT_ROW_MULTIPLE, a.shape[1]), dtype=a.dtype)
+        padded[:rows - whole] = a[whole:]
+        out[whole:] = (padded @ b)[:rows - whole]
+    return out
 
 
 def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None = None,
