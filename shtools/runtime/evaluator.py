@@ -687,9 +687,8 @@ class ShadowRuntime:
 
         A log that is zero everywhere (no blocker reaches these receivers, e.g. every
         row's own blocker skipped) gives ``exp(0)`` of the same method without an exp.
-        (Rows of zero log within a batch are left out by the exp itself; the fast
-        exp's products give each row the same bytes whatever rows share its batch,
-        :data:`~shtools.runtime.fast_exp.PRODUCT_BLOCK_ROWS`.)
+        (The fast exp's products give each row the same bytes whatever rows share
+        its batch: :data:`~shtools.runtime.fast_exp.PRODUCT_BLOCK_ROWS`.)
         """
         log_vis = np.asarray(log_vis)
         if log_vis.shape[0] == 0 or log_vis.any():
