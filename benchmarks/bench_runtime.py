@@ -2,6 +2,9 @@
 accumulation order, log space vs product space, peak memory.
 
 ``python -m benchmarks -k runtime`` or ``python benchmarks/bench_runtime.py [--quick]``.
+With ``--baseline DIR`` (or ``SHTOOLS_BASELINE=DIR``; DIR a checkout of an earlier
+commit, e.g. ``git worktree add /tmp/base 98bedba``) it first times the battle frame
+side by side with that checkout and prints the ratio per stage.
 
 Scenes are procedural (capsule-built characters and columns over a ground grid,
 sphere sets bounding the capsules exactly), so the figures do not depend on
@@ -15,9 +18,12 @@ and multiply the cost of small matrix products many times over.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
+import subprocess
 import sys
+import tempfile
 import time
 import tracemalloc
 from pathlib import Path
@@ -315,6 +321,86 @@ def table_log_vs_product(quick: bool) -> list[dict]:
     return rows
 
 
+# -- side by side with a baseline checkout ------------------------------------------
+#: the battle frame the side-by-side comparison times: order 4, accumulation order 6,
+#: the default exp, one thread, one process
+BATTLE_FRAME = {"order": 4, "acc_order": 6, "exp_method": "auto", "threads": 1,
+                "processes": 1}
+#: receivers (a fixed random subset) scored against ray tracing in the comparison
+TRACED_RECEIVERS = 1500
+
+
+def frame_child(quick: bool, frames: int, save: str | None) -> int:
+    """Time the battle frame with whatever ``shtools`` this process imports (the
+    comparison runs it once with the working tree and once with ``PYTHONPATH`` at
+    a baseline checkout); prints per-stage minima as JSON, saves one frame's
+    visibility to ``save``."""
+    import shtools
+
+    scene = BattleScene(grid=90 if quick else 200, mesh_count=14 if quick else 38)
+    best, _, rt = battle_frames(scene, ShadowSettings(**BATTLE_FRAME),
+                                PROCESS_WARMUP_FRAMES + frames)
+    if save:
+        v, n, _, blockers = scene.frame(0.35)
+        g = rt.visibility(v, n, blockers, rt.clusters(scene.frame(0.0)[0],
+                                                      scene.frame(0.0)[2]))
+        np.save(save, g)
+    rt.close()
+    print(json.dumps({"module": shtools.__file__, **{k: float(x) for k, x in best.items()}}))
+    return 0
+
+
+def _run_child(baseline: str | None, quick: bool, frames: int, save: str) -> dict:
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    if baseline is not None:
+        env["PYTHONPATH"] = os.pathsep.join(
+            [baseline, *filter(None, [os.environ.get("PYTHONPATH")])])
+    args = [sys.executable, str(Path(__file__).resolve()), "--frame-child",
+            "--frames", str(frames), "--save", save] + (["--quick"] if quick else [])
+    out = subprocess.run(args, env=env, check=True, capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def table_versus(baseline: str, quick: bool, rounds: int) -> tuple[list[dict], dict]:
+    """The battle frame timed in child processes, this tree and ``baseline``
+    alternating (``rounds`` each, minima kept), and their visibilities compared with
+    each other and with sphere-union ray tracing."""
+    best = {"this tree": {}, "baseline": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = {k: os.path.join(tmp, f"{k.replace(' ', '_')}.npy") for k in best}
+        for _ in range(rounds):
+            for name, root in (("this tree", None), ("baseline", baseline)):
+                res = _run_child(root, quick, 2 if quick else 4, paths[name])
+                for k, x in res.items():
+                    if k != "module":
+                        best[name][k] = min(best[name].get(k, math.inf), x)
+        g_new, g_old = np.load(paths["this tree"]), np.load(paths["baseline"])
+    keys = [k for k in ("cuts", "accumulate", "exp", "shade", "frame")
+            if k in best["this tree"] and k in best["baseline"]]
+    rows = [{"stage": k, "baseline ms": 1e3 * best["baseline"][k],
+             "this tree ms": 1e3 * best["this tree"][k],
+             "ratio (baseline / this)": best["baseline"][k] / best["this tree"][k]}
+            for k in keys]
+    # accuracy: the same frame's visibility, new vs old, and both vs ray tracing
+    scene = BattleScene(grid=90 if quick else 200, mesh_count=14 if quick else 38)
+    v, n, _, blockers = scene.frame(0.35)
+    pick = np.sort(np.random.default_rng(0).choice(len(v), min(len(v), TRACED_RECEIVERS),
+                                                   replace=False))
+    centers = np.vstack([b.centers for b in blockers])
+    radii = np.concatenate([b.radii for b in blockers])
+    ref = sphere_union_visibility(v[pick], n[pick], centers, radii, 4)
+
+    def median_err(g):
+        return float(np.median(np.linalg.norm(g[pick] - ref, axis=1)
+                               / np.linalg.norm(ref, axis=1)))
+
+    acc = {"max |g_this - g_baseline|": float(np.abs(g_new - g_old).max()),
+           "max |g_baseline|": float(np.abs(g_old).max()),
+           "median rel. L2 vs rays, baseline": median_err(g_old),
+           "median rel. L2 vs rays, this tree": median_err(g_new)}
+    return rows, acc
+
+
 def _markdown(rows: list[dict]) -> str:
     keys = list(rows[0])
     out = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
@@ -327,7 +413,30 @@ def _markdown(rows: list[dict]) -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small scenes, few frames")
+    parser.add_argument("--baseline", metavar="DIR", default=os.environ.get("SHTOOLS_BASELINE"),
+                        help="a checkout of the baseline commit: time the battle frame "
+                             "side by side with it (child processes, PYTHONPATH=DIR)")
+    parser.add_argument("--rounds", type=int, default=2,
+                        help="alternating child runs per side with --baseline")
+    parser.add_argument("--versus-only", action="store_true",
+                        help="with --baseline: only the side-by-side table")
+    parser.add_argument("--frame-child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--frames", type=int, default=4, help=argparse.SUPPRESS)
+    parser.add_argument("--save", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.frame_child:
+        return frame_child(args.quick, args.frames, args.save)
+    if args.baseline:
+        rows, acc = table_versus(args.baseline, args.quick, args.rounds)
+        print(f"\n### Runtime: battle frame side by side with {args.baseline} (CPU of one "
+              "process, one BLAS thread, order 4, acc 6; minima over frames and "
+              f"{args.rounds} alternating runs each)\n")
+        print(_markdown(rows))
+        print("\nSame frame, this tree vs baseline and vs sphere-union ray tracing "
+              f"({TRACED_RECEIVERS} receivers): "
+              + ", ".join(f"{k} = {x:.3g}" for k, x in acc.items()))
+        if args.versus_only:
+            return 0
     rows, mem, n_v, cores = table_battle(args.quick)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"\n### Runtime: battle-scale frame ({n_v} receivers; target <= "

@@ -45,7 +45,7 @@ FULL_BLOCK_RULES_FRACTION = 0.1
 
 
 def accumulate_log(points, normals, centers, radii, table: CapLogTable, *, weights=None,
-                   self_shadow: bool = True, chunk_pairs: int = 1 << 16,
+                   self_shadow: bool = True, chunk_pairs: int = 1 << 15,
                    out: np.ndarray | None = None, kernel: BlockKernel | None = None
                    ) -> np.ndarray:
     """Sum of sphere log-visibility vectors at each receiver (float32), one sphere list.
@@ -288,10 +288,11 @@ class BlockKernel:
         """``bands[l] = u * G_l(cell of u)`` (the ratio table; no interpolation)."""
         tbl = self.table
         np.multiply(u, tbl.ratio_cells, out=cell)
-        np.minimum(cell, tbl.ratio_cells - 1, out=cell)
         np.copyto(idx, cell, casting="unsafe")  # truncation == floor since >= 0
         for l in range(self.order):
-            np.take(tbl.ratios[l], idx, out=bands[l])
+            # 0 <= u <= 1: "clip" takes u = 1 to the last cell, and unlike the
+            # default mode it gathers straight into ``out`` without a buffer copy
+            np.take(tbl.ratios[l], idx, out=bands[l], mode="clip")
             bands[l] *= u
 
     def _accumulate(self, bands, x, y, z, scratch, out):

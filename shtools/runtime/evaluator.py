@@ -686,8 +686,8 @@ class ShadowRuntime:
 
         A log that is zero everywhere (no blocker reaches these receivers, e.g. every
         row's own blocker skipped) gives ``exp(0)`` of the same method without an exp.
-        Only then: the fast exp's bytes depend on a row's place in its batch (BLAS
-        blocking), so dropping some rows would change the others' last bits.
+        (The fast exp's products give each row the same bytes whatever rows share
+        its batch: :data:`~shtools.runtime.fast_exp.PRODUCT_BLOCK_ROWS`.)
         """
         log_vis = np.asarray(log_vis)
         if log_vis.shape[0] == 0 or log_vis.any():

@@ -1,11 +1,13 @@
-r"""The runtime's product backend: parity-split quadrature SH products in float32 on BLAS.
+r"""The runtime's product backend: quadrature SH products in float32 on BLAS.
 
 Every truncated SH product :math:`(\mathbf f * \mathbf g)_i = \int f g\, y_i` is
 evaluated as two small matrix products through a quadrature that integrates
 the degree :math:`3(n-1)` integrand exactly: reconstruct ``f`` and ``g`` at the
-``Q`` directions, multiply pointwise, project back.  For tens of thousands of
-vectors this runs on BLAS in float32 and is far faster than contracting the
-sparse triple-product tensor.
+``Q`` directions, multiply pointwise, project back.  Up to order 6 the rule is
+the one with the fewest nodes known here (Lebedev's for orders 4-6); from order
+7 on, the products are split by parity over a quarter of a product Gauss rule.
+For tens of thousands of vectors this runs on BLAS in float32 and is far faster
+than contracting the sparse triple-product tensor.
 
 :class:`QuadratureProducts` is a :class:`shtools.sh.exponential.ProductBackend`;
 :func:`fast_exp` runs the one exp driver of :mod:`shtools.sh.exponential`
@@ -17,6 +19,7 @@ exponential with a lighter quadrature.  Tests check it against
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 
 import numpy as np
@@ -39,9 +42,53 @@ VOLTERRA_DEGREE = (4, 6)
 #: The projection onto class k of f * g collects f_i g_j with i XOR j == k.
 _CLASS_PAIRS = tuple(tuple((i, i ^ k) for i in range(4)) for k in range(4))
 #: From this order on, products use the 4 parity classes (4x fewer matrix flops
-#: for ~4x more elementwise work, which pays from this order on; below it the plain
-#: full quadrature is faster: benchmarks/bench_runtime.py times both).
-SPLIT_MIN_ORDER = 5
+#: for ~4x more elementwise work).  Up to order 6 the plain full quadrature is
+#: faster: its two matrix products run near the BLAS peak, while the split's
+#: sixteen elementwise passes per square are bound by memory traffic.
+SPLIT_MIN_ORDER = 7
+
+
+#: Lebedev rules (V. I. Lebedev and D. N. Laikov, "A quadrature formula for the
+#: sphere of the 131st algebraic order of accuracy", Doklady Mathematics 59, 1999)
+#: by degree of exactness: orbits as (generator, weight), each orbit every signed
+#: permutation of its generator; weights sum to 4 pi.  Exact to the same degree
+#: with fewer nodes than the product Gauss rule (38 vs 50, 86 vs 128), so the
+#: products of orders 4 and 6 cost that much fewer flops.
+_LEBEDEV = {
+    9: (((1.0, 0.0, 0.0), 0.11967972013675403),
+        ((0.5773502691896257, 0.5773502691896257, 0.5773502691896257), 0.4039190554615448),
+        ((0.8880738339771153, 0.4597008433809831, 0.0), 0.35903916041026207)),
+    15: (((1.0, 0.0, 0.0), 0.14506632743848968),
+         ((0.5773502691896257, 0.5773502691896257, 0.5773502691896257),
+          0.15009158815708187),
+         ((0.6943540066026664, 0.6943540066026664, 0.18906355288539498),
+          0.1492445168690702),
+         ((0.8525183117012676, 0.3696028464541502, 0.3696028464541502),
+          0.13961936079092707),
+         ((0.9273306571511725, 0.3742430390903412, 0.0), 0.1484377866929852)),
+}
+
+
+def lebedev_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes ``(Q, 3)`` and weights ``(Q,)`` of the Lebedev rule exact to ``degree``
+    (one of :data:`_LEBEDEV`), nodes in a fixed order."""
+    dirs, weights = [], []
+    for generator, weight in _LEBEDEV[degree]:
+        points = set()
+        for perm in itertools.permutations(generator):
+            for signs in itertools.product((1.0, -1.0), repeat=3):
+                points.add(tuple(sg * c if c else 0.0 for sg, c in zip(signs, perm,
+                                                                       strict=True)))
+        dirs.extend(sorted(points))
+        weights.extend([weight] * len(points))
+    return np.array(dirs), np.array(weights)
+
+
+def _product_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """The fewest-node rule exact to ``degree`` that this module knows."""
+    rules = [sphere_quadrature(degree)]
+    rules += [lebedev_rule(d) for d in _LEBEDEV if d >= degree]
+    return min(rules, key=lambda rule: rule[1].shape[0])  # the first of equal sizes
 
 
 @functools.lru_cache(maxsize=16)
@@ -54,7 +101,8 @@ def _split_operators(order: int, dtype_name: str):
     the 4 images of a base point are ``a +- b +- c +- d`` of the 4 class
     reconstructions at that point, and a product needs reconstructions at a
     quarter of the nodes only (odd classes vanish at z = 0).  Below
-    :data:`SPLIT_MIN_ORDER` there is one class (all coefficients) on the full rule.
+    :data:`SPLIT_MIN_ORDER` there is one class (all coefficients) on the fewest-node
+    rule exact to that degree (:func:`_product_rule`).
 
     Returns
     -------
@@ -69,7 +117,7 @@ def _split_operators(order: int, dtype_name: str):
     """
     degree = max(0, 3 * (order - 1))
     if order < SPLIT_MIN_ORDER:
-        dirs, w = sphere_quadrature(degree)
+        dirs, w = _product_rule(degree)
         cls = np.zeros(order * order, dtype=np.int64)
         n_classes, sq_factor = 1, (1.0,)
     else:
@@ -165,18 +213,18 @@ class QuadratureProducts:
 
     def _values(self, parts, ws=None):
         if ws is None:
-            return [p @ r for p, r in zip(parts, self.recon, strict=True)]
+            return [_matmul(p, r) for p, r in zip(parts, self.recon, strict=True)]
         rows = parts[0].shape[0]
-        return [np.matmul(p, r, out=w[:rows])
+        return [_matmul(p, r, out=w[:rows])
                 for p, r, w in zip(parts, self.recon, ws, strict=False)]
 
     def _project(self, vals, rows=slice(None), sizes=None, square=False, out=None):
         mats = self.proj_sq if square else self.proj
         sizes = sizes or [p.shape[1] for p in mats]
         if out is None:
-            return [v[rows] @ p[:, :s] for v, p, s in zip(vals, mats, sizes, strict=True)]
+            return [_matmul(v[rows], p[:, :s]) for v, p, s in zip(vals, mats, sizes, strict=True)]
         for v, p, s, o in zip(vals, mats, sizes, out, strict=True):
-            np.matmul(v[rows], p[:, :s], out=o)
+            _matmul(v[rows], p[:, :s], out=o)
         return out
 
     def square_values(self, parts, ws=None):
@@ -241,8 +289,36 @@ class QuadratureProducts:
                                              self.split(g, copy=False)))
 
 
+#: Rows per matrix product, and the multiple a product's rows are padded to with
+#: zero rows.  BLAS libraries run small products on other kernels than large
+#: ones (OpenBLAS's small-matrix path below about 2^20 multiply-adds, its
+#: matrix-vector path for one row, edge kernels for a ragged row count), which
+#: sum in another order, so a vector's product would change in its last bits
+#: with the number of vectors beside it (e.g. when other receivers skip every
+#: blocker).  Blocks of 256 rows stay on one kernel at the orders the runtime
+#: uses and run as fast as one large product.
+PRODUCT_BLOCK_ROWS = 256
+PRODUCT_ROW_MULTIPLE = 8
+
+
+def _matmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``a @ b`` (into ``out``), the same bytes per row whatever the number of rows."""
+    rows = a.shape[0]
+    if out is None:
+        out = np.empty((rows, b.shape[1]), dtype=np.result_type(a, b))
+    whole = rows - rows % PRODUCT_ROW_MULTIPLE
+    for start in range(0, whole, PRODUCT_BLOCK_ROWS):
+        stop = min(whole, start + PRODUCT_BLOCK_ROWS)
+        np.matmul(a[start:stop], b, out=out[start:stop])
+    if whole < rows:
+        padded = np.zeros((PRODUCT_ROW_MULTIPLE, a.shape[1]), dtype=a.dtype)
+        padded[:rows - whole] = a[whole:]
+        out[whole:] = (padded @ b)[:rows - whole]
+    return out
+
+
 def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None = None,
-             chunk: int = 4096, threads: int = 1, out_order: int | None = None,
+             chunk: int = 2048, threads: int = 1, out_order: int | None = None,
              workspaces: list | None = None) -> np.ndarray:
     """SH exponential of many vectors (``"hyb"``, ``"ps*"``, ``"ol"`` or ``"volterra"``).
 
@@ -261,7 +337,8 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
         PS*-p series degree (default :data:`shtools.sh.exponential.DEFAULT_DEGREE`).
     chunk : int
         Vectors per block (bounds memory: the reused scratch is about
-        ``chunk * 1 KB`` at order 6).
+        ``chunk * 1 KB`` at order 6; blocks whose scratch fits the core's L2
+        cache run fastest).
     threads : int
         Blocks evaluated concurrently (NumPy/BLAS release the GIL).
     out_order : int, optional

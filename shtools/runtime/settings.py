@@ -275,7 +275,9 @@ class ShadowSettings:
         Apply the self-shadowing rules of Sec. 6.2 (tangent-plane culling and
         replacement).
     chunk_pairs : int
-        Number of sphere-vertex pairs processed per array pass (memory bound).
+        Number of sphere-vertex pairs processed per array pass (memory bound):
+        the kernel's ~17 scratch arrays of this many float32 values should fit
+        a core's L2 cache (the clustered path's bytes do not depend on it).
     threads : int
         Threads accumulating blocks concurrently within a process.  Default 1:
         NumPy releases the GIL in each array pass, but the kernel makes hundreds
@@ -329,7 +331,7 @@ class ShadowSettings:
     deringing: str = setting("desaturate", "choice", choices=DERINGING_CHOICES,
                              doc="negative radiance from SH ringing: desaturate toward "
                                  "luminance (0 where it is negative) or keep it")
-    chunk_pairs: int = setting(1 << 16, "int", lo=256, scene=False,
+    chunk_pairs: int = setting(1 << 15, "int", lo=256, scene=False,
                                doc="sphere-vertex pairs per array pass (memory bound)")
     threads: int = setting(1, "int", lo=1, hi=64, scene=False,
                            doc="threads accumulating blocks within a process")

@@ -67,14 +67,20 @@ def desaturate_negative(radiance) -> np.ndarray:
         Non-negative linear RGB.
     """
     rgb = np.asarray(radiance, dtype=np.float64)
-    lum = rgb @ LUMINANCE
-    low = rgb.min(axis=-1)
+    negative = rgb.min(axis=-1) < 0.0
+    if not negative.any():
+        return rgb
+    out = rgb.copy()
+    # only the colours with a negative channel change (few: ringing is rare)
+    sub = rgb[negative]
+    lum = sub @ LUMINANCE
+    low = sub.min(axis=-1)
     # c' = Y + s (c - Y) with s = Y / (Y - min c) puts the smallest channel at 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(low < 0.0, np.clip(lum / (lum - low), 0.0, 1.0), 1.0)
-    out = lum[..., None] + s[..., None] * (rgb - lum[..., None])
-    out = np.where(lum[..., None] > 0.0, np.maximum(out, 0.0), 0.0)
-    return np.where((low < 0.0)[..., None], out, rgb)
+        s = np.clip(lum / (lum - low), 0.0, 1.0)
+    fixed = lum[:, None] + s[:, None] * (sub - lum[:, None])
+    out[negative] = np.where(lum[:, None] > 0.0, np.maximum(fixed, 0.0), 0.0)
+    return out
 
 
 def band_window(order: int, kind: str | None, h: float | None) -> np.ndarray:

@@ -26,6 +26,10 @@ from shtools.runtime.log_table import CapLogTable
 #: Receivers per tile: small enough that padding a cluster's last tile wastes
 #: little, large enough that (tile x cut) blocks batch well.
 TILE_ROWS = 32
+#: Tiles are blocked apart by the share of their sphere list that needs the
+#: self-shadow rules, in this many steps (flat ground far from the blockers
+#: needs none, a blocker's own surface nearly all).
+RULE_SHARES = 2
 #: Tiles per batched plane test in :func:`_tile_sphere_lists` (bounds its
 #: ``(tiles, TILE_ROWS, S)`` scratch to a few MB).
 _CURVED_TILES_PER_CHUNK = 256
@@ -33,7 +37,7 @@ _CURVED_TILES_PER_CHUNK = 256
 
 def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_centers,
                         sphere_radii, sphere_weights, cut_sizes, table: CapLogTable, *,
-                        self_shadow: bool = True, chunk_pairs: int = 1 << 16,
+                        self_shadow: bool = True, chunk_pairs: int = 1 << 15,
                         threads: int = 1, kernels: list[BlockKernel] | None = None,
                         stats: dict | None = None) -> np.ndarray:
     """Eq. 38 log sums for receivers grouped in clusters with per-cluster sphere lists.
@@ -92,18 +96,23 @@ def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_
     # exactly 0 under the self-shadow rules; ~18 % of the pairs in a battle scene)
     tile_spheres, sizes, rule_sizes = _tile_sphere_lists(pts, nrm, rows, tile_cluster, cen, rad,
                                              np.asarray(cut_sizes), self_shadow)
-    # sort tiles by list size so each block pads little
-    by_size = np.argsort(sizes, kind="stable")
+    # tiles grouped by the share of their list that needs the self-shadow rules
+    # (a block runs the rules on its largest such prefix), then sorted by list
+    # size so each block pads little
+    share = np.ceil(RULE_SHARES * rule_sizes / np.maximum(sizes, 1)).astype(np.int64)
+    by_size = np.lexsort((sizes, share))
     blocks = []
     sorted_sizes = np.maximum(sizes[by_size], 1)
-    start = 0
-    while start < by_size.size:
-        # grow the block while it stays within chunk_pairs at its largest list
-        # (the sizes ascend, so the last tile's size is the block's)
-        pairs = np.arange(1, by_size.size - start + 1) * TILE_ROWS * sorted_sizes[start:]
-        stop = start + max(1, int(np.count_nonzero(pairs <= chunk_pairs)))
-        blocks.append((by_size[start:stop], int(sorted_sizes[stop - 1])))
-        start = stop
+    ends = np.flatnonzero(np.diff(share[by_size])) + 1
+    for first, last in zip(np.r_[0, ends], np.r_[ends, by_size.size], strict=True):
+        start = first
+        while start < last:
+            # grow the block while it stays within chunk_pairs at its largest list
+            # (the sizes ascend within a group, so the last tile's size is the block's)
+            pairs = np.arange(1, last - start + 1) * TILE_ROWS * sorted_sizes[start:last]
+            stop = start + max(1, int(np.count_nonzero(pairs <= chunk_pairs)))
+            blocks.append((by_size[start:stop], int(sorted_sizes[stop - 1])))
+            start = stop
 
     def run(block_list, kern):
         for tiles, s_max in block_list:
