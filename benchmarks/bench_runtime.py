@@ -1,4 +1,4 @@
-"""Runtime benchmarks (issue 4 §7): battle-scale frame time, accuracy/time of the
+"""Runtime benchmarks: battle-scale frame time, accuracy/time of the
 accumulation order, log space vs product space, peak memory.
 
 ``python -m benchmarks -k runtime`` or ``python benchmarks/bench_runtime.py [--quick]``.
@@ -48,7 +48,7 @@ from shtools.runtime import (
 )
 from shtools.runtime.parallel import available_cores
 
-#: Targets from issue 4 §7.
+#: The runtime's targets: a battle frame, its memory, log space against product space.
 FRAME_TARGET_S = 0.150
 MEMORY_TARGET_BYTES = 1 << 30
 SPEEDUP_TARGETS = {4: 10.0, 6: 20.0}
