@@ -187,8 +187,10 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     same = _same_lights(lights)
     still = _fixed_rows(bake) if same else np.zeros(bake.n_vertices, bool)
     fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
-    # under the same lights, the moving rows of several frames are shaded in one call
-    batch = max(1, BATCH_ROWS // max(1, moving.size)) if same else 1
+    # under the same lights, several frames go in one batch: their moving rows in one
+    # shading call, their still rows in one product with K; a batch holds at most
+    # BATCH_ROWS receiver rows of every frame's visibility and radiance
+    batch = max(1, BATCH_ROWS // bake.n_vertices) if same else 1
     batches = [list(range(a, min(a + batch, bake.n_frames)))
                for a in range(0, bake.n_frames, batch)]
     shaders = _Shaders(env_sh, settings)
@@ -199,19 +201,19 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     def frames_of(frames, K):
         """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
         out = np.empty((len(frames), bake.n_vertices, 3))
+        vis = bake.visibility[frames[0]:frames[-1] + 1]  # consecutive frames: one read
         if moving.size:
-            g = np.concatenate([bake.visibility[t][moving] for t in frames])
+            g = vis[:, moving].reshape(-1, vis.shape[2])
             shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
             out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
-        for k, t in enumerate(frames):
-            if K is not None:
-                out[k, fixed] = np.einsum("vcj,vj->vc", K,
-                                          bake.visibility[t][fixed].astype(np.float64))
-            if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
-                # colours without a negative channel are left as they are by it
-                low = np.minimum(np.minimum(out[k, :, 0], out[k, :, 1]), out[k, :, 2])
-                neg = np.flatnonzero(low < 0.0)
-                out[k, neg] = desaturate_negative(out[k, neg])
+        if K is not None:  # every frame of the batch in one product
+            out[:, fixed] = np.einsum("vcj,tvj->tvc", K, vis[:, fixed].astype(np.float64),
+                                      optimize=True)
+        if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
+            # colours without a negative channel are left as they are by it
+            flat = out.reshape(-1, 3)
+            neg = np.flatnonzero(flat.min(axis=1) < 0.0)
+            flat[neg] = desaturate_negative(flat[neg])
         return out.astype(np.float32)
 
     with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
@@ -228,8 +230,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             yield from done
 
 
-#: Most receiver rows shaded in one call (frames batched under unchanging lights).
-BATCH_ROWS = 1 << 15
+#: Most receiver rows of one batch of frames (under unchanging lights): with its
+#: visibility, shading scratch and radiance, some 2 kB a row.
+BATCH_ROWS = 1 << 16
 
 
 class _Shaders:
