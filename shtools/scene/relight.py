@@ -206,13 +206,14 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             g = vis[:, moving].reshape(-1, vis.shape[2])
             shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
             out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
-        if K is not None:  # every frame of the batch in one product
-            out[:, fixed] = np.einsum("vcj,tvj->tvc", K, vis[:, fixed].astype(np.float64),
-                                      optimize=True)
+        if K is not None:  # every frame of the batch in one float32 product, as the
+            # baker dots its float32 lit transfer with the visibility
+            out[:, fixed] = np.einsum("vcj,tvj->tvc", K, vis[:, fixed], optimize=True)
         if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
             # colours without a negative channel are left as they are by it
             flat = out.reshape(-1, 3)
-            neg = np.flatnonzero(flat.min(axis=1) < 0.0)
+            low = np.minimum(np.minimum(flat[:, 0], flat[:, 1]), flat[:, 2])
+            neg = np.flatnonzero(low < 0.0)
             flat[neg] = desaturate_negative(flat[neg])
         return out.astype(np.float32)
 
@@ -220,7 +221,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
         K = None
         if fixed.size:
             parts = [p for p in np.array_split(fixed, threads) if p.size]
-            K = np.concatenate(list(pool.map(linear_part, parts)))
+            K = np.concatenate(list(pool.map(linear_part, parts))).astype(np.float32)
         window = 2 * threads  # batches in flight: bounded memory, every thread busy
         pending = [pool.submit(frames_of, frames, K) for frames in batches[:window]]
         for i in range(len(batches)):
@@ -254,8 +255,8 @@ class _Shaders:
 
         run = getattr(self.local, "run", None)
         if run is None:
-            runtime = ShadowRuntime(self.settings)
-            with self.lock:
+            with self.lock:  # one at a time: the second reuses the first's cached log tables
+                runtime = ShadowRuntime(self.settings)
                 self.runtimes.append(runtime)
             run = self.local.run = BakeRun(self.source, runtime, "relight")
         return run
