@@ -146,9 +146,11 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     position, normal and lights do not change over the bake has radiance
     ``K g`` with a fixed ``K (3, n*n)``.  ``K`` is made once by the baker's own
     :func:`~shtools.scene.shadows.shade_frame` (without de-ringing) of the unit
-    visibility vectors, so these vertices cost one small product per frame; the
-    others are shaded frame by frame with ``shade_frame`` as the baker does
-    (several frames in one call while the lights do not change).  De-ringing
+    visibility vectors, so these vertices cost one float32 product per batch of
+    frames; the others are shaded with ``shade_frame`` as the baker does (a
+    batch of frames in one call while the lights do not change).  A batch holds
+    at most :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads``
+    batches are in flight.  De-ringing
     (``settings.deringing``) follows, as in the runtime's ``shade``.
 
     Parameters
