@@ -405,17 +405,24 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         writer = made.result()
     with (h5py.File(bake, "r") as source, writer as w,
           (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
-        # per-frame datasets stored as the output stores them are copied as stored
-        # (compressed bytes), not compressed again; the others come from memory
-        kept = {name: source[name] for name in ("vertices", "normals", "visibility")
-                if source[name].ndim == 3 and source[name].compression
-                == (None if name == "visibility" else compression)}
-        for t, radiance in enumerate(itertools.chain([first], frames)):
-            frame = {name: kept.get(name, getattr(b, name)[t])
-                     for name in ("vertices", "normals") if not static}
-            w.write_frame(t, radiance, visibility=kept.get("visibility", b.visibility[t]),
-                          **frame)
-            bar.update(1)
+        # compressed geometry stored as the output stores it is copied as stored (not
+        # compressed again), frame by frame; otherwise everything comes from memory, a
+        # block of frames in one write per dataset (the visibility is plain both ways)
+        kept = {name: source[name] for name in ("vertices", "normals")
+                if source[name].ndim == 3 and source[name].compression is not None
+                and source[name].compression == compression}
+        block = 1 if kept else max(1, BATCH_ROWS // b.n_vertices)
+        relit = itertools.chain([first], frames)
+        for a in range(0, b.n_frames, block):
+            z = min(a + block, b.n_frames)
+            radiance = np.stack(list(itertools.islice(relit, z - a)))
+            geometry = {} if static else {"vertices": b.vertices[a:z], "normals": b.normals[a:z]}
+            if kept:
+                geometry = {name: kept.get(name, values[0]) for name, values in geometry.items()}
+                w.write_frame(a, radiance[0], visibility=b.visibility[a], **geometry)
+            else:
+                w.write_frames(a, radiance, visibility=b.visibility[a:z], **geometry)
+            bar.update(z - a)
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),
             "lights": 0 if scene is None else len(scene.lights)}
