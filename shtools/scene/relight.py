@@ -203,7 +203,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     def frames_of(frames, K):
         """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
         out = np.empty((len(frames), bake.n_vertices, 3))
-        vis = bake.visibility[frames[0]:frames[-1] + 1]  # consecutive frames: one read
+        vis = bake.visibility[frames[0]:frames[-1] + 1]  # consecutive frames: one slice
         if moving.size:
             g = vis[:, moving].reshape(-1, vis.shape[2])
             shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
@@ -233,8 +233,8 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             yield from done
 
 
-#: Most receiver rows of one batch of frames (under unchanging lights): with its
-#: visibility, shading scratch and radiance, some 2 kB a row.
+#: Most receiver rows (vertices x frames) of one batch of frames under unchanging
+#: lights; its visibility, shading scratch and radiance grow with it.
 BATCH_ROWS = 1 << 16
 
 
@@ -407,7 +407,7 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
           (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
         # compressed geometry stored as the output stores it is copied as stored (not
         # compressed again), frame by frame; otherwise everything comes from memory, a
-        # block of frames in one write per dataset (the visibility is plain both ways)
+        # block of frames in one write per dataset (the output's visibility is plain)
         kept = {name: source[name] for name in ("vertices", "normals")
                 if source[name].ndim == 3 and source[name].compression is not None
                 and source[name].compression == compression}
