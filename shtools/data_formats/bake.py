@@ -447,6 +447,44 @@ class BakeWriter:
                 ds[name][t] = np.asarray(values, dtype=np.float32)
         self._written[t] = True
 
+    def write_frames(self, start: int, radiance, *, vertices=None, normals=None,
+                     visibility=None):
+        """Write the consecutive asset frames ``start, start + 1, ...`` in one call each.
+
+        As :meth:`write_frame` for ``len(radiance)`` frames at once (arrays only):
+        one HDF5 write per dataset, not one per frame.
+
+        Parameters
+        ----------
+        start : int
+        radiance : ndarray, shape (K, V, 3)
+        vertices, normals : ndarray, shape (K, V, 3)
+            Required when the receivers move.
+        visibility : ndarray, shape (K, V, n*n), optional
+            Required when the writer stores visibility.
+        """
+        f = self._file
+        if f is None or self._stack is None:
+            raise RuntimeError("BakeWriter.write_frames outside its context")
+        radiance = np.asarray(radiance, dtype=np.float32)
+        k = len(radiance)
+        if radiance.shape != (k, self.n_vertices, 3) or not 0 <= start <= self.n_frames - k:
+            raise ValueError(f"radiance has shape {radiance.shape} from frame {start}, expected "
+                             f"(K, {self.n_vertices}, 3) within {self.n_frames} frames")
+        finite = np.isfinite(radiance).reshape(k, -1).all(axis=1)
+        if not finite.all():
+            bad = int(self.frame_index[start + int(np.argmin(finite))])
+            raise AssetError(f"frame {bad} produced NaN/inf radiance", self.path)
+        frames = slice(start, start + k)
+        ds = self._datasets
+        ds["radiance"][frames] = radiance
+        per_frame = {"vertices": vertices, "normals": normals} if not self.static else {}
+        if self.visibility_size:
+            per_frame["visibility"] = visibility
+        for name, values in per_frame.items():
+            ds[name][frames] = np.asarray(values, dtype=np.float32)
+        self._written[frames] = True
+
     def _copy_chunk(self, source: h5py.Dataset, target: h5py.Dataset, t: int) -> None:
         """Frame ``t`` of a per-frame dataset of another bake, its stored bytes copied as
         they are when both store frames alike (one frame a chunk, the same filters): no

@@ -20,11 +20,14 @@ cylinder    ``radius=0.25``, ``height=1.0`` (along Y), ``sections=32``,   4*sect
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from shtools.errors import InputError
+
+if TYPE_CHECKING:  # imported where a mesh is made: parsing a scene needs only the tables
+    import trimesh
 
 #: primitive type -> {parameter: default}
 PRIMITIVES: dict[str, dict] = {
@@ -161,6 +164,8 @@ def make_primitive(kind: str, params: dict) -> Primitive:
         Unknown type or parameter, or a non-positive size.
     """
     import difflib
+
+    import trimesh
 
     if kind not in PRIMITIVES:
         close = difflib.get_close_matches(kind, PRIMITIVES, n=1)

@@ -146,9 +146,11 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     position, normal and lights do not change over the bake has radiance
     ``K g`` with a fixed ``K (3, n*n)``.  ``K`` is made once by the baker's own
     :func:`~shtools.scene.shadows.shade_frame` (without de-ringing) of the unit
-    visibility vectors, so these vertices cost one small product per frame; the
-    others are shaded frame by frame with ``shade_frame`` as the baker does
-    (several frames in one call while the lights do not change).  De-ringing
+    visibility vectors, so these vertices cost one float32 product per batch of
+    frames; the others are shaded with ``shade_frame`` as the baker does (a
+    batch of frames in one call while the lights do not change).  A batch holds
+    at most :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads``
+    batches are in flight.  De-ringing
     (``settings.deringing``) follows, as in the runtime's ``shade``.
 
     Parameters
@@ -187,8 +189,10 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     same = _same_lights(lights)
     still = _fixed_rows(bake) if same else np.zeros(bake.n_vertices, bool)
     fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
-    # under the same lights, the moving rows of several frames are shaded in one call
-    batch = max(1, BATCH_ROWS // max(1, moving.size)) if same else 1
+    # under the same lights, several frames go in one batch: their moving rows in one
+    # shading call, their still rows in one product with K; a batch holds at most
+    # BATCH_ROWS receiver rows of every frame's visibility and radiance
+    batch = max(1, BATCH_ROWS // bake.n_vertices) if same else 1
     batches = [list(range(a, min(a + batch, bake.n_frames)))
                for a in range(0, bake.n_frames, batch)]
     shaders = _Shaders(env_sh, settings)
@@ -199,26 +203,27 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     def frames_of(frames, K):
         """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
         out = np.empty((len(frames), bake.n_vertices, 3))
+        vis = bake.visibility[frames[0]:frames[-1] + 1]  # consecutive frames: one slice
         if moving.size:
-            g = np.concatenate([bake.visibility[t][moving] for t in frames])
+            g = vis[:, moving].reshape(-1, vis.shape[2])
             shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
             out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
-        for k, t in enumerate(frames):
-            if K is not None:
-                out[k, fixed] = np.einsum("vcj,vj->vc", K,
-                                          bake.visibility[t][fixed].astype(np.float64))
-            if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
-                # colours without a negative channel are left as they are by it
-                low = np.minimum(np.minimum(out[k, :, 0], out[k, :, 1]), out[k, :, 2])
-                neg = np.flatnonzero(low < 0.0)
-                out[k, neg] = desaturate_negative(out[k, neg])
+        if K is not None:  # every frame of the batch in one float32 product, as the
+            # baker dots its float32 lit transfer with the visibility
+            out[:, fixed] = np.einsum("vcj,tvj->tvc", K, vis[:, fixed], optimize=True)
+        if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
+            # colours without a negative channel are left as they are by it
+            flat = out.reshape(-1, 3)
+            low = np.minimum(np.minimum(flat[:, 0], flat[:, 1]), flat[:, 2])
+            neg = np.flatnonzero(low < 0.0)
+            flat[neg] = desaturate_negative(flat[neg])
         return out.astype(np.float32)
 
     with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
         K = None
         if fixed.size:
             parts = [p for p in np.array_split(fixed, threads) if p.size]
-            K = np.concatenate(list(pool.map(linear_part, parts)))
+            K = np.concatenate(list(pool.map(linear_part, parts))).astype(np.float32)
         window = 2 * threads  # batches in flight: bounded memory, every thread busy
         pending = [pool.submit(frames_of, frames, K) for frames in batches[:window]]
         for i in range(len(batches)):
@@ -228,8 +233,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             yield from done
 
 
-#: Most receiver rows shaded in one call (frames batched under unchanging lights).
-BATCH_ROWS = 1 << 15
+#: Most receiver rows (vertices x frames) of one batch of frames under unchanging
+#: lights; its visibility, shading scratch and radiance grow with it.
+BATCH_ROWS = 1 << 16
 
 
 class _Shaders:
@@ -251,8 +257,8 @@ class _Shaders:
 
         run = getattr(self.local, "run", None)
         if run is None:
-            runtime = ShadowRuntime(self.settings)
-            with self.lock:
+            with self.lock:  # one at a time: the second reuses the first's cached log tables
+                runtime = ShadowRuntime(self.settings)
                 self.runtimes.append(runtime)
             run = self.local.run = BakeRun(self.source, runtime, "relight")
         return run
@@ -399,17 +405,24 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         writer = made.result()
     with (h5py.File(bake, "r") as source, writer as w,
           (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
-        # per-frame datasets stored as the output stores them are copied as stored
-        # (compressed bytes), not compressed again; the others come from memory
-        kept = {name: source[name] for name in ("vertices", "normals", "visibility")
-                if source[name].ndim == 3 and source[name].compression
-                == (None if name == "visibility" else compression)}
-        for t, radiance in enumerate(itertools.chain([first], frames)):
-            frame = {name: kept.get(name, getattr(b, name)[t])
-                     for name in ("vertices", "normals") if not static}
-            w.write_frame(t, radiance, visibility=kept.get("visibility", b.visibility[t]),
-                          **frame)
-            bar.update(1)
+        # compressed geometry stored as the output stores it is copied as stored (not
+        # compressed again), frame by frame; otherwise everything comes from memory, a
+        # block of frames in one write per dataset (the output's visibility is plain)
+        kept = {name: source[name] for name in ("vertices", "normals")
+                if source[name].ndim == 3 and source[name].compression is not None
+                and source[name].compression == compression}
+        block = 1 if kept else max(1, BATCH_ROWS // b.n_vertices)
+        relit = itertools.chain([first], frames)
+        for a in range(0, b.n_frames, block):
+            z = min(a + block, b.n_frames)
+            radiance = np.stack(list(itertools.islice(relit, z - a)))
+            geometry = {} if static else {"vertices": b.vertices[a:z], "normals": b.normals[a:z]}
+            if kept:
+                geometry = {name: kept.get(name, values[0]) for name, values in geometry.items()}
+                w.write_frame(a, radiance[0], visibility=b.visibility[a], **geometry)
+            else:
+                w.write_frames(a, radiance, visibility=b.visibility[a:z], **geometry)
+            bar.update(z - a)
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),
             "lights": 0 if scene is None else len(scene.lights)}
