@@ -94,7 +94,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
                 traced_self_visibility(world_v, world_n, o.faces, st.order,
                                        st.self_visibility_directions, caster=caster))))
-            casters.append((caster, world_v, len(blockers)))
+            casters.append((caster, world_v, o.faces, len(blockers)))
         if o.spec.receives and not o.spec.blocks:
             ground.append((np.arange(n_rows, n_rows + len(world_v)), world_v, world_n))
         if o.local_log is not None and joints is not None:
@@ -125,8 +125,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     if casters and ground and st.traced_shadows:
         # (rows, points, normals) of every receiver-only object, once for all casters
         receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
-        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters) for c in casters)
-                     if v is not None)
+        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared)
+                                 for c in casters) if v is not None)
     lights = []
     for spec in prepared.scene.lights:
         key = light_at(spec, t)
@@ -136,25 +136,56 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
 
 
-def _traced_shadow(caster_of, receivers: tuple, st, clusters=None):
-    """A traced object's shadow on the receiver-only objects (the ground), traced against
-    its real mesh (a skinned object's posed mesh: the same Embree scene as its own
-    vertices); its blocker is skipped on those rows.  Each traced object gives one such
-    visibility; the runtime multiplies them (the product of separately traced
-    visibilities, not a joint trace: measured on ``bench_fidelity``'s rigid scenes).
+def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared):
+    """A traced object's shadow on the receiver-only objects (the ground): its real mesh
+    near it, its blocker far from it, a per-vertex blend between
+    (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
+    over.  Each traced object gives one such visibility; the runtime multiplies them
+    (the product of separately traced visibilities, not a joint trace: measured on
+    ``bench_fidelity``'s rigid scenes).
 
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
     ``(R,)``, ``(R, 3)``, ``(R, 3)``; returns None when none is within the object's reach."""
     from shtools.runtime import SelfVisibility
-    from shtools.scene.transfer import traced_shadow_visibility
+    from shtools.scene.traced_shadows import traced_ground
 
-    caster, mesh_v, index = caster_of
+    caster, mesh_v, faces, index = caster_of
     rows, points, normals = receivers
     labels = None if clusters is None else clusters.labels[rows]
-    traced, g = traced_shadow_visibility(points, normals, mesh_v, caster, st.order,
-                                         st.traced_shadow_directions, labels=labels)
-    # receivers beyond the object's reach keep its blocker (no row traced: no entry)
-    return SelfVisibility(None, rows[traced], blocker=index, visibility=g) if len(traced) else None
+    handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
+                                      st.traced_shadow_directions, labels=labels)
+    if not len(handed):  # every receiver beyond the object's reach keeps its blocker
+        return None
+    part = np.flatnonzero(weight < 1.0)
+    if part.size:  # the blend with the object's own blocker: w T + (1 - w) S
+        own = [blockers[k] for k in (index if isinstance(index, tuple) else (index,))]
+        at = handed[part]
+        s = _handover_runtime(prepared).visibility(points[at], normals[at], own)
+        w = weight[part, None]
+        g[part] = w * g[part] + (1.0 - w) * np.asarray(s, dtype=np.float64)
+    return SelfVisibility(None, rows[handed], blocker=index, visibility=g.astype(np.float32))
+
+
+#: The runtime that evaluates a traced object's own blocker where its traced shadow hands
+#: over to it, per process: (pid, id of the prepared scene, the scene itself, runtime).
+_HANDOVER: list = []
+
+
+def _handover_runtime(prepared):
+    """A one-process runtime of the scene's settings over every leaf sphere (no hierarchy:
+    only the hand-over rows are evaluated, each with its own blocker alone)."""
+    import os
+
+    from shtools.runtime import ShadowRuntime
+
+    if _HANDOVER and _HANDOVER[0][:2] == (os.getpid(), id(prepared)) and \
+            _HANDOVER[0][2] is prepared:
+        return _HANDOVER[0][3]
+    settings = dataclasses.replace(prepared.scene.settings.runtime_only(), hierarchy=False,
+                                   processes=1)
+    runtime = ShadowRuntime(settings, tables=prepared.tables)
+    _HANDOVER[:] = [(os.getpid(), id(prepared), prepared, runtime)]
+    return runtime
 
 
 #: Embree scenes of rigid objects in world space, per process (a forked worker builds its
@@ -164,8 +195,8 @@ _RIGID_CASTERS: dict = {}
 
 
 def _rigid_caster(rigid: list):
-    """``(caster, vertices, blocker indices)``: one Embree scene of rigid objects' real
-    meshes at their transforms (cached while the transforms hold); ``rigid`` holds
+    """``(caster, vertices, faces, blocker indices)``: one Embree scene of rigid objects'
+    real meshes at their transforms (cached while the transforms hold); ``rigid`` holds
     ``(object, transform, posed vertices, blocker index)``."""
     import os
 
@@ -179,15 +210,20 @@ def _rigid_caster(rigid: list):
     if (hit is not None and hit[0] == os.getpid()
             and all(a is o.faces for a, (o, _, _, _) in zip(hit[1], rigid, strict=True))
             and all(np.array_equal(a, m) for a, (_, m, _, _) in zip(hit[2], rigid, strict=True))):
-        return hit[3], vertices, index
+        return hit[3], vertices, _joint_faces(rigid), index
     if len(_RIGID_CASTERS) >= 64:
         _RIGID_CASTERS.clear()
-    offsets = np.cumsum([0] + [len(v) for _, _, v, _ in rigid])
-    faces = np.concatenate([o.faces + offsets[i] for i, (o, _, _, _) in enumerate(rigid)])
+    faces = _joint_faces(rigid)
     caster = posed_caster(vertices, faces)
     _RIGID_CASTERS[key] = (os.getpid(), [o.faces for o, _, _, _ in rigid],
                            [np.array(m, copy=True) for _, m, _, _ in rigid], caster)
-    return caster, vertices, index
+    return caster, vertices, faces, index
+
+
+def _joint_faces(rigid: list) -> np.ndarray:
+    """The faces of rigid objects' meshes, indices into their concatenated vertices."""
+    offsets = np.cumsum([0] + [len(v) for _, _, v, _ in rigid])
+    return np.concatenate([o.faces + offsets[i] for i, (o, _, _, _) in enumerate(rigid)])
 
 
 def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:
