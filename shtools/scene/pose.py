@@ -152,18 +152,30 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     caster, mesh_v, faces, index = caster_of
     rows, points, normals = receivers
     labels = None if clusters is None else clusters.labels[rows]
+    own = [blockers[k] for k in (index if isinstance(index, tuple) else (index,))]
     handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
-                                      st.traced_shadow_directions, labels=labels)
+                                      st.traced_shadow_directions, labels=labels,
+                                      spheres=_bounding_spheres(own))
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)
     if part.size:  # the blend with the object's own blocker: w T + (1 - w) S
-        own = [blockers[k] for k in (index if isinstance(index, tuple) else (index,))]
         at = handed[part]
         s = _handover_runtime(prepared).visibility(points[at], normals[at], own)
         w = weight[part, None]
         g[part] = w * g[part] + (1.0 - w) * np.asarray(s, dtype=np.float64)
     return SelfVisibility(None, rows[handed], blocker=index, visibility=g.astype(np.float32))
+
+
+def _bounding_spheres(blockers: list):
+    """Leaf spheres ``(centres (S, 3), radii (S,))`` of sphere-set blockers; None if any
+    blocker is not a sphere set."""
+    from shtools.runtime import SphereBlocker
+    from shtools.runtime.hierarchy import leaf_spheres
+
+    if not all(isinstance(b, SphereBlocker) for b in blockers):
+        return None
+    return leaf_spheres(blockers)
 
 
 #: The runtime that evaluates a traced object's own blocker where its traced shadow hands

@@ -28,7 +28,7 @@ silhouette crossing a direction is still a step of ``4π / 2n`` in the
 estimate.  The steps come every ``d α`` of receiver motion, ``d`` the distance
 to the nearest point of the mesh and ``α`` the set's angular spacing; the
 true visibility projected to order ``n`` changes on the scale ``d π / n``.
-A Gaussian of width ``d α / 2`` over the neighbouring receivers (same facing)
+A Gaussian of width ``d α`` over the neighbouring receivers (same facing)
 smooths the steps and leaves the order-``n`` visibility: where the mesh touches
 the receiver (``d -> 0``) nothing is filtered, so contact shadows stay sharp.
 The filter is linear in the SH vector, so it holds for any light.
@@ -61,9 +61,9 @@ import numpy as np
 #: (about 2 radii) leaves the shadow proper to the real mesh.
 HANDOVER_RAYS = (4.0, 12.0)
 #: Width of the surface filter, in the set's angular spacing times the distance to
-#: the nearest point of the mesh (half the spacing: the steps smoothed, the
-#: order-n visibility kept).
-FILTER_SPACING = 0.5
+#: the nearest point of the mesh: one spacing (a step per width) smooths the steps
+#: and keeps the order-n visibility, whose angular scale is several spacings.
+FILTER_SPACING = 1.0
 #: Receivers whose normals differ by more than this cosine are not filtered together.
 FILTER_MIN_COS = 0.9
 #: Ray origin offset along the normal, relative to the caster's bounding-box diagonal.
@@ -72,6 +72,7 @@ RAY_OFFSET = 1e-5
 RAYS_PER_STEP = 1 << 20
 
 SQRT_4PI = math.sqrt(4.0 * math.pi)
+_CUT = math.exp(-2.0)  # the filter's Gaussian at its cut, 2 widths
 
 
 @functools.lru_cache(maxsize=8)
@@ -158,58 +159,95 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
     return g
 
 
-def nearest_distance(points, mesh_vertices, faces) -> np.ndarray:
+#: Neighbours each receiver's filter may take (the nearest ones; caps its width at about
+#: 2 receiver spacings where the receivers are dense enough).
+FILTER_NEIGHBOURS = 48
+
+#: Per process: the last receivers' neighbour lists and the last meshes' search trees
+#: (a static ground and a rigid object are searched once per bake).
+_NEIGHBOURS: list = []
+_SITES: list = []
+
+
+def nearest_distance(points, mesh_vertices, faces, caster=None) -> np.ndarray:
     """Distance ``(V,)`` from each point to the nearest vertex or face centroid of a mesh.
 
     A cheap stand-in for the distance to the surface: exact enough for the
-    filter's width, which only needs its scale.
+    filter's width, which only needs its scale.  The search tree is kept while
+    ``caster`` (the mesh's Embree scene, rebuilt whenever the mesh moves) is the same
+    object.
     """
     from scipy.spatial import cKDTree
 
-    v = np.asarray(mesh_vertices, dtype=np.float64)
-    sites = np.concatenate([v, v[np.asarray(faces)].mean(axis=1)])
-    d, _ = cKDTree(sites).query(np.asarray(points, dtype=np.float64), k=1)
+    if caster is not None and _SITES and _SITES[0][0] is caster:
+        tree = _SITES[0][1]
+    else:
+        v = np.asarray(mesh_vertices, dtype=np.float64)
+        tree = cKDTree(np.concatenate([v, v[np.asarray(faces)].mean(axis=1)]))
+        _SITES[:] = [(caster, tree)] if caster is not None else []
+    d, _ = tree.query(np.asarray(points, dtype=np.float64), k=1)
     return d
 
 
-def surface_filter(points, normals, values, width) -> np.ndarray:
-    """Gaussian filter of per-vertex values over neighbouring receivers, ``(V, K)``.
+def sphere_distance(points, centers, radii) -> np.ndarray:
+    """Distance ``(V,)`` from each point to a union of spheres (0 inside one)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    r = np.asarray(radii, dtype=np.float64).reshape(-1)
+    d2 = (p * p).sum(axis=1)[:, None] - 2.0 * p @ c.T + (c * c).sum(axis=1)[None, :]
+    return np.maximum(0.0, (np.sqrt(np.maximum(d2, 0.0)) - r[None, :]).min(axis=1))
 
-    Each receiver ``v`` averages the values of the receivers within ``2 width_v``
-    whose normals are within ``FILTER_MIN_COS`` of its own, weighted by
-    ``exp(-|p_u - p_v|^2 / 2 width_v^2)``.  A receiver with ``width_v = 0`` keeps its
-    value.
 
-    Parameters
-    ----------
-    points, normals : array_like, shape (V, 3)
-    values : array_like, shape (V, K)
-    width : array_like, shape (V,)
-        Standard deviation of each receiver's Gaussian (world units).
-    """
-    from scipy import sparse
+def neighbours(points) -> tuple[np.ndarray, np.ndarray]:
+    """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
+    and distances (kept while the same points come back)."""
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if _NEIGHBOURS and _NEIGHBOURS[0][0].shape == p.shape and np.array_equal(
+            _NEIGHBOURS[0][0], p):
+        return _NEIGHBOURS[0][1:]
+    k = min(FILTER_NEIGHBOURS, len(p))
+    dist, idx = cKDTree(p).query(p, k=k)
+    dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
+    _NEIGHBOURS[:] = [(p.copy(), idx, dist)]
+    return idx, dist
+
+
+def surface_filter(normals, values, width, idx, dist) -> np.ndarray:
+    """Gaussian filter of per-vertex values over neighbouring receivers, ``(V, K)``.
+
+    Each receiver ``v`` averages the values of its neighbours within ``2 width_v``
+    whose normals are within ``FILTER_MIN_COS`` of its own, weighted by
+    ``exp(-|p_u - p_v|^2 / 2 width_v^2) - exp(-2)`` (a Gaussian lowered to 0 at the
+    cut); a receiver of width 0 keeps its value.
+
+    Parameters
+    ----------
+    normals : array_like, shape (V, 3)
+    values : array_like, shape (V, C)
+    width : array_like, shape (V,)
+        Standard deviation of each receiver's Gaussian (world units).
+    idx, dist : ndarray, shape (V, N)
+        Each receiver's neighbours (indices into the rows, -1 for none) and their
+        distances, itself first (:func:`neighbours`).
+    """
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     x = np.asarray(values, dtype=np.float64)
-    sigma = np.asarray(width, dtype=np.float64).reshape(-1)
-    lists = cKDTree(p).query_ball_point(p, r=2.0 * sigma, return_sorted=False)
-    counts = np.fromiter((len(a) for a in lists), dtype=np.int64, count=len(lists))
-    cols = np.fromiter((j for a in lists for j in a), dtype=np.int64, count=int(counts.sum()))
-    rows = np.repeat(np.arange(len(p)), counts)
-    d2 = ((p[rows] - p[cols]) ** 2).sum(axis=1)
-    s2 = np.maximum(sigma[rows], 1e-300) ** 2
-    w = np.exp(-0.5 * d2 / s2)
-    w[rows == cols] = 1.0  # a receiver of width 0 keeps its own value
-    w *= np.einsum("ik,ik->i", nrm[rows], nrm[cols]) >= FILTER_MIN_COS
-    m = sparse.csr_matrix((w, (rows, cols)), shape=(len(p), len(p)))
-    total = np.asarray(m.sum(axis=1)).reshape(-1)
-    return (m @ x) / total[:, None]
+    sigma = np.asarray(width, dtype=np.float64).reshape(-1, 1)
+    safe = np.maximum(idx, 0)
+    inside = (idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
+    u = np.where(inside, dist, 0.0) / np.where(sigma > 0, sigma, 1.0)
+    # lowered to 0 at the cut (2 widths): no step where a neighbour enters the window
+    w = np.maximum(np.exp(-0.5 * u * u) - _CUT, 0.0) * inside
+    w *= np.einsum("vk,vnk->vn", nrm, nrm[safe]) >= FILTER_MIN_COS
+    w[sigma[:, 0] <= 0, 0] = 1.0  # a receiver of width 0 keeps its own value
+    w /= w.sum(axis=1, keepdims=True)
+    return np.einsum("vn,vnc->vc", w, x[safe])
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  labels=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  labels=None, spheres=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -227,6 +265,11 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     labels : array_like of int, shape (R,), optional
         Group of each receiver (its runtime cluster); a group is handed over when any
         receiver of it has a weight above 0.  None: every receiver.
+    spheres : tuple of ndarray, shapes (S, 3) and (S,), optional
+        Spheres bounding the mesh (its blocker's): the filter's distance to the mesh
+        is the distance to their union, never more than the true one (a contact
+        shadow is never filtered wider than its distance allows); without them, the
+        distance to the mesh's nearest vertex or face centroid.
 
     Returns
     -------
@@ -259,6 +302,16 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         at = rows[live]
         traced = set_visibility(p[at], nrm[at], caster, axis[at], cos_half[at], order, n_dirs)
         spacing = math.sqrt(4.0 * math.pi / (2 * int(n_dirs)))
-        width = FILTER_SPACING * spacing * nearest_distance(p[at], v, faces)
-        g[live] = surface_filter(p[at], nrm[at], traced, width)
+        if spheres is not None and len(spheres[1]):
+            near = sphere_distance(p[at], *spheres)
+        else:
+            near = nearest_distance(p[at], v, faces, caster)
+        width = FILTER_SPACING * spacing * near
+        idx, dist = neighbours(p)
+        # neighbours among the traced receivers only (row of each in ``at``, -1 if none)
+        where = np.full(len(p), -1)
+        where[at] = np.arange(len(at))
+        local = where[idx[at]]
+        g[live] = surface_filter(nrm[at], traced, width, local,
+                                 np.where(local >= 0, dist[at], np.inf))
     return rows, weight, g
