@@ -99,3 +99,30 @@ def test_near_blockers_is_a_ball_per_blocker():
     pts = np.array([[0.0, 0, 0], [2.1, 0, 0], [5.0, 0, 0]])
     near = near_blockers(pts, [(np.zeros(3), 1.0), (np.array([5.0, 0, 0]), 0.1)])
     np.testing.assert_array_equal(near, [True, False, True])
+
+
+def test_eval_reports_the_look_per_receiver(run_cli, tmp_path):
+    """``shtools eval --json`` carries the first method's look measures for the ground:
+    the ground grid's own faces (its Laplacian is finite and positive under a shadow),
+    the vertices the capsule darkens, and those within 2 bounding radii of it."""
+    import json
+
+    from shtools.data_formats.spheres import write_spheres
+    from shtools.geometry.sphere_set import SphereSet
+    from shtools.reference.scenes import capsule_scene
+
+    sc = capsule_scene(grid=8)
+    sc.meshes[0].export(tmp_path / "capsule.obj")
+    write_spheres(tmp_path / "s.h5", SphereSet(centers=sc.centers[:-1], radii=sc.radii[:-1],
+                                               outside_volume_ratio=0.1, coverage=1.0,
+                                               method="import", info={}))
+    code, out, err = run_cli("eval", "--mesh", tmp_path / "capsule.obj", "--spheres",
+                             tmp_path / "s.h5", "--grid", 16, "--n-dirs", 400, "--methods",
+                             "auto", "--json")
+    assert code == 0, err
+    (look,) = json.loads(out)["look"]
+    assert look["receiver"] == "ground"
+    assert 0.0 < look["smoothness"] < 10.0
+    assert 0 < look["shadowed_vertices"] < 16 * 16 and 0 < look["near_vertices"] <= 16 * 16
+    # over the shadowed vertices the error is not diluted by the unshadowed ones
+    assert look["shadowed_error"] >= 0.5 * look["error"]
