@@ -130,33 +130,42 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
     -------
     ndarray, shape (V, n*n) float64
     """
-    from shtools.sh import basis
-
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    dirs = world_directions(2 * int(n_dirs))
-    proj = basis(dirs, order) * (4.0 * math.pi / dirs.shape[0])  # (Q, n*n)
+    dirs, proj = _set_projection(2 * int(n_dirs), order)
     g = np.zeros((p.shape[0], order * order))
     g[:, 0] = SQRT_4PI
     if offset is None:
         offset = RAY_OFFSET * caster.diagonal
     origins = caster.embree_points(p + offset * nrm)
-    dirs32 = dirs.astype(np.float32)
+    a32, n32 = axis.astype(np.float32), nrm.astype(np.float32)
+    cos32 = np.asarray(cos_half, dtype=np.float32)[:, None]
     step = max(1, RAYS_PER_STEP // dirs.shape[0])
     for start in range(0, p.shape[0], step):
         stop = min(p.shape[0], start + step)
         # directions of the set inside the cone and above the tangent plane
-        take = ((axis[start:stop] @ dirs.T >= cos_half[start:stop, None])
-                & (nrm[start:stop] @ dirs.T > 0.0))
+        take = (a32[start:stop] @ dirs.T >= cos32[start:stop]) & (n32[start:stop] @ dirs.T > 0)
         vi, qi = np.nonzero(take)
         if not vi.size:
             continue
-        blocked = caster.occluded_embree(np.ascontiguousarray(origins[start + vi]),
-                                         np.ascontiguousarray(dirs32[qi]))
-        hits = np.zeros(take.shape, dtype=np.float64)
+        blocked = caster.occluded_embree(origins[start + vi], dirs[qi])
+        hits = np.zeros(take.shape, dtype=np.float32)
         hits[vi[blocked], qi[blocked]] = 1.0
         g[start:stop] -= hits @ proj
     return g
+
+
+@functools.lru_cache(maxsize=8)
+def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """The shared set in float32 ``(n, 3)`` and its projection ``(4π / n) y(s)``, ``(n, order^2)``."""
+    from shtools.sh import basis
+
+    dirs = world_directions(n)
+    proj = (basis(dirs, order) * (4.0 * math.pi / n)).astype(np.float32)
+    d32 = np.ascontiguousarray(dirs, dtype=np.float32)
+    d32.setflags(write=False)
+    proj.setflags(write=False)
+    return d32, proj
 
 
 #: Neighbours each receiver's filter may take (the nearest ones; caps its width at about
@@ -232,18 +241,23 @@ def surface_filter(normals, values, width, idx, dist) -> np.ndarray:
         Each receiver's neighbours (indices into the rows, -1 for none) and their
         distances, itself first (:func:`neighbours`).
     """
-    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    from scipy import sparse
+
+    nrm = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
     x = np.asarray(values, dtype=np.float64)
-    sigma = np.asarray(width, dtype=np.float64).reshape(-1, 1)
+    sigma = np.asarray(width, dtype=np.float32).reshape(-1, 1)
     safe = np.maximum(idx, 0)
-    inside = (idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
-    u = np.where(inside, dist, 0.0) / np.where(sigma > 0, sigma, 1.0)
+    # same facing only (a wall's receivers are not a floor's)
+    inside = ((idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
+              & (np.einsum("vk,vnk->vn", nrm, nrm[safe]) >= FILTER_MIN_COS))
+    u = np.where(inside, dist, 0.0).astype(np.float32) / np.where(sigma > 0, sigma, 1.0)
     # lowered to 0 at the cut (2 widths): no step where a neighbour enters the window
-    w = np.maximum(np.exp(-0.5 * u * u) - _CUT, 0.0) * inside
-    w *= np.einsum("vk,vnk->vn", nrm, nrm[safe]) >= FILTER_MIN_COS
+    w = np.where(inside, np.maximum(np.exp(-0.5 * u * u) - np.float32(_CUT), 0.0), 0.0)
     w[sigma[:, 0] <= 0, 0] = 1.0  # a receiver of width 0 keeps its own value
-    w /= w.sum(axis=1, keepdims=True)
-    return np.einsum("vn,vnc->vc", w, x[safe])
+    k = idx.shape[1]
+    m = sparse.csr_matrix((w.ravel(), safe.ravel(), np.arange(0, w.size + 1, k)),
+                          shape=(len(x), len(x)))
+    return (m @ x) / w.sum(axis=1, dtype=np.float64)[:, None]
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,

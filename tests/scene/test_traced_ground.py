@@ -41,7 +41,7 @@ def test_set_visibility_of_a_sphere_is_its_cap_in_closed_form():
     cos over the cap)."""
     from shtools.fields.self_visibility import bounding_cones
 
-    v, _, caster = _unit_sphere()
+    _, _, caster = _unit_sphere()
     dist = np.array([1.5, 2.5, 4.0])
     pts = np.column_stack([np.zeros(3), np.zeros(3), -dist])
     nrm = np.tile([0.0, 0.0, 1.0], (3, 1))  # facing the sphere: the cap is above
@@ -108,4 +108,4 @@ def test_surface_filter_keeps_linear_fields_and_zero_widths():
     near = d2 <= (2 * 0.1) ** 2 + 1e-12
     wts = np.exp(-0.5 * d2[near] / 0.01) - math.exp(-2.0)
     want = (wts[:, None] * noisy[up][near]).sum(axis=0) / wts.sum()
-    np.testing.assert_allclose(y[k], want, rtol=1e-12)
+    np.testing.assert_allclose(y[k], want, rtol=1e-6)  # weights in float32
