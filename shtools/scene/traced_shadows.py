@@ -157,7 +157,7 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
 
 @functools.lru_cache(maxsize=8)
 def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
-    """The shared set in float32 ``(n, 3)`` and its projection ``(4π / n) y(s)``, ``(n, order^2)``."""
+    """The shared set in float32 ``(n, 3)``, its projection ``(4π / n) y(s)`` ``(n, order^2)``."""
     from shtools.sh import basis
 
     dirs = world_directions(n)
