@@ -160,8 +160,14 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
         return None
     part = np.flatnonzero(weight < 1.0)
     if part.size:  # the blend with the object's own blocker: w T + (1 - w) S
+        from shtools.runtime.clusters import ReceiverClusters
+
         at = handed[part]
-        s = _handover_runtime(prepared).visibility(points[at], normals[at], own)
+        # grouped as the bake's clusters: the cuts of the sphere tree the runtime makes
+        # for the rows next door, which keep the blocker
+        groups = None if labels is None else ReceiverClusters.from_labels(labels[at])
+        s = _handover_runtime(prepared).visibility(points[at], normals[at], own,
+                                                   clusters=groups)
         w = weight[part, None]
         g[part] = w * g[part] + (1.0 - w) * np.asarray(s, dtype=np.float64)
     return SelfVisibility(None, rows[handed], blocker=index, visibility=g.astype(np.float32))
@@ -184,8 +190,8 @@ _HANDOVER: list = []
 
 
 def _handover_runtime(prepared):
-    """A one-process runtime of the scene's settings over every leaf sphere (no hierarchy:
-    only the hand-over rows are evaluated, each with its own blocker alone)."""
+    """A one-process runtime of the scene's settings (the hand-over rows are evaluated
+    with the traced object's own blocker alone)."""
     import os
 
     from shtools.runtime import ShadowRuntime
@@ -193,8 +199,7 @@ def _handover_runtime(prepared):
     if _HANDOVER and _HANDOVER[0][:2] == (os.getpid(), id(prepared)) and \
             _HANDOVER[0][2] is prepared:
         return _HANDOVER[0][3]
-    settings = dataclasses.replace(prepared.scene.settings.runtime_only(), hierarchy=False,
-                                   processes=1)
+    settings = dataclasses.replace(prepared.scene.settings.runtime_only(), processes=1)
     runtime = ShadowRuntime(settings, tables=prepared.tables)
     _HANDOVER[:] = [(os.getpid(), id(prepared), prepared, runtime)]
     return runtime
