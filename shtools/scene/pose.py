@@ -45,10 +45,10 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     ``trace=False`` leaves out the traced self-visibility of skinned objects and their
     traced shadow on the receiver-only objects (the frame's largest cost): for callers
     that need only the posed geometry.  ``clusters`` (the runtime's
-    :class:`~shtools.runtime.clusters.ReceiverClusters` of this bake) lets a traced
-    shadow stop at the object's reach: receivers of the clusters none of whose
-    vertices is within it keep the object's blocker (a cluster's receivers must
-    skip the same blockers); without clusters every receiver-only vertex is traced.
+    :class:`~shtools.runtime.clusters.ReceiverClusters` of this bake) groups the
+    receivers where a traced shadow hands over to the object's blocker, so the
+    blocker is evaluated there by the same cuts of its tree as on the receivers
+    next door.
     """
     from shtools.runtime import SelfVisibility, SphereBlocker, SphereLight
     from shtools.scene.transfer import (
@@ -154,7 +154,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     labels = None if clusters is None else clusters.labels[rows]
     own = [blockers[k] for k in (index if isinstance(index, tuple) else (index,))]
     handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
-                                      st.traced_shadow_directions, labels=labels,
+                                      st.traced_shadow_directions,
                                       spheres=_bounding_spheres(own))
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None

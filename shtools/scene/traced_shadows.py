@@ -42,10 +42,8 @@ mesh, and in between the blend ``w T + (1 - w) S`` of the traced visibility
 visibility, not log: ``T`` is a visibility whose per-frame log (eigen) would
 cost more than the frame, and where the blend happens the object is far and
 faint (both visibilities near 1), where a visibility blend and a log blend
-agree to first order in the log.  The runtime skips an object's spheres for
-whole receiver clusters, so a cluster with any receiver of weight above 0 is
-handed ``S`` on its rows of weight 0: the same as the spheres next door (up to
-the truncated product with the other blockers' visibility).
+agree to first order in the log.  Receivers of weight 0 keep the blocker in the
+runtime (which splits a receiver cluster whose rows skip different blockers).
 """
 
 from __future__ import annotations
@@ -223,8 +221,8 @@ def neighbours(points) -> tuple[np.ndarray, np.ndarray]:
     return idx, dist
 
 
-def surface_filter(normals, values, width, idx, dist) -> np.ndarray:
-    """Gaussian filter of per-vertex values over neighbouring receivers, ``(V, K)``.
+def surface_filter(normals, values, width, idx, dist, rows=None) -> np.ndarray:
+    """Gaussian filter of per-vertex values over neighbouring receivers, ``(R, C)``.
 
     Each receiver ``v`` averages the values of its neighbours within ``2 width_v``
     whose normals are within ``FILTER_MIN_COS`` of its own, weighted by
@@ -233,35 +231,38 @@ def surface_filter(normals, values, width, idx, dist) -> np.ndarray:
 
     Parameters
     ----------
-    normals : array_like, shape (V, 3)
-    values : array_like, shape (V, C)
-    width : array_like, shape (V,)
-        Standard deviation of each receiver's Gaussian (world units).
-    idx, dist : ndarray, shape (V, N)
-        Each receiver's neighbours (indices into the rows, -1 for none) and their
-        distances, itself first (:func:`neighbours`).
+    normals : array_like, shape (N, 3)
+    values : array_like, shape (N, C)
+    width : array_like, shape (R,)
+        Standard deviation of each filtered receiver's Gaussian (world units).
+    idx, dist : ndarray, shape (R, K)
+        Each filtered receiver's neighbours (indices into the ``N`` rows, -1 for none)
+        and their distances, itself first (:func:`neighbours`).
+    rows : array_like of int, shape (R,), optional
+        The filtered receivers among the ``N`` (default all, ``R = N``).
     """
     from scipy import sparse
 
     nrm = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
     x = np.asarray(values, dtype=np.float64)
+    rows = np.arange(len(x)) if rows is None else np.asarray(rows)
     sigma = np.asarray(width, dtype=np.float32).reshape(-1, 1)
     safe = np.maximum(idx, 0)
     # same facing only (a wall's receivers are not a floor's)
     inside = ((idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
-              & (np.einsum("vk,vnk->vn", nrm, nrm[safe]) >= FILTER_MIN_COS))
+              & (np.einsum("vk,vnk->vn", nrm[rows], nrm[safe]) >= FILTER_MIN_COS))
     u = np.where(inside, dist, 0.0).astype(np.float32) / np.where(sigma > 0, sigma, 1.0)
     # lowered to 0 at the cut (2 widths): no step where a neighbour enters the window
     w = np.where(inside, np.maximum(np.exp(-0.5 * u * u) - np.float32(_CUT), 0.0), 0.0)
     w[sigma[:, 0] <= 0, 0] = 1.0  # a receiver of width 0 keeps its own value
     k = idx.shape[1]
     m = sparse.csr_matrix((w.ravel(), safe.ravel(), np.arange(0, w.size + 1, k)),
-                          shape=(len(x), len(x)))
+                          shape=(len(rows), len(x)))
     return (m @ x) / w.sum(axis=1, dtype=np.float64)[:, None]
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  labels=None, spheres=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  spheres=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -276,9 +277,6 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         Shading order.
     n_dirs : int
         Rays of a receiver whose cone fills its hemisphere.
-    labels : array_like of int, shape (R,), optional
-        Group of each receiver (its runtime cluster); a group is handed over when any
-        receiver of it has a weight above 0.  None: every receiver.
     spheres : tuple of ndarray, shapes (S, 3) and (S,), optional
         Spheres bounding the mesh (its blocker's): the filter's distance to the mesh
         is the distance to their union, never more than the true one (a contact
@@ -288,11 +286,11 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     Returns
     -------
     rows : ndarray of int, shape (T,)
-        Indices into ``points`` of the receivers whose groups are handed over.
+        Indices into ``points`` of the receivers of weight above 0.
     weight : ndarray, shape (T,)
         Their weights of the traced mesh (the rest is the spheres').
     visibility : ndarray, shape (T, order^2) float64
-        The filtered traced visibility (the constant 1 where the weight is 0: not traced).
+        The filtered traced visibility.
     """
     from shtools.fields.self_visibility import bounding_cones
 
@@ -303,17 +301,13 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
     axis, cos_half = bounding_cones(p, nrm, center, radius)
     weight = handover_weights(cone_rays(cos_half, n_dirs))
-    if labels is None:
-        rows = np.arange(len(p))
-    else:
-        labels = np.asarray(labels)
-        rows = np.flatnonzero(np.isin(labels, labels[weight > 0]))
+    rows = np.flatnonzero(weight > 0)
     weight = weight[rows]
     g = np.zeros((len(rows), order * order))
     g[:, 0] = SQRT_4PI
-    live = np.flatnonzero(weight > 0)
+    live = np.arange(len(rows))
     if live.size:
-        at = rows[live]
+        at = rows
         traced = set_visibility(p[at], nrm[at], caster, axis[at], cos_half[at], order, n_dirs)
         spacing = math.sqrt(4.0 * math.pi / (2 * int(n_dirs)))
         if spheres is not None and len(spheres[1]):
@@ -326,6 +320,14 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         where = np.full(len(p), -1)
         where[at] = np.arange(len(at))
         local = where[idx[at]]
-        g[live] = surface_filter(nrm[at], traced, width, local,
-                                 np.where(local >= 0, dist[at], np.inf))
+        # receivers with no blocked ray around them keep the exact constant
+        hit = np.zeros(len(at) + 1, dtype=bool)
+        hit[:-1] = traced[:, 1:].any(axis=1) | (traced[:, 0] != SQRT_4PI)
+        busy = np.flatnonzero(hit[local].any(axis=1))
+        g[live] = traced
+        if busy.size:
+            near = local[busy]
+            g[live[busy]] = surface_filter(nrm[at], traced, width[busy], near,
+                                           np.where(near >= 0, dist[at[busy]], np.inf),
+                                           rows=busy)
     return rows, weight, g
