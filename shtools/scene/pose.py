@@ -122,21 +122,22 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     # cone spends its rays on the gap), and joint traces of the demo's overlapping limbs
     # left visible ray noise on its ground (the common cone's sparser rays)
     casters.extend(_rigid_caster([r]) for r in rigid)
-    if casters and ground and st.traced_shadows:
-        # (rows, points, normals) of every receiver-only object, once for all casters
-        receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
-        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared)
-                                 for c in casters) if v is not None)
     lights = []
     for spec in prepared.scene.lights:
         key = light_at(spec, t)
         lights.append(SphereLight(position=key.position, radius=float(key.radius),
                                   color=key.color))
+    if casters and ground and st.traced_shadows:
+        # (rows, points, normals) of every receiver-only object, once for all casters
+        receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
+        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
+                                                lights) for c in casters) if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
 
 
-def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared):
+def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
+                   lights=()):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -155,7 +156,8 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     own = [blockers[k] for k in (index if isinstance(index, tuple) else (index,))]
     handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
                                       st.traced_shadow_directions,
-                                      spheres=_bounding_spheres(own))
+                                      spheres=_bounding_spheres(own),
+                                      lights=[(x.position, x.radius) for x in lights])
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)

@@ -58,6 +58,9 @@ import numpy as np
 #: the traced reach of the former per-cluster rule (about 3.5 bounding radii), 12
 #: (about 2 radii) leaves the shadow proper to the real mesh.
 HANDOVER_RAYS = (4.0, 12.0)
+#: Gap (in the cone's half-angle plus the light disc's) over which a spherical light
+#: hidden by the object hands its long shadow over to the spheres (:func:`light_weights`).
+LIGHT_MARGIN = 0.5
 #: Width of the surface filter, in the set's angular spacing times the distance to
 #: the nearest point of the mesh: one spacing (a step per width) smooths the steps
 #: and keeps the order-n visibility, whose angular scale is several spacings.
@@ -66,8 +69,9 @@ FILTER_SPACING = 1.0
 FILTER_MIN_COS = 0.9
 #: Ray origin offset along the normal, relative to the caster's bounding-box diagonal.
 RAY_OFFSET = 1e-5
-#: Rays per Embree call (bounds the (v, Q) blocks).
-RAYS_PER_STEP = 1 << 20
+#: Receivers per block of :func:`set_visibility` (neighbours in the receivers' order
+#: see nearby runs of the set: the block tests only the run its cones span).
+SET_CHUNK = 256
 
 SQRT_4PI = math.sqrt(4.0 * math.pi)
 _CUT = math.exp(-2.0)  # the filter's Gaussian at its cut, 2 widths
@@ -77,15 +81,16 @@ _CUT = math.exp(-2.0)  # the filter's Gaussian at its cut, 2 widths
 def world_directions(n: int) -> np.ndarray:
     """Spherical Fibonacci set of ``n`` unit directions over the sphere, ``(n, 3)``.
 
-    Point ``i`` sits at height ``z_i = 1 - 2 (i + 1/2) / n`` (equal-area bands) and
-    azimuth ``i`` golden angles; every point stands for ``4π / n``.  Read-only
-    (cached).
+    Point ``i`` sits at height ``y_i = 1 - 2 (i + 1/2) / n`` (equal-area bands about
+    +Y, in decreasing order) and azimuth ``i`` golden angles; every point stands for
+    ``4π / n``.  Read-only (cached).
     """
     i = np.arange(int(n)) + 0.5
     z = 1.0 - 2.0 * i / n
     phi = i * math.pi * (3.0 - math.sqrt(5.0))
     r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    # bands along +Y (up in a scene): a cone's directions are one run of the set
+    d = np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1)
     d.setflags(write=False)
     return d
 
@@ -104,6 +109,32 @@ def handover_weights(rays) -> np.ndarray:
     lo, hi = HANDOVER_RAYS
     t = np.clip((np.asarray(rays, dtype=np.float64) - lo) / (hi - lo), 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
+
+
+def light_weights(points, axis, cos_half, center, radius, position, light_radius
+                  ) -> np.ndarray:
+    """Weight ``(V,)`` of the traced mesh where the object may hide a spherical light.
+
+    A small light casts the object's shadow far beyond the hand-over of
+    :func:`handover_weights` (a lamp's long shadow), where the object's spheres shade
+    it poorly.  1 where the light's disc overlaps the cone of the object's bounding
+    sphere (and the light is beyond the sphere's near side), 0 once the gap between
+    them reaches ``LIGHT_MARGIN`` times the cone's half-angle plus the disc's, a
+    smoothstep between.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    to = np.asarray(position, dtype=np.float64)[None] - p
+    far = np.sqrt(np.einsum("vk,vk->v", to, to))
+    u = to / np.maximum(far, 1e-300)[:, None]
+    disc = np.arcsin(np.clip(float(light_radius) / np.maximum(far, 1e-300), 0.0, 1.0))
+    cone = np.arccos(np.clip(cos_half, -1.0, 1.0))
+    gap = np.arccos(np.clip(np.einsum("vk,vk->v", axis, u), -1.0, 1.0)) - cone - disc
+    margin = LIGHT_MARGIN * (cone + disc)
+    t = np.clip(1.0 - gap / np.maximum(margin, 1e-300), 0.0, 1.0)
+    w = t * t * (3.0 - 2.0 * t)
+    beyond = far > np.linalg.norm(np.asarray(center, dtype=np.float64)[None] - p,
+                                  axis=1) - radius
+    return np.where(beyond & (cos_half < 1.0), w, 0.0)
 
 
 def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: int,
@@ -138,18 +169,29 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
     origins = caster.embree_points(p + offset * nrm)
     a32, n32 = axis.astype(np.float32), nrm.astype(np.float32)
     cos32 = np.asarray(cos_half, dtype=np.float32)[:, None]
-    step = max(1, RAYS_PER_STEP // dirs.shape[0])
-    for start in range(0, p.shape[0], step):
-        stop = min(p.shape[0], start + step)
+    # the run of the set (sorted by height) each cone can hold: its heights' range
+    n = dirs.shape[0]
+    polar = np.arccos(np.clip(axis[:, 1], -1.0, 1.0))
+    half = np.arccos(np.clip(cos_half, -1.0, 1.0))
+    first = np.floor(0.5 * n * (1.0 - np.cos(np.maximum(0.0, polar - half))) - 1.0)
+    last = np.ceil(0.5 * n * (1.0 - np.cos(np.minimum(math.pi, polar + half))))
+    first = np.clip(first, 0, n).astype(np.int64)
+    last = np.clip(last, 0, n - 1).astype(np.int64)
+    for start in range(0, p.shape[0], SET_CHUNK):
+        stop = min(p.shape[0], start + SET_CHUNK)
+        lo, hi = int(first[start:stop].min()), int(last[start:stop].max()) + 1
+        if hi <= lo:
+            continue
+        d = dirs[lo:hi]
         # directions of the set inside the cone and above the tangent plane
-        take = (a32[start:stop] @ dirs.T >= cos32[start:stop]) & (n32[start:stop] @ dirs.T > 0)
+        take = (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
         vi, qi = np.nonzero(take)
         if not vi.size:
             continue
-        blocked = caster.occluded_embree(origins[start + vi], dirs[qi])
+        blocked = caster.occluded_embree(origins[start + vi], d[qi])
         hits = np.zeros(take.shape, dtype=np.float32)
         hits[vi[blocked], qi[blocked]] = 1.0
-        g[start:stop] -= hits @ proj
+        g[start:stop] -= hits @ proj[lo:hi]
     return g
 
 
@@ -262,7 +304,7 @@ def surface_filter(normals, values, width, idx, dist, rows=None) -> np.ndarray:
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  spheres=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  spheres=None, lights=()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -282,6 +324,9 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         is the distance to their union, never more than the true one (a contact
         shadow is never filtered wider than its distance allows); without them, the
         distance to the mesh's nearest vertex or face centroid.
+    lights : sequence of (position (3,), radius)
+        Spherical lights: a receiver that sees one behind the object is traced
+        however far (:func:`light_weights`).
 
     Returns
     -------
@@ -301,6 +346,9 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
     axis, cos_half = bounding_cones(p, nrm, center, radius)
     weight = handover_weights(cone_rays(cos_half, n_dirs))
+    for position, light_radius in lights:
+        weight = np.maximum(weight, light_weights(p, axis, cos_half, center, radius,
+                                                  position, light_radius))
     rows = np.flatnonzero(weight > 0)
     weight = weight[rows]
     g = np.zeros((len(rows), order * order))

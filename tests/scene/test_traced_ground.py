@@ -28,10 +28,10 @@ def _unit_sphere():
 def test_world_directions_are_an_equal_area_set():
     d = world_directions(512)
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, rtol=1e-12)
-    # equal-area bands: the mean of z over the set is exactly 0, of z^2 is 1/3 up to
+    # equal-area bands about +Y: the mean of y over the set is exactly 0, of y^2 is 1/3 up to
     # the midpoint rule's O(1/n^2)
-    assert abs(d[:, 2].mean()) < 1e-12
-    assert abs((d[:, 2] ** 2).mean() - 1.0 / 3.0) < 1e-5
+    assert abs(d[:, 1].mean()) < 1e-12
+    assert abs((d[:, 1] ** 2).mean() - 1.0 / 3.0) < 1e-5
 
 
 def test_set_visibility_of_a_sphere_is_its_cap_in_closed_form():
