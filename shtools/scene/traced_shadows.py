@@ -209,8 +209,8 @@ def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: Neighbours each receiver's filter may take (the nearest ones; caps its width at about
-#: 2 receiver spacings where the receivers are dense enough).
-FILTER_NEIGHBOURS = 48
+#: 1.5 receiver spacings where the receivers are dense enough).
+FILTER_NEIGHBOURS = 24
 
 #: Per process: the last receivers' neighbour lists and the last meshes' search trees
 #: (a static ground and a rigid object are searched once per bake).
@@ -247,59 +247,53 @@ def sphere_distance(points, centers, radii) -> np.ndarray:
     return np.maximum(0.0, (np.sqrt(np.maximum(d2, 0.0)) - r[None, :]).min(axis=1))
 
 
-def neighbours(points) -> tuple[np.ndarray, np.ndarray]:
+def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
     """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
-    and distances (kept while the same points come back)."""
+    (-1 for a neighbour facing away by more than ``FILTER_MIN_COS``: a wall's receivers
+    are not a floor's) and distances, kept while the same receivers come back."""
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     if _NEIGHBOURS and _NEIGHBOURS[0][0].shape == p.shape and np.array_equal(
-            _NEIGHBOURS[0][0], p):
-        return _NEIGHBOURS[0][1:]
+            _NEIGHBOURS[0][0], p) and np.array_equal(_NEIGHBOURS[0][1], nrm):
+        return _NEIGHBOURS[0][2:]
     k = min(FILTER_NEIGHBOURS, len(p))
     dist, idx = cKDTree(p).query(p, k=k)
     dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
-    _NEIGHBOURS[:] = [(p.copy(), idx, dist)]
+    idx = np.where(np.einsum("vk,vnk->vn", nrm, nrm[idx]) >= FILTER_MIN_COS, idx, -1)
+    _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist)]
     return idx, dist
 
 
-def surface_filter(normals, values, width, idx, dist, rows=None) -> np.ndarray:
+def surface_filter(values, width, idx, dist) -> np.ndarray:
     """Gaussian filter of per-vertex values over neighbouring receivers, ``(R, C)``.
 
-    Each receiver ``v`` averages the values of its neighbours within ``2 width_v``
-    whose normals are within ``FILTER_MIN_COS`` of its own, weighted by
-    ``exp(-|p_u - p_v|^2 / 2 width_v^2) - exp(-2)`` (a Gaussian lowered to 0 at the
-    cut); a receiver of width 0 keeps its value.
+    Each filtered receiver ``v`` averages the values of its neighbours within
+    ``2 width_v``, weighted by ``exp(-|p_u - p_v|^2 / 2 width_v^2) - exp(-2)`` (a
+    Gaussian lowered to 0 at the cut); a receiver of width 0 keeps its value.
 
     Parameters
     ----------
-    normals : array_like, shape (N, 3)
     values : array_like, shape (N, C)
     width : array_like, shape (R,)
         Standard deviation of each filtered receiver's Gaussian (world units).
     idx, dist : ndarray, shape (R, K)
         Each filtered receiver's neighbours (indices into the ``N`` rows, -1 for none)
         and their distances, itself first (:func:`neighbours`).
-    rows : array_like of int, shape (R,), optional
-        The filtered receivers among the ``N`` (default all, ``R = N``).
     """
     from scipy import sparse
 
-    nrm = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
     x = np.asarray(values, dtype=np.float64)
-    rows = np.arange(len(x)) if rows is None else np.asarray(rows)
     sigma = np.asarray(width, dtype=np.float32).reshape(-1, 1)
-    safe = np.maximum(idx, 0)
-    # same facing only (a wall's receivers are not a floor's)
-    inside = ((idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
-              & (np.einsum("vk,vnk->vn", nrm[rows], nrm[safe]) >= FILTER_MIN_COS))
+    inside = (idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
     u = np.where(inside, dist, 0.0).astype(np.float32) / np.where(sigma > 0, sigma, 1.0)
     # lowered to 0 at the cut (2 widths): no step where a neighbour enters the window
     w = np.where(inside, np.maximum(np.exp(-0.5 * u * u) - np.float32(_CUT), 0.0), 0.0)
     w[sigma[:, 0] <= 0, 0] = 1.0  # a receiver of width 0 keeps its own value
     k = idx.shape[1]
-    m = sparse.csr_matrix((w.ravel(), safe.ravel(), np.arange(0, w.size + 1, k)),
-                          shape=(len(rows), len(x)))
+    m = sparse.csr_matrix((w.ravel(), np.maximum(idx, 0).ravel(), np.arange(0, w.size + 1, k)),
+                          shape=(len(w), len(x)))
     return (m @ x) / w.sum(axis=1, dtype=np.float64)[:, None]
 
 
@@ -363,11 +357,11 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         else:
             near = nearest_distance(p[at], v, faces, caster)
         width = FILTER_SPACING * spacing * near
-        idx, dist = neighbours(p)
+        idx, dist = neighbours(p, nrm)
         # neighbours among the traced receivers only (row of each in ``at``, -1 if none)
         where = np.full(len(p), -1)
         where[at] = np.arange(len(at))
-        local = where[idx[at]]
+        local = np.where(idx[at] >= 0, where[np.maximum(idx[at], 0)], -1)
         # receivers with no blocked ray around them keep the exact constant
         hit = np.zeros(len(at) + 1, dtype=bool)
         hit[:-1] = traced[:, 1:].any(axis=1) | (traced[:, 0] != SQRT_4PI)
@@ -375,7 +369,6 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         g[live] = traced
         if busy.size:
             near = local[busy]
-            g[live[busy]] = surface_filter(nrm[at], traced, width[busy], near,
-                                           np.where(near >= 0, dist[at[busy]], np.inf),
-                                           rows=busy)
+            g[live[busy]] = surface_filter(traced, width[busy], near,
+                                           np.where(near >= 0, dist[at[busy]], np.inf))
     return rows, weight, g

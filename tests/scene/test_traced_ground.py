@@ -10,8 +10,10 @@ import trimesh
 
 from shtools.geometry.raycast import RayCaster
 from shtools.scene.traced_shadows import (
+    FILTER_NEIGHBOURS,
     HANDOVER_RAYS,
     handover_weights,
+    neighbours,
     set_visibility,
     surface_filter,
     traced_ground,
@@ -78,30 +80,31 @@ def test_handover_weights_and_the_receivers_traced():
 def test_surface_filter_keeps_linear_fields_and_zero_widths():
     """A symmetric Gaussian average of a linear field on a regular grid is the field
     (inside, where every neighbour has its mirror image); a receiver of width 0 keeps
-    its value; receivers facing away are not mixed in."""
-    from scipy.spatial import cKDTree
-
+    its value; receivers facing away are no neighbours."""
     n = 15
     i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     pts = np.column_stack([i.ravel() * 0.1, np.zeros(n * n), j.ravel() * 0.1])
     nrm = np.tile([0.0, 1.0, 0.0], (n * n, 1))
     x = np.column_stack([1.0 + 2.0 * pts[:, 0] - pts[:, 2], pts[:, 0] * 0 + 3.0])
-    rng = np.random.default_rng(0)
-    dist, idx = cKDTree(pts).query(pts, k=49)
+    idx, dist = neighbours(pts, nrm)
+    assert idx.shape == (n * n, FILTER_NEIGHBOURS) and np.all(idx[:, 0] == np.arange(n * n))
     width = np.full(n * n, 0.1)
     width[0] = 0.0
-    y = surface_filter(nrm, x, width, idx, dist)
+    y = surface_filter(x, width, idx, dist)
     inside = (i.ravel() >= 3) & (i.ravel() < n - 3) & (j.ravel() >= 3) & (j.ravel() < n - 3)
     np.testing.assert_allclose(y[inside], x[inside], rtol=0, atol=1e-12)
     np.testing.assert_array_equal(y[0], x[0])
-    noisy = x + rng.normal(0, 0.1, x.shape)
+    noisy = x + np.random.default_rng(0).normal(0, 0.1, x.shape)
     flipped = nrm.copy()
     flipped[::2] *= -1.0  # every other receiver faces away: only the others are averaged
-    y = surface_filter(flipped, noisy, np.full(n * n, 0.1), idx, dist)
-    k = 7 * n + 8  # an inside receiver facing up (odd index): mixes odd ones only
+    idx, dist = neighbours(pts, flipped)
+    assert np.all((idx < 0) | (idx % 2 == np.arange(n * n)[:, None] % 2))
+    y = surface_filter(noisy, np.full(n * n, 0.1), idx, dist)
+    k = 7 * n + 8  # an inside receiver facing up (odd index)
     up = np.flatnonzero(flipped[:, 1] > 0)
     assert k in up
     d2 = ((pts[up] - pts[k]) ** 2).sum(axis=1)
+    # the nearest FILTER_NEIGHBOURS of k hold every same-facing receiver within 2 widths
     near = d2 <= (2 * 0.1) ** 2 + 1e-12
     wts = np.exp(-0.5 * d2[near] / 0.01) - math.exp(-2.0)
     want = (wts[:, None] * noisy[up][near]).sum(axis=0) / wts.sum()
