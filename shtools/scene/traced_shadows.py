@@ -35,8 +35,8 @@ The filter is linear in the SH vector, so it holds for any light.
 
 **A per-vertex hand-over to the spheres** (:func:`handover_weights`).  The
 cone's expected ray count ``k = n_dirs (1 - cos θ)`` decides: beyond
-``HANDOVER_RAYS[0]`` rays (about 3.5 bounding radii) the object's spheres
-shadow the receiver, within ``HANDOVER_RAYS[1]`` (about 2.5 radii) its traced
+``HANDOVER_RAYS[0]`` rays (about 5 bounding radii) the object's spheres
+shadow the receiver, within ``HANDOVER_RAYS[1]`` (about 3.5 radii) its traced
 mesh, and in between the blend ``w T + (1 - w) S`` of the traced visibility
 ``T`` and the spheres' ``S``, ``w`` a smoothstep of ``k``.  The blend is in SH
 visibility, not log: ``T`` is a visibility whose per-frame log (eigen) would
@@ -54,10 +54,10 @@ import math
 import numpy as np
 
 #: Ray counts (at the hemisphere density ``n_dirs``) of a receiver's cone where the
-#: hand-over from the object's spheres to its traced mesh starts and ends: 4 keeps
-#: the traced reach of the former per-cluster rule (about 3.5 bounding radii), 8
-#: (about 2.5 radii) leaves the shadow proper to the real mesh.
-HANDOVER_RAYS = (4.0, 8.0)
+#: hand-over from the object's spheres to its traced mesh starts and ends: 2 (about 5
+#: bounding radii) and 4 (about 3.5 radii, the reach of the former per-cluster rule,
+#: within which the whole shadow is the real mesh's).
+HANDOVER_RAYS = (2.0, 4.0)
 #: Gap (in the cone's half-angle plus the light disc's) over which a spherical light
 #: hidden by the object hands its long shadow over to the spheres (:func:`light_weights`).
 LIGHT_MARGIN = 0.5

@@ -1,6 +1,6 @@
 """No seams where a traced object's real-mesh shadow hands over to its spheres: a ground
-grid next to a torus whose reach boundary (about 3.5 bounding radii) crosses the grid,
-scored with shtools.reference.look against the ray tracer of the real mesh."""
+grid next to a torus whose reach boundary crosses the grid, scored with
+shtools.reference.look against the ray tracer of the real mesh."""
 
 from __future__ import annotations
 
@@ -54,8 +54,9 @@ def _scene(folder):
 
 
 def test_ground_is_as_smooth_as_the_truth_across_the_hand_over(tmp_path):
-    """The torus' bounding radius is 0.85: its traced reach ends about 3 units from its
-    centre, inside the 8 x 8 ground of 400-vertex receiver clusters.  A per-cluster
+    """The torus' bounding radius is 0.85: its traced reach ends 3 to 4.3 units from its
+    centre (3.5 to 5 radii), inside the 8 x 8 ground of 400-vertex receiver clusters.
+    A per-cluster
     choice between the traced mesh and the spheres leaves steps on the cluster
     boundaries, and per-vertex ray patterns leave noise: the ground's mean |graph
     Laplacian| of luminance was 1.94x the ray tracer's (measured on the per-cluster rule

@@ -71,9 +71,9 @@ def test_handover_weights_and_the_receivers_traced():
     want = np.clip((rays - HANDOVER_RAYS[0]) / (HANDOVER_RAYS[1] - HANDOVER_RAYS[0]), 0, 1)
     want = want * want * (3 - 2 * want)
     rows, w, g = traced_ground(pts, nrm, v, f, caster, 3, 96)
-    assert rows.tolist() == np.flatnonzero(want > 0).tolist() == [0, 1, 2, 3, 4]
+    assert rows.tolist() == np.flatnonzero(want > 0).tolist() == [0, 1, 2, 3, 4, 5]
     np.testing.assert_allclose(w, want[rows], rtol=1e-12)
-    assert w[0] == 1.0 and np.all(np.diff(w) <= 0) and g.shape == (5, 9)
+    assert w[0] == 1.0 and 0 < w[-1] < 1 and np.all(np.diff(w) <= 0) and g.shape == (6, 9)
     np.testing.assert_allclose(handover_weights([0.0, 100.0]), [0.0, 1.0])
 
 
