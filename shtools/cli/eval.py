@@ -8,8 +8,11 @@ Two forms:
   point, under the light (default: a procedural sky).
 
 Prints per method the relative RMSE of per-vertex radiance against ray tracing
-of the real meshes and of the sphere set, and the time (``--json`` for a
-machine-readable summary; ``--png`` writes a false-colour comparison image).
+of the real meshes and of the sphere set, and the time, then per receiver where
+the first method's error comes from and what a viewer sees of it
+(:mod:`shtools.reference.look`: the smoothness ratio, the error over the shadowed
+vertices and near the blockers) (``--json`` for a machine-readable summary;
+``--png`` writes a false-colour comparison image).
 """
 
 from __future__ import annotations

@@ -109,3 +109,29 @@ def test_surface_filter_keeps_linear_fields_and_zero_widths():
     wts = np.exp(-0.5 * d2[near] / 0.01) - math.exp(-2.0)
     want = (wts[:, None] * noisy[up][near]).sum(axis=0) / wts.sum()
     np.testing.assert_allclose(y[k], want, rtol=1e-6)  # weights in float32
+
+
+def test_runtime_splits_a_cluster_whose_rows_skip_different_blockers():
+    """Only the receivers of weight above 0 skip the traced object's blocker, so one
+    receiver cluster may hold rows that skip it and rows that do not: the runtime
+    splits it, each row getting what it would alone."""
+    from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker
+    from shtools.runtime.clusters import ReceiverClusters
+
+    pts = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.2, 0.0, 0.0], [0.3, 0.0, 0.0]])
+    nrm = np.tile([0.0, 1.0, 0.0], (4, 1))
+    a = SphereBlocker(centers=np.array([[0.1, 1.0, 0.0]]), radii=np.array([0.5]))
+    given = np.zeros((2, 16), dtype=np.float32)
+    given[:, 0] = 3.0
+    given[:, 2] = 0.5
+    rt = ShadowRuntime(ShadowSettings(order=4, processes=1))
+    one = ReceiverClusters.from_labels([0, 0, 0, 0])
+    g = rt.visibility(pts, nrm, [a], clusters=one, self_visibility=[
+        SelfVisibility(None, np.array([0, 1]), blocker=0, visibility=given)])
+    plain = rt.visibility(pts, nrm, [a], clusters=one)
+    # rows 0, 1 skip the sphere: the given visibility times exp(0) (float32 product)
+    np.testing.assert_allclose(g[:2], given, rtol=0, atol=2e-6)
+    np.testing.assert_allclose(g[2:], plain[2:], rtol=0, atol=1e-6)
+    assert one.split([0, 0, 0, 0]) is one
+    split = one.split([1, 1, 0, 0])
+    assert split.n_clusters == 2 and split.labels[0] == split.labels[1] != split.labels[2]
