@@ -240,11 +240,15 @@ def nearest_distance(points, mesh_vertices, faces, caster=None) -> np.ndarray:
 
 def sphere_distance(points, centers, radii) -> np.ndarray:
     """Distance ``(V,)`` from each point to a union of spheres (0 inside one)."""
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    # relative to the spheres' centroid, in float32 (a filter width needs no more)
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
-    r = np.asarray(radii, dtype=np.float64).reshape(-1)
-    d2 = (p * p).sum(axis=1)[:, None] - 2.0 * p @ c.T + (c * c).sum(axis=1)[None, :]
-    return np.maximum(0.0, (np.sqrt(np.maximum(d2, 0.0)) - r[None, :]).min(axis=1))
+    o = c.mean(axis=0)
+    p = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - o).astype(np.float32)
+    c = (c - o).astype(np.float32)
+    r = np.asarray(radii, dtype=np.float32).reshape(-1)
+    d2 = np.einsum("vk,vk->v", p, p)[:, None] - 2.0 * (p @ c.T) + np.einsum("sk,sk->s", c, c)
+    d = np.sqrt(np.maximum(d2, 0.0)) - r[None, :]
+    return np.maximum(0.0, d.min(axis=1)).astype(np.float64)
 
 
 def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
@@ -345,30 +349,25 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
                                                   position, light_radius))
     rows = np.flatnonzero(weight > 0)
     weight = weight[rows]
-    g = np.zeros((len(rows), order * order))
-    g[:, 0] = SQRT_4PI
-    live = np.arange(len(rows))
-    if live.size:
-        at = rows
-        traced = set_visibility(p[at], nrm[at], caster, axis[at], cos_half[at], order, n_dirs)
-        spacing = math.sqrt(4.0 * math.pi / (2 * int(n_dirs)))
+    if not rows.size:
+        return rows, weight, np.zeros((0, order * order))
+    g = set_visibility(p[rows], nrm[rows], caster, axis[rows], cos_half[rows], order, n_dirs)
+    idx, dist = neighbours(p, nrm)
+    # neighbours among the traced receivers only (row of each in ``rows``, -1 if none)
+    where = np.full(len(p) + 1, -1)
+    where[rows] = np.arange(len(rows))
+    local = where[idx[rows]]  # idx -1 (facing away) reads the sentinel
+    # receivers with no blocked ray around them keep the exact constant
+    hit = np.zeros(len(rows) + 1, dtype=bool)
+    hit[:-1] = g[:, 1:].any(axis=1) | (g[:, 0] != SQRT_4PI)
+    busy = np.flatnonzero(hit[local].any(axis=1))
+    if busy.size:
+        at = rows[busy]
         if spheres is not None and len(spheres[1]):
             near = sphere_distance(p[at], *spheres)
         else:
             near = nearest_distance(p[at], v, faces, caster)
-        width = FILTER_SPACING * spacing * near
-        idx, dist = neighbours(p, nrm)
-        # neighbours among the traced receivers only (row of each in ``at``, -1 if none)
-        where = np.full(len(p), -1)
-        where[at] = np.arange(len(at))
-        local = np.where(idx[at] >= 0, where[np.maximum(idx[at], 0)], -1)
-        # receivers with no blocked ray around them keep the exact constant
-        hit = np.zeros(len(at) + 1, dtype=bool)
-        hit[:-1] = traced[:, 1:].any(axis=1) | (traced[:, 0] != SQRT_4PI)
-        busy = np.flatnonzero(hit[local].any(axis=1))
-        g[live] = traced
-        if busy.size:
-            near = local[busy]
-            g[live[busy]] = surface_filter(traced, width[busy], near,
-                                           np.where(near >= 0, dist[at[busy]], np.inf))
+        width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
+        around = local[busy]
+        g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
     return rows, weight, g
