@@ -42,8 +42,10 @@ mesh, and in between the blend ``w T + (1 - w) S`` of the traced visibility
 visibility, not log: ``T`` is a visibility whose per-frame log (eigen) would
 cost more than the frame, and where the blend happens the object is far and
 faint (both visibilities near 1), where a visibility blend and a log blend
-agree to first order in the log.  Receivers of weight 0 keep the blocker in the
-runtime (which splits a receiver cluster whose rows skip different blockers).
+agree to first order in the log.  A spherical light the object may hide keeps
+its long shadow traced however far (:func:`light_weights`), where spheres shade
+it poorly.  Receivers of weight 0 keep the blocker in the runtime (which splits a
+receiver cluster whose rows skip different blockers).
 """
 
 from __future__ import annotations
