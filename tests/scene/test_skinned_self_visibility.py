@@ -227,8 +227,11 @@ def test_traced_shadow_on_the_ground_matches_ray_tracing(rig):
     field = _ground_rows(field_scene)
     whole = _whole_weight_rows(field_scene)
     assert 0 < whole.sum() < whole.size
-    # float32 products, batched by other clusters with either blocker (measured 3e-6)
-    np.testing.assert_allclose(field[whole], traced[whole], rtol=1e-5, atol=1e-6)
+    # the same traced mesh; only the filter's width differs (the distance to the sphere
+    # set, or to the mesh without one): measured 0.029 %, against the 0.78 % of either
+    # against the ray tracer
+    near = relative_rmse(field[whole], traced[whole])
+    assert near < 0.002, near
     assert not np.allclose(field[~whole], traced[~whole], rtol=0, atol=1e-6)
 
 
