@@ -213,12 +213,12 @@ def test_traced_shadow_on_the_ground_matches_ray_tracing(rig):
     err, err_off = relative_rmse(traced, ref), relative_rmse(off, ref)
     err_fine = relative_rmse(fine, ref)
     # 96 rays for a receiver whose hemisphere the tube's bounding sphere fills, fewer for
-    # smaller cones, against 3,200 over the sphere: quadrature only (measured 0.78 %, 64
-    # rays 0.92 %; the reference differs from one at 12,000 directions by 0.12 %); the 8
-    # spheres measured 3.1 %
+    # smaller cones (the shared direction set, filtered), against 3,200 over the sphere:
+    # quadrature only (measured 0.42 %; the reference differs from one at 12,000
+    # directions by 0.12 %); the 8 spheres measured 3.1 %
     assert err < 0.015
     assert err_off > 2 * err
-    # 512 rays: measured 0.26 % (16 / 32 / 128 rays: 2.7 / 1.5 / 0.63 %)
+    # 512 rays: measured 0.18 %
     assert err_fine < 0.5 * err
     # the ground's rows where the traced mesh has the whole weight skip the tube's
     # blocker: a deformable field gives the same rows there (elsewhere the blocker
@@ -228,7 +228,7 @@ def test_traced_shadow_on_the_ground_matches_ray_tracing(rig):
     whole = _whole_weight_rows(field_scene)
     assert 0 < whole.sum() < whole.size
     # the same traced mesh; only the filter's width differs (the distance to the sphere
-    # set, or to the mesh without one): measured 0.029 %, against the 0.78 % of either
+    # set, or to the mesh without one): measured 0.029 %, against the 0.42 % of either
     # against the ray tracer
     near = relative_rmse(field[whole], traced[whole])
     assert near < 0.002, near
