@@ -8,8 +8,11 @@ Two forms:
   point, under the light (default: a procedural sky).
 
 Prints per method the relative RMSE of per-vertex radiance against ray tracing
-of the real meshes and of the sphere set, and the time (``--json`` for a
-machine-readable summary; ``--png`` writes a false-colour comparison image).
+of the real meshes and of the sphere set, and the time, then per receiver where
+the first method's error comes from and what a viewer sees of it
+(:mod:`shtools.reference.look`: the smoothness ratio, the error over the shadowed
+vertices and near the blockers) (``--json`` for a machine-readable summary;
+``--png`` writes a false-colour comparison image).
 """
 
 from __future__ import annotations
@@ -121,7 +124,8 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
                                   groups=data.groups)
     out = evaluate(data.vertices, data.normals, data.blockers, data.meshes, data.env,
                    data.lights, settings, methods, clusters=clusters, tables=data.tables,
-                   n_dirs=n_dirs, self_visibility=data.self_visibility, groups=data.groups)
+                   n_dirs=n_dirs, self_visibility=data.self_visibility, groups=data.groups,
+                   faces=data.faces, blocker_groups=data.blocker_groups)
     refs = out["references"]
     rows = [{"method": r.method, "rmse_vs_mesh": r.rmse_mesh, "rmse_vs_spheres": r.rmse_spheres,
              "seconds": r.seconds} for r in out["results"]]
@@ -140,6 +144,8 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
         # where the first method's error comes from, per receiver object
         "split_method": rows[0]["method"],
         "split": [dict(r, receiver=data.receiver_names[r["group"]]) for r in out["split"]],
+        # what a viewer sees of the first method, per receiver (shtools.reference.look)
+        "look": [dict(r, receiver=data.receiver_names[r["group"]]) for r in out["look"]],
     }
     if png_path is not None:
         from shtools.reference.maps import write_comparison_png
@@ -183,6 +189,21 @@ def _table(summary: dict) -> str:
                      f"{num(r['sphere_approximation'])} | "
                      f"{num(r['shexp'])} | {trunc} | {r['ringing']:.4f} | "
                      f"{r['negative_vertices']} |")
+    if summary["look"]:
+        lines += [
+            "",
+            f"look of {summary['split_method']} per receiver (smoothness: mean |graph Laplacian| "
+            "of luminance over the ray tracer's; errors over the vertices the real meshes "
+            "darken by > 2 % and within 2 bounding radii of the other blockers):",
+            "",
+            "| receiver | smoothness ratio | whole | shadowed (vertices) | near blockers "
+            "(vertices) |",
+            "|---|---|---|---|---|",
+        ]
+        for r in summary["look"]:
+            lines.append(f"| {r['receiver']} | {r['smoothness']:.3f} | {r['error']:.4f} | "
+                         f"{num(r['shadowed_error'])} ({r['shadowed_vertices']}) | "
+                         f"{num(r['near_error'])} ({r['near_vertices']}) |")
     if "png" in summary:
         lines.append(f"\nwrote {summary['png']}")
     return "\n".join(lines)

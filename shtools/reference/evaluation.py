@@ -85,6 +85,12 @@ class EvalInputs:
     receiver_names: list = field(default_factory=lambda: ["ground"])
     #: exact self-shadowing of rigid objects (runtime SelfVisibility), for the methods
     self_visibility: list = field(default_factory=list)
+    #: each receiver group's triangles (indices into its own vertices), for the look
+    #: measures (:mod:`shtools.reference.look`); None: not measured
+    faces: list | None = None
+    #: receiver group of each blocker mesh (-1: a blocker that does not receive), so a
+    #: receiver's error near blockers leaves out its own
+    blocker_groups: list | None = None
 
 
 def eval_settings(inputs: EvalInputs, *, order: int | None = None,
@@ -155,7 +161,8 @@ def mesh_eval_inputs(mesh_path, spheres_path, tree_path=None, light_path=None, *
                     env_sh=env, gap=gap)
     return EvalInputs(Path(mesh_path).name, sc.vertices, sc.normals, None,
                       [SphereBlocker(sc.centers, sc.radii, tree=tree)], sc.meshes, sc.env_sh,
-                      [], {"order": order, "hierarchy": tree is not None})
+                      [], {"order": order, "hierarchy": tree is not None},
+                      faces=[grid_faces(grid)], blocker_groups=[-1])
 
 
 
@@ -196,7 +203,7 @@ def parse_methods(text: str) -> list[tuple[str, str, int | None]]:
 def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, lights,
              settings: ShadowSettings, methods: str, *, clusters=None,
              tables: dict | None = None, n_dirs: int = DEFAULT_DIRECTIONS,
-             self_visibility=(), groups=None) -> dict:
+             self_visibility=(), groups=None, faces=None, blocker_groups=None) -> dict:
     """Run the methods and the two ray-traced references on one frame.
 
     Parameters
@@ -225,14 +232,20 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
     groups : ndarray of int, shape (V,), optional
         Receiver object of each vertex, for the per-receiver :func:`error_split`
         (default: one receiver).
+    faces : list of ndarray (F_k, 3), optional
+        Each receiver group's triangles (indices into its own vertices): adds the
+        first method's :func:`look_split` per receiver.
+    blocker_groups : list of int, optional
+        Receiver group of each mesh in ``meshes`` (-1 for none).
 
     Returns
     -------
     dict
         ``references``: {"mesh": seconds, "spheres": (rmse vs mesh, seconds)},
         ``results``: list of :class:`MethodResult`, the radiance arrays of the
-        references (``mesh_radiance``, ``spheres_radiance``) and ``split``: the
-        first method's :func:`error_split` per receiver.
+        references (``mesh_radiance``, ``spheres_radiance``), ``split``: the
+        first method's :func:`error_split` per receiver, and ``look``: its
+        :func:`look_split` (empty without ``faces``).
     """
     specs = parse_methods(methods)
     order = settings.order
@@ -299,7 +312,52 @@ def evaluate(vertices, normals, blockers: list[SphereBlocker], meshes, env_sh, l
         "mesh_radiance": r_mesh,
         "spheres_radiance": r_sph,
         "split": error_split(results[0].radiance, r_mesh, r_sph, groups, exact),
+        "look": [] if faces is None else look_split(
+            results[0].radiance, r_mesh, shade(_unblocked(len(vertices), order), ref_shader),
+            groups, faces, vertices, meshes, blocker_groups),
     }
+
+
+def _unblocked(n_vertices: int, order: int) -> np.ndarray:
+    g = np.zeros((n_vertices, order * order))
+    g[:, 0] = np.sqrt(4.0 * np.pi)
+    return g
+
+
+def look_split(radiance, mesh_radiance, unshadowed, groups, faces, vertices, meshes,
+               blocker_groups=None) -> list[dict]:
+    """:func:`shtools.reference.look.look_metrics` per receiver group.
+
+    Parameters
+    ----------
+    radiance, mesh_radiance, unshadowed : ndarray, shape (V, 3)
+        The method, the ray-traced real meshes, and no blocker at all.
+    groups : ndarray of int, shape (V,)
+    faces : list of ndarray (F_k, 3)
+        Group ``k``'s triangles, indices into its own vertices (in order).
+    vertices : ndarray, shape (V, 3)
+    meshes : list of trimesh.Trimesh
+        The blockers (their bounding spheres for the near-blocker error).
+    blocker_groups : list of int, optional
+        Receiver group of each mesh (-1 for none): a receiver's own mesh is left out.
+
+    Returns
+    -------
+    list of dict
+        Per group: ``group`` and the measures of :func:`look_metrics`.
+    """
+    from shtools.reference.look import bounding_sphere, look_metrics
+
+    spheres = [bounding_sphere(m.vertices) for m in meshes]
+    owners = [-1] * len(spheres) if blocker_groups is None else list(blocker_groups)
+    rows = []
+    for g in np.unique(groups):
+        m = groups == g
+        others = [s for s, k in zip(spheres, owners, strict=True) if k != g]
+        rows.append({"group": int(g), **look_metrics(
+            radiance[m], mesh_radiance[m], unshadowed[m], faces[int(g)], points=vertices[m],
+            blocker_spheres=others)})
+    return rows
 
 
 def error_split(radiance, mesh_radiance, spheres_radiance, groups, exact=None) -> list[dict]:
@@ -346,6 +404,15 @@ def error_split(radiance, mesh_radiance, spheres_radiance, groups, exact=None) -
             "negative_vertices": int((radiance[m].min(axis=1) < 0).sum()),
         })
     return rows
+
+
+def grid_faces(n: int) -> np.ndarray:
+    """Triangles ``(2 (n-1)^2, 3)`` of an ``n x n`` receiver grid stored row by row
+    (:func:`shtools.reference.scenes.ground_grid`)."""
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    return np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                           np.stack([a, c, d], -1).reshape(-1, 3)])
 
 
 def _raytrace_binary(vertices, normals, meshes, order, n_dirs):
@@ -411,4 +478,5 @@ def field_eval_inputs(mesh_path, field_path, light_path=None, *, grid: int = 64,
                     env_sh=env, gap=gap)
     return EvalInputs(Path(mesh_path).name, sc.vertices, sc.normals, None,
                       [FieldBlocker(fld)], sc.meshes, sc.env_sh, [],
-                      {"order": fld.order, "hierarchy": False})
+                      {"order": fld.order, "hierarchy": False},
+                      faces=[grid_faces(grid)], blocker_groups=[-1])

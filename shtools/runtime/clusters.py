@@ -58,6 +58,19 @@ class ReceiverClusters:
         offsets = np.concatenate([[0], np.cumsum(counts)])
         return cls(dense, order, offsets)
 
+    def split(self, labels) -> ReceiverClusters:
+        """These clusters split so that each holds vertices of one label only (self when
+        they already do).  Labels ``(V,)`` of int, e.g. the blockers each vertex skips:
+        a traced shadow that covers only part of a cluster."""
+        labels = np.asarray(labels)
+        counts = np.diff(self.offsets)
+        first = labels[self.order[self.offsets[:-1]]]
+        if np.array_equal(labels[self.order], np.repeat(first, counts)):
+            return self
+        _, pair = np.unique(np.stack([self.labels, labels], axis=1), axis=0,
+                            return_inverse=True)
+        return ReceiverClusters.from_labels(pair.reshape(-1))
+
     def bounds(self, vertices) -> tuple[np.ndarray, np.ndarray]:
         """Bounding sphere of every cluster at the given positions.
 

@@ -575,6 +575,8 @@ class ShadowRuntime:
                     f"clusters were built for {clusters.n_vertices} vertices but "
                     f"{pts.shape[0]} were given; call clusters() on this receiver set"
                 )
+            if exclude is not None:  # a cluster's receivers must skip the same blockers
+                clusters = clusters.split(exclude.labels)
             cl_centers, cl_radii = clusters.bounds(pts)
             cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
             weights = ratio_weights(forest, cuts, cl_centers, self.table,

@@ -41,9 +41,13 @@ def scene_eval_inputs(path, frame: int = 0, order: int | None = None) -> EvalInp
                 "window_h": st.window_h, "theta_max": st.theta_max, "theta_min": st.theta_min,
                 "hierarchy": st.hierarchy, "vertices_per_cluster": st.vertices_per_cluster,
                 "deringing": st.deringing, "field_space": st.field_space}
+    receivers = [o.spec.name for o in prepared.receivers]
+    blocking = [o.spec.name for o in prepared.objects if o.spec.blocks]
     return EvalInputs(Path(path).name, state.vertices, state.normals, groups, state.blockers,
                       meshes, prepared.env_sh, state.lights, settings, prepared.tables,
-                      receiver_names=[o.spec.name for o in prepared.receivers],
-                      self_visibility=state.self_visibility)
+                      receiver_names=receivers, self_visibility=state.self_visibility,
+                      faces=[o.faces for o in prepared.receivers],
+                      blocker_groups=[receivers.index(b) if b in receivers else -1
+                                      for b in blocking])
 
 

@@ -45,10 +45,10 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     ``trace=False`` leaves out the traced self-visibility of skinned objects and their
     traced shadow on the receiver-only objects (the frame's largest cost): for callers
     that need only the posed geometry.  ``clusters`` (the runtime's
-    :class:`~shtools.runtime.clusters.ReceiverClusters` of this bake) lets a traced
-    shadow stop at the object's reach: receivers of the clusters none of whose
-    vertices is within it keep the object's blocker (a cluster's receivers must
-    skip the same blockers); without clusters every receiver-only vertex is traced.
+    :class:`~shtools.runtime.clusters.ReceiverClusters` of this bake) groups the
+    receivers where a traced shadow hands over to the object's blocker, so the
+    blocker is evaluated there by the same cuts of its tree as on the receivers
+    next door.
     """
     from shtools.runtime import SelfVisibility, SphereBlocker
     from shtools.scene.transfer import (
@@ -94,7 +94,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
                 traced_self_visibility(world_v, world_n, o.faces, st.order,
                                        st.self_visibility_directions, caster=caster))))
-            casters.append((caster, world_v, len(blockers)))
+            casters.append((caster, world_v, o.faces, len(blockers)))
         if o.spec.receives and not o.spec.blocks:
             ground.append((np.arange(n_rows, n_rows + len(world_v)), world_v, world_n))
         if o.local_log is not None and joints is not None:
@@ -116,18 +116,17 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                                 selfs, len(blockers) - 1)
             if with_meshes:
                 meshes.append((world_v, o.faces))
-    # each rigid object traced in its own cone, the visibilities multiplied: closer to
-    # the real meshes than one joint trace in the cone of their common bounding sphere
-    # at the same ray density (the common cone spends its rays on the gap between
-    # them; bench_fidelity's rigid scenes), and joint traces of the demo's overlapping limbs
-    # left visible ray noise on its ground (the common cone's sparser rays)
-    casters.extend(_rigid_caster([r]) for r in rigid)
+    # rigid objects whose bounding spheres overlap (a character's parts) traced jointly,
+    # the others each in its own cone, the visibilities multiplied: one trace, filter
+    # and hand-over for the parts instead of one each, at the same ray density (the
+    # shared direction set), and no product of visibilities that overlap
+    casters.extend(_rigid_caster(group) for group in _overlapping(rigid))
+    lights = pose_lights(prepared.scene, t)
     if casters and ground and st.traced_shadows:
         # (rows, points, normals) of every receiver-only object, once for all casters
         receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
-        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters) for c in casters)
-                     if v is not None)
-    lights = pose_lights(prepared.scene, t)
+        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
+                                                lights) for c in casters) if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
 
@@ -151,25 +150,76 @@ def pose_lights(scene, t: float) -> list:
     return lights
 
 
-def _traced_shadow(caster_of, receivers: tuple, st, clusters=None):
-    """A traced object's shadow on the receiver-only objects (the ground), traced against
-    its real mesh (a skinned object's posed mesh: the same Embree scene as its own
-    vertices); its blocker is skipped on those rows.  Each traced object gives one such
-    visibility; the runtime multiplies them (the product of separately traced
-    visibilities, not a joint trace: see ``bench_fidelity``'s rigid scenes).
+def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
+                   lights=()):
+    """A traced object's shadow on the receiver-only objects (the ground): its real mesh
+    near it, its blocker far from it, a per-vertex blend between
+    (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
+    over.  Each traced object gives one such visibility; the runtime multiplies them
+    (the product of separately traced visibilities, not a joint trace: measured on
+    ``bench_fidelity``'s rigid scenes).
 
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
     ``(R,)``, ``(R, 3)``, ``(R, 3)``; returns None when none is within the object's reach."""
-    from shtools.runtime import SelfVisibility
-    from shtools.scene.transfer import traced_shadow_visibility
+    from shtools.runtime import SelfVisibility, SphereLight
+    from shtools.scene.traced_shadows import traced_ground
 
-    caster, mesh_v, index = caster_of
+    caster, mesh_v, faces, index = caster_of
     rows, points, normals = receivers
     labels = None if clusters is None else clusters.labels[rows]
-    traced, g = traced_shadow_visibility(points, normals, mesh_v, caster, st.order,
-                                         st.traced_shadow_directions, labels=labels)
-    # receivers beyond the object's reach keep its blocker (no row traced: no entry)
-    return SelfVisibility(None, rows[traced], blocker=index, visibility=g) if len(traced) else None
+    own = [blockers[k] for k in (index if isinstance(index, tuple) else (index,))]
+    handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
+                                      st.traced_shadow_directions,
+                                      spheres=_bounding_spheres(own),
+                                      lights=[(x.position, x.radius) for x in lights
+                                              if isinstance(x, SphereLight)])
+    if not len(handed):  # every receiver beyond the object's reach keeps its blocker
+        return None
+    part = np.flatnonzero(weight < 1.0)
+    if part.size:  # the blend with the object's own blocker: w T + (1 - w) S
+        from shtools.runtime.clusters import ReceiverClusters
+
+        at = handed[part]
+        # grouped as the bake's clusters: the cuts of the sphere tree the runtime makes
+        # for the rows next door, which keep the blocker
+        groups = None if labels is None else ReceiverClusters.from_labels(labels[at])
+        s = _handover_runtime(prepared).visibility(points[at], normals[at], own,
+                                                   clusters=groups)
+        w = weight[part, None]
+        g[part] = w * g[part] + (1.0 - w) * np.asarray(s, dtype=np.float64)
+    return SelfVisibility(None, rows[handed], blocker=index, visibility=g.astype(np.float32))
+
+
+def _bounding_spheres(blockers: list):
+    """Leaf spheres ``(centres (S, 3), radii (S,))`` of sphere-set blockers; None if any
+    blocker is not a sphere set."""
+    from shtools.runtime import SphereBlocker
+    from shtools.runtime.hierarchy import leaf_spheres
+
+    if not all(isinstance(b, SphereBlocker) for b in blockers):
+        return None
+    return leaf_spheres(blockers)
+
+
+#: The runtime that evaluates a traced object's own blocker where its traced shadow hands
+#: over to it, per process: (pid, id of the prepared scene, the scene itself, runtime).
+_HANDOVER: list = []
+
+
+def _handover_runtime(prepared):
+    """A one-process runtime of the scene's settings (the hand-over rows are evaluated
+    with the traced object's own blocker alone)."""
+    import os
+
+    from shtools.runtime import ShadowRuntime
+
+    if _HANDOVER and _HANDOVER[0][:2] == (os.getpid(), id(prepared)) and \
+            _HANDOVER[0][2] is prepared:
+        return _HANDOVER[0][3]
+    settings = dataclasses.replace(prepared.scene.settings.runtime_only(), processes=1)
+    runtime = ShadowRuntime(settings, tables=prepared.tables)
+    _HANDOVER[:] = [(os.getpid(), id(prepared), prepared, runtime)]
+    return runtime
 
 
 #: Embree scenes of rigid objects in world space, per process (a forked worker builds its
@@ -179,8 +229,8 @@ _RIGID_CASTERS: dict = {}
 
 
 def _rigid_caster(rigid: list):
-    """``(caster, vertices, blocker indices)``: one Embree scene of rigid objects' real
-    meshes at their transforms (cached while the transforms hold); ``rigid`` holds
+    """``(caster, vertices, faces, blocker indices)``: one Embree scene of rigid objects'
+    real meshes at their transforms (cached while the transforms hold); ``rigid`` holds
     ``(object, transform, posed vertices, blocker index)``."""
     import os
 
@@ -194,15 +244,45 @@ def _rigid_caster(rigid: list):
     if (hit is not None and hit[0] == os.getpid()
             and all(a is o.faces for a, (o, _, _, _) in zip(hit[1], rigid, strict=True))
             and all(np.array_equal(a, m) for a, (_, m, _, _) in zip(hit[2], rigid, strict=True))):
-        return hit[3], vertices, index
+        return hit[3], vertices, _joint_faces(rigid), index
     if len(_RIGID_CASTERS) >= 64:
         _RIGID_CASTERS.clear()
-    offsets = np.cumsum([0] + [len(v) for _, _, v, _ in rigid])
-    faces = np.concatenate([o.faces + offsets[i] for i, (o, _, _, _) in enumerate(rigid)])
+    faces = _joint_faces(rigid)
     caster = posed_caster(vertices, faces)
     _RIGID_CASTERS[key] = (os.getpid(), [o.faces for o, _, _, _ in rigid],
                            [np.array(m, copy=True) for _, m, _, _ in rigid], caster)
-    return caster, vertices, index
+    return caster, vertices, faces, index
+
+
+def _overlapping(rigid: list) -> list[list]:
+    """``rigid`` (object, transform, posed vertices, blocker index) grouped by bounding
+    spheres that overlap, directly or through others (in the objects' order)."""
+    spheres = []
+    for _, _, v, _ in rigid:
+        center = 0.5 * (v.min(axis=0) + v.max(axis=0))
+        spheres.append((center, float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))))
+    group = list(range(len(rigid)))
+
+    def root(i):
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    for i in range(len(rigid)):
+        for j in range(i):
+            (ci, ri), (cj, rj) = spheres[i], spheres[j]
+            if np.linalg.norm(ci - cj) < ri + rj:
+                group[max(root(i), root(j))] = min(root(i), root(j))
+    out: dict = {}
+    for i, r in enumerate(rigid):
+        out.setdefault(root(i), []).append(r)
+    return list(out.values())
+
+
+def _joint_faces(rigid: list) -> np.ndarray:
+    """The faces of rigid objects' meshes, indices into their concatenated vertices."""
+    offsets = np.cumsum([0] + [len(v) for _, _, v, _ in rigid])
+    return np.concatenate([o.faces + offsets[i] for i, (o, _, _, _) in enumerate(rigid)])
 
 
 def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:

@@ -21,8 +21,9 @@ vertex over its hemisphere); the runtime multiplies that visibility into the
 vertices' visibility from every other blocker, the object's own blocker skipped
 on its rows.  The same per-frame Embree scene traces the object's shadow on the
 receiver-only objects (the ground, ``traced_shadows``;
-:func:`traced_shadow_visibility`: rays only inside the cone of its bounding
-sphere), whose rows then skip its blocker too.  The older
+:mod:`shtools.scene.traced_shadows`: rays only inside the cone of its bounding
+sphere, handed over to its blocker far from it), whose rows then skip its
+blocker too.  The older
 alternative, kept behind ``local_visibility`` for objects that do not trace: the
 paper's *local* visibility ``g_p`` (Ren et al. 2006 Sec. 7), the rest-pose
 self-visibility of fine detail, rays limited to :data:`LOCAL_DISTANCE` times the
@@ -213,65 +214,6 @@ def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int, *,
     caster = caster if caster is not None else posed_caster(vertices, faces)
     return hemisphere_visibility(vertices, normals, caster, order,
                                  n_dirs=n_dirs).astype(np.float32)
-
-
-def traced_shadow_visibility(points, normals, vertices, caster, order: int,
-                             n_dirs: int, labels=None) -> tuple[np.ndarray, np.ndarray]:
-    """Visibility of a posed mesh at the other receivers within its reach (the ground).
-
-    Rays only inside the cone each receiver sees the mesh's bounding sphere in
-    (:func:`~shtools.fields.self_visibility.cone_visibility`; everything outside it
-    is exactly unblocked), ``n_dirs`` for a cone that fills the hemisphere and fewer
-    in proportion to its solid angle.  Only receivers whose cone earns at least
-    ``CONE_MIN_RAYS`` rays at that density are traced (``Ω >= CONE_MIN_RAYS 2π /
-    n_dirs``: within about 3.5 bounding radii at the default 96); farther ones,
-    where the object is a small faint blocker, keep its spheres, which cost less
-    there than the fewest rays a cone may get.  Without ``labels`` every receiver is
-    traced; with them, whole groups (the runtime's receiver clusters) are traced or
-    left, so that a cluster's receivers skip the same blockers.
-
-    Parameters
-    ----------
-    points, normals : array_like, shape (R, 3)
-        The receivers (world space) and their unit normals.
-    vertices : array_like, shape (V, 3)
-        The posed mesh (its bounding sphere: the box centre and the farthest vertex).
-    caster : RayCaster
-        Its Embree scene (:func:`posed_caster`).
-    order : int
-        Shading order.
-    n_dirs : int
-        Rays of a receiver whose cone is its whole hemisphere.
-    labels : array_like of int, shape (R,), optional
-        Group of each receiver (its cluster); a group is traced when any of its
-        receivers is within reach.  None: trace every receiver.
-
-    Returns
-    -------
-    traced : ndarray of int, shape (T,)
-        Indices into ``points`` of the receivers within reach.
-    visibility : ndarray, shape (T, order^2) float32
-    """
-    from shtools.fields.self_visibility import (
-        CONE_MIN_RAYS,
-        bounding_cones,
-        cone_visibility,
-    )
-
-    v = np.asarray(vertices, dtype=np.float64)
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
-    _, cos_half = bounding_cones(p, nrm, center, radius)
-    if labels is None:
-        traced = np.arange(len(p))
-    else:
-        labels = np.asarray(labels)
-        near = n_dirs * (1.0 - cos_half) >= CONE_MIN_RAYS - 1e-9  # Ω n_dirs / 2π
-        traced = np.flatnonzero(np.isin(labels, labels[near]))
-    return traced, cone_visibility(p[traced], nrm[traced], caster, center, radius, order,
-                                   n_dirs=n_dirs).astype(np.float32)
 
 
 def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE) -> np.ndarray:

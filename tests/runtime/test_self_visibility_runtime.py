@@ -81,7 +81,9 @@ def test_rotation_equals_tracing_the_rotated_mesh():
     assert rms < 2e-2
 
 
-def test_clusters_mixing_objects_are_refused():
+def test_clusters_mixing_rows_that_skip_different_blockers_are_split():
+    """A cluster whose rows skip different blockers (a traced shadow covering part of
+    it) is evaluated as its parts; a log at the wrong order is refused."""
     torus, centers, radii = _torus_scene()
     v, n = torus.vertices, torus.vertex_normals
     log = np.zeros((len(v) // 2, 36), np.float32)
@@ -90,8 +92,13 @@ def test_clusters_mixing_objects_are_refused():
     from shtools.runtime.clusters import ReceiverClusters
 
     mixed = ReceiverClusters.from_labels(np.zeros(len(v), dtype=int))
-    with pytest.raises(InputError, match="groups"):
-        rt.visibility(v, n, [SphereBlocker(centers, radii)], mixed, self_visibility=[sv])
+    skips = (np.arange(len(v)) < len(v) // 2).astype(int)
+    blockers = [SphereBlocker(centers, radii)]
+    got = rt.visibility(v, n, blockers, mixed, self_visibility=[sv])
+    want = rt.visibility(v, n, blockers, mixed.split(skips), self_visibility=[sv])
+    np.testing.assert_array_equal(got, want)
+    # the rows that skip the torus' spheres see nothing else: exp(0), the constant 1
+    np.testing.assert_allclose(got[: len(v) // 2, 1:], 0.0, atol=1e-6)
     with pytest.raises(InputError, match="accumulates at order 6"):
         rt.visibility(v, n, [SphereBlocker(centers, radii)],
                       self_visibility=[SelfVisibility(np.zeros((len(v), 16)), slice(None))])

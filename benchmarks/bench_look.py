@@ -1,0 +1,245 @@
+"""What a person sees (issue 25): seams, rings and noise, and the error where the shadows are.
+
+Per receiver of each scene, at the default settings, against the project's ray
+tracer of the posed real meshes (:func:`shtools.reference.raytrace_visibility`,
+3,200 directions; 800 with ``--quick``), shaded raw at the scene's order
+(:mod:`shtools.reference.look`):
+
+* the **smoothness ratio** (mean |graph Laplacian| of luminance, bake over truth;
+  target 0.85-1.15),
+* the **error over the shadowed vertices** (reference darkened by > 2 %) next to
+  the whole receiver's, and the error within 2 bounding radii of the blockers,
+* CPU per frame (one process, the set-up frame left out) and its ratio to the baseline.
+
+Scenes from ``../shared/data`` (never committed; the assets are built with
+``benchmarks/bench_fidelity.py``'s helpers and cached there): the bunny under the
+Uffizi probe and CesiumMan walking under Grace, each on a 4 x 4 ground of 96
+subdivisions; ``--demo DIR`` adds frames 10-13 of ``make demo``'s scene in DIR.
+``--quick``: spot on a 3 x 3 ground of 40 subdivisions, one frame.
+
+``--baseline DIR`` bakes the same scenes with the code in DIR (e.g. the worktree of
+the previous release) in the same run, each bake in its own process (the two
+alternated, the fastest repeat kept), and prints both side by side.
+
+``python benchmarks/bench_look.py [--quick] [--baseline DIR] [--demo DIR]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import importlib.util
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+#: the shared data next to the repository (or next to the folder of its worktrees)
+DATA = next((d / "shared" / "data" for d in (REPO.parent, REPO.parent.parent)
+             if (d / "shared" / "data").is_dir()), REPO.parent / "shared" / "data")
+CACHE = REPO / "build" / "bench_look"
+#: Alternating repeats of each code's bake (the fastest CPU kept: the machine is shared).
+REPEATS = 2
+
+
+def _fidelity():
+    spec = importlib.util.spec_from_file_location("_bench_fidelity",
+                                                  Path(__file__).with_name("bench_fidelity.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def scenes(quick: bool, demo: Path | None) -> dict[str, dict]:
+    """Scene files (written to ``CACHE``) and the frames to measure."""
+    fid = _fidelity()
+    fid.DATA = DATA
+    fid.CACHE.mkdir(parents=True, exist_ok=True)
+    CACHE.mkdir(parents=True, exist_ok=True)
+    out = {}
+    pre: dict = {}
+
+    def write(name, body, env, frames, fps=24):
+        path = CACHE / f"{name}.toml"
+        path.write_text(f"[settings]\norder = 4\nframes = {frames}\nfps = {fps}\n\n"
+                        f'[environment]\nimage = "{env}"\n\n{body}')
+        return path
+
+    if quick:
+        body = fid._ground(3.0, 40) + fid._rigid("spot", "spot.obj", 24, 1.0, 0.0, 0.0, 30.0,
+                                                 pre)
+        out["spot"] = {"path": write("spot", body, DATA / "probes" / "uffizi.hdr", 2),
+                       "frames": range(0, 2)}
+        return out
+    body = fid._ground(4.0, 96) + fid._rigid("bunny", "stanford-bunny.obj", 48, 1.0, 0.0, 0.0,
+                                             0.0, pre)
+    out["bunny"] = {"path": write("bunny", body, DATA / "probes" / "uffizi.hdr", 2),
+                    "frames": range(0, 2)}
+    body = fid._ground(4.0, 96) + fid._skinned("cesiumman", "CesiumMan.glb", 48, pre)
+    out["cesiumman"] = {"path": write("cesiumman", body, DATA / "probes" / "grace.hdr", 3, 4),
+                        "frames": range(0, 3)}
+    if demo is not None:
+        out["demo"] = {"path": Path(demo) / "scene.toml", "frames": range(10, 14)}
+    return out
+
+
+def bake_worker(scene_path: str, first: int, stop: int, out_path: str) -> None:
+    """Bake frames ``first..stop-1`` in this process (one runtime process): radiance, CPU."""
+    from shtools.scene.bake import bake_scene, prepare_scene
+    from shtools.scene.scene import load_scene
+
+    scene = load_scene(scene_path)
+    prepared = prepare_scene(scene)
+    frames = range(first, stop)
+    cpu = []
+    radiance = []
+    # a frame before the measured ones sets the per-bake state up (clusters, casters)
+    setup_start = time.process_time()
+    list(bake_scene(scene, prepared=prepared, frames=range(first, first + 1), processes=1,
+                    scheduler="inline"))
+    setup = time.process_time() - setup_start
+    for k in frames:
+        t0 = time.process_time()
+        (frame,) = bake_scene(scene, prepared=prepared, frames=range(k, k + 1), processes=1,
+                              scheduler="inline")
+        cpu.append(time.process_time() - t0)
+        radiance.append(frame.radiance.astype(np.float64))
+    np.savez(out_path, radiance=np.stack(radiance), cpu=np.array(cpu), setup=setup)
+
+
+def _bake(code: Path, scene: dict, tag: str) -> dict:
+    out = CACHE / f"{scene['path'].stem}.{tag}.npz"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code)}
+    subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
+                    str(scene["path"]), str(scene["frames"].start), str(scene["frames"].stop),
+                    str(out)], check=True, env=env, cwd=str(code))
+    return dict(np.load(out))
+
+
+def references(scene: dict, n_dirs: int) -> dict:
+    """Ray-traced (real meshes) and unshadowed radiance per frame, receivers' faces, spheres."""
+    import trimesh
+
+    from shtools.reference import raytrace_visibility
+    from shtools.reference.look import bounding_sphere
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.scene.bake import prepare_scene
+    from shtools.scene.pose import pose_frame
+    from shtools.scene.scene import load_scene
+
+    sc = load_scene(scene["path"])
+    prepared = prepare_scene(sc)
+    order = sc.settings.order
+    digest = hashlib.sha256(scene["path"].read_bytes()).hexdigest()[:12]
+    cache = CACHE / f"{scene['path'].stem}.ref{n_dirs}.{digest}.npz"
+    stored = dict(np.load(cache)) if cache.exists() else {}
+    shader = ShadowRuntime(ShadowSettings(order=order, processes=1, deringing="none"))
+    blocking = [o.spec.name for o in prepared.objects if o.spec.blocks]
+    ref, free, spheres = [], [], []
+    for k in scene["frames"]:
+        state = pose_frame(prepared, k / sc.settings.fps, with_meshes=True, trace=False)
+        if f"g{k}" not in stored:
+            meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
+            stored[f"g{k}"] = raytrace_visibility(state.vertices, state.normals, meshes, order,
+                                                  n_dirs)
+            np.savez(cache, **stored)
+        one = np.zeros((len(state.vertices), order * order))
+        one[:, 0] = math.sqrt(4 * math.pi)
+        ref.append(shader.shade(stored[f"g{k}"], state.vertices, state.normals,
+                                prepared.env_sh, state.lights))
+        free.append(shader.shade(one, state.vertices, state.normals, prepared.env_sh,
+                                 state.lights))
+        spheres.append({name: bounding_sphere(v)
+                        for name, (v, _) in zip(blocking, state.blocker_meshes, strict=True)})
+        last = state
+    offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
+    receivers = [(o.spec.name, o.faces, slice(offsets[i], offsets[i + 1]))
+                 for i, o in enumerate(prepared.receivers)]
+    return {"ref": np.stack(ref), "free": np.stack(free), "spheres": spheres,
+            "receivers": receivers, "points": last.vertices}
+
+
+def score(radiance: np.ndarray, refs: dict) -> list[dict]:
+    """:func:`shtools.reference.look.look_metrics` per receiver, frames pooled (errors) or
+    averaged (smoothness)."""
+    from shtools.reference.look import (
+        luminance,
+        near_blockers,
+        relative_rmse,
+        shadowed,
+        smoothness_ratio,
+    )
+
+    rows = []
+    for name, faces, rows_of in refs["receivers"]:
+        x, ref, free = (a[:, rows_of] for a in (radiance, refs["ref"], refs["free"]))
+        smooth = float(np.mean([smoothness_ratio(luminance(x[k]), luminance(ref[k]), faces)
+                                for k in range(len(x))]))
+        dark = np.stack([shadowed(ref[k], free[k]) for k in range(len(x))])
+        near = np.stack([near_blockers(refs["points"][rows_of],
+                                       [s for n, s in refs["spheres"][k].items() if n != name])
+                         for k in range(len(x))])
+        rows.append({"receiver": name, "smoothness": smooth,
+                     "error": relative_rmse(x, ref),
+                     "shadowed": relative_rmse(x[dark], ref[dark]) if dark.any() else None,
+                     "near": relative_rmse(x[near], ref[near]) if near.any() else None})
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="spot, one small ground")
+    parser.add_argument("--baseline", type=Path, help="code to compare with (a worktree)")
+    parser.add_argument("--demo", type=Path, help="make demo's output folder (its scene.toml)")
+    parser.add_argument("--scenes", help="comma-separated scene names (default all)")
+    parser.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        bake_worker(args.worker[0], int(args.worker[1]), int(args.worker[2]), args.worker[3])
+        return 0
+    if not (DATA / "meshes").is_dir():
+        print(f"no data in {DATA}: nothing to measure")
+        return 0
+    codes = {"this": REPO}
+    if args.baseline is not None:
+        codes = {"baseline": args.baseline.resolve(), **codes}
+    n_dirs = 800 if args.quick else 3200
+    print(f"\n### Look at the default settings vs a {n_dirs}-direction ray tracer of the real "
+          "meshes (smoothness target 0.85-1.15; errors relative RMSE of radiance)\n")
+    keys = ["scene", "receiver", "code", "smoothness", "error", "shadowed", "near",
+            "CPU ms/frame", "CPU ratio"]
+    print("| " + " | ".join(keys) + " |\n|" + "---|" * len(keys))
+    wanted = None if not args.scenes else set(args.scenes.split(","))
+    for name, scene in scenes(args.quick, args.demo).items():
+        if wanted is not None and name not in wanted:
+            continue
+        baked = {}
+        for _ in range(REPEATS):
+            for tag, code in codes.items():
+                run = _bake(code, scene, tag)
+                cpu = float(np.mean(run["cpu"]))
+                if tag not in baked or cpu < baked[tag]["cpu"]:
+                    baked[tag] = {"radiance": run["radiance"], "cpu": cpu}
+        refs = references(scene, n_dirs)
+        first = next(iter(codes))
+        for tag in codes:
+            for row in score(baked[tag]["radiance"], refs):
+                cells = [name, row["receiver"], tag] + [
+                    "-" if row[k] is None else f"{row[k]:.3f}" if k == "smoothness"
+                    else f"{100 * row[k]:.2f} %" for k in ("smoothness", "error", "shadowed",
+                                                           "near")] + [
+                    f"{1e3 * baked[tag]['cpu']:.0f}",
+                    f"{baked[tag]['cpu'] / baked[first]['cpu']:.2f}"]
+                print("| " + " | ".join(cells) + " |", flush=True)
+    print(f"\nload {os.getloadavg()[0]:.1f}; " + json.dumps({"n_dirs": n_dirs}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

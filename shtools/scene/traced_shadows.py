@@ -1,0 +1,375 @@
+r"""A traced object's shadow on the receiver-only objects, continuous over the surface.
+
+The ground under a traced object (a skinned character's posed mesh, a rigid
+sphere-set blocker's real mesh; ``traced_shadows``) is shadowed by the object's
+real mesh near it and by its spheres far from it.  Three things keep that
+shadow free of seams, rings and per-vertex noise:
+
+**One direction set for every receiver.**  A spherical Fibonacci set of
+``2 n_dirs`` world directions (:func:`world_directions`) is shared by all
+receivers and frames; a receiver traces the directions of the set that fall in
+the cone it sees the object's bounding sphere in (everything outside that cone
+is exactly unblocked) and above its tangent plane, each standing for the same
+solid angle ``4π / 2 n_dirs``:
+
+.. math::
+
+    g_v = \sqrt{4\pi}\,\delta_{i0} - \frac{4\pi}{2 n}\sum_{q\ \mathrm{blocked}} y(s_q).
+
+A receiver whose cone fills its hemisphere gets ``n_dirs`` rays, a smaller
+cone fewer in proportion: the count follows the cone with no steps, since a
+direction enters the cone where it grazes the bounding sphere, unblocked, and
+neighbouring receivers sample the same directions, so their estimates differ
+only as the mesh's silhouette crosses them (no per-vertex pattern, no frame
+that flips over the ground).  The basis is evaluated once per set, not per ray.
+
+**A surface filter of the traced visibility** (:func:`surface_filter`).  A
+silhouette crossing a direction is still a step of ``4π / 2n`` in the
+estimate.  The steps come every ``d α`` of receiver motion, ``d`` the distance
+to the nearest point of the mesh and ``α`` the set's angular spacing; the
+true visibility projected to order ``n`` changes on the scale ``d π / n``.
+A Gaussian of width ``d α`` over the neighbouring receivers (same facing)
+smooths the steps and leaves the order-``n`` visibility: where the mesh touches
+the receiver (``d -> 0``) nothing is filtered, so contact shadows stay sharp.
+The filter is linear in the SH vector, so it holds for any light.
+
+**A per-vertex hand-over to the spheres** (:func:`handover_weights`).  The
+cone's expected ray count ``k = n_dirs (1 - cos θ)`` decides: beyond
+``HANDOVER_RAYS[0]`` rays (about 5 bounding radii) the object's spheres
+shadow the receiver, within ``HANDOVER_RAYS[1]`` (about 3.5 radii) its traced
+mesh, and in between the blend ``w T + (1 - w) S`` of the traced visibility
+``T`` and the spheres' ``S``, ``w`` a smoothstep of ``k``.  The blend is in SH
+visibility, not log: ``T`` is a visibility whose per-frame log (eigen) would
+cost more than the frame, and where the blend happens the object is far and
+faint (both visibilities near 1), where a visibility blend and a log blend
+agree to first order in the log.  A spherical light the object may hide keeps
+its long shadow traced however far (:func:`light_weights`), where spheres shade
+it poorly.  Receivers of weight 0 keep the blocker in the runtime (which splits a
+receiver cluster whose rows skip different blockers).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+#: Ray counts (at the hemisphere density ``n_dirs``) of a receiver's cone where the
+#: hand-over from the object's spheres to its traced mesh starts and ends: 2 (about 5
+#: bounding radii) and 4 (about 3.5 radii, the reach of the former per-cluster rule,
+#: within which the whole shadow is the real mesh's).
+HANDOVER_RAYS = (2.0, 4.0)
+#: Gap (in the cone's half-angle plus the light disc's) over which a spherical light
+#: hidden by the object hands its long shadow over to the spheres (:func:`light_weights`).
+LIGHT_MARGIN = 0.5
+#: Width of the surface filter, in the set's angular spacing times the distance to
+#: the nearest point of the mesh: one spacing (a step per width) smooths the steps
+#: and keeps the order-n visibility, whose angular scale is several spacings.
+FILTER_SPACING = 1.0
+#: Receivers whose normals differ by more than this cosine are not filtered together.
+FILTER_MIN_COS = 0.9
+#: Ray origin offset along the normal, relative to the caster's bounding-box diagonal.
+RAY_OFFSET = 1e-5
+#: Receivers per block of :func:`set_visibility` (neighbours in the receivers' order
+#: see nearby runs of the set: the block tests only the run its cones span).
+SET_CHUNK = 256
+
+SQRT_4PI = math.sqrt(4.0 * math.pi)
+_CUT = math.exp(-2.0)  # the filter's Gaussian at its cut, 2 widths
+
+
+@functools.lru_cache(maxsize=8)
+def world_directions(n: int) -> np.ndarray:
+    """Spherical Fibonacci set of ``n`` unit directions over the sphere, ``(n, 3)``.
+
+    Point ``i`` sits at height ``y_i = 1 - 2 (i + 1/2) / n`` (equal-area bands about
+    +Y, in decreasing order) and azimuth ``i`` golden angles; every point stands for
+    ``4π / n``.  Read-only (cached).
+    """
+    i = np.arange(int(n)) + 0.5
+    z = 1.0 - 2.0 * i / n
+    phi = i * math.pi * (3.0 - math.sqrt(5.0))
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    # bands along +Y (up in a scene): a cone's directions are one run of the set
+    d = np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1)
+    d.setflags(write=False)
+    return d
+
+
+def cone_rays(cos_half, n_dirs: int) -> np.ndarray:
+    """Expected rays ``n_dirs (1 - cos θ)`` of each receiver's cone, ``(V,)``."""
+    return int(n_dirs) * (1.0 - np.asarray(cos_half, dtype=np.float64))
+
+
+def handover_weights(rays) -> np.ndarray:
+    """Weight ``(V,)`` of the traced mesh against the spheres: a smoothstep of the rays.
+
+    0 at or below ``HANDOVER_RAYS[0]``, 1 at or above ``HANDOVER_RAYS[1]``, ``C^1``
+    between (``3t² - 2t³``).
+    """
+    lo, hi = HANDOVER_RAYS
+    t = np.clip((np.asarray(rays, dtype=np.float64) - lo) / (hi - lo), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def light_weights(points, axis, cos_half, center, radius, position, light_radius
+                  ) -> np.ndarray:
+    """Weight ``(V,)`` of the traced mesh where the object may hide a spherical light.
+
+    A small light casts the object's shadow far beyond the hand-over of
+    :func:`handover_weights` (a lamp's long shadow), where the object's spheres shade
+    it poorly.  1 where the light's disc overlaps the cone of the object's bounding
+    sphere (and the light is beyond the sphere's near side), 0 once the gap between
+    them reaches ``LIGHT_MARGIN`` times the cone's half-angle plus the disc's, a
+    smoothstep between.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    to = np.asarray(position, dtype=np.float64)[None] - p
+    far = np.sqrt(np.einsum("vk,vk->v", to, to))
+    u = to / np.maximum(far, 1e-300)[:, None]
+    disc = np.arcsin(np.clip(float(light_radius) / np.maximum(far, 1e-300), 0.0, 1.0))
+    cone = np.arccos(np.clip(cos_half, -1.0, 1.0))
+    gap = np.arccos(np.clip(np.einsum("vk,vk->v", axis, u), -1.0, 1.0)) - cone - disc
+    margin = LIGHT_MARGIN * (cone + disc)
+    t = np.clip(1.0 - gap / np.maximum(margin, 1e-300), 0.0, 1.0)
+    w = t * t * (3.0 - 2.0 * t)
+    beyond = far > np.linalg.norm(np.asarray(center, dtype=np.float64)[None] - p,
+                                  axis=1) - radius
+    return np.where(beyond & (cos_half < 1.0), w, 0.0)
+
+
+def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: int,
+                   offset: float | None = None) -> np.ndarray:
+    """Binary visibility of the caster on the shared set's directions in each cone, in SH.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (V, 3)
+        Receivers and their unit normals (world space).
+    caster : RayCaster
+        The object's real mesh.
+    axis, cos_half : ndarray, shapes (V, 3) and (V,)
+        The cones of its bounding sphere
+        (:func:`~shtools.fields.self_visibility.bounding_cones`).
+    order : int
+        SH order ``n`` of the result.
+    n_dirs : int
+        Rays of a receiver whose cone fills its hemisphere (the set has ``2 n_dirs``).
+
+    Returns
+    -------
+    ndarray, shape (V, n*n) float64
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    dirs, proj = _set_projection(2 * int(n_dirs), order)
+    g = np.zeros((p.shape[0], order * order))
+    g[:, 0] = SQRT_4PI
+    if offset is None:
+        offset = RAY_OFFSET * caster.diagonal
+    origins = caster.embree_points(p + offset * nrm)
+    a32, n32 = axis.astype(np.float32), nrm.astype(np.float32)
+    cos32 = np.asarray(cos_half, dtype=np.float32)[:, None]
+    # the run of the set (sorted by height) each cone can hold: its heights' range
+    n = dirs.shape[0]
+    polar = np.arccos(np.clip(axis[:, 1], -1.0, 1.0))
+    half = np.arccos(np.clip(cos_half, -1.0, 1.0))
+    first = np.floor(0.5 * n * (1.0 - np.cos(np.maximum(0.0, polar - half))) - 1.0)
+    last = np.ceil(0.5 * n * (1.0 - np.cos(np.minimum(math.pi, polar + half))))
+    first = np.clip(first, 0, n).astype(np.int64)
+    last = np.clip(last, 0, n - 1).astype(np.int64)
+    for start in range(0, p.shape[0], SET_CHUNK):
+        stop = min(p.shape[0], start + SET_CHUNK)
+        lo, hi = int(first[start:stop].min()), int(last[start:stop].max()) + 1
+        if hi <= lo:
+            continue
+        d = dirs[lo:hi]
+        # directions of the set inside the cone and above the tangent plane
+        take = (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
+        vi, qi = np.nonzero(take)
+        if not vi.size:
+            continue
+        blocked = caster.occluded_embree(origins[start + vi], d[qi])
+        hits = np.zeros(take.shape, dtype=np.float32)
+        hits[vi[blocked], qi[blocked]] = 1.0
+        g[start:stop] -= hits @ proj[lo:hi]
+    return g
+
+
+@functools.lru_cache(maxsize=8)
+def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """The shared set in float32 ``(n, 3)``, its projection ``(4π / n) y(s)`` ``(n, order^2)``."""
+    from shtools.sh import basis
+
+    dirs = world_directions(n)
+    proj = (basis(dirs, order) * (4.0 * math.pi / n)).astype(np.float32)
+    d32 = np.ascontiguousarray(dirs, dtype=np.float32)
+    d32.setflags(write=False)
+    proj.setflags(write=False)
+    return d32, proj
+
+
+#: Neighbours each receiver's filter may take (the nearest ones; caps its width at about
+#: 1.5 receiver spacings where the receivers are dense enough).
+FILTER_NEIGHBOURS = 24
+
+#: Per process: the last receivers' neighbour lists and the last meshes' search trees
+#: (a static ground and a rigid object are searched once per bake).
+_NEIGHBOURS: list = []
+_SITES: list = []
+
+
+def nearest_distance(points, mesh_vertices, faces, caster=None) -> np.ndarray:
+    """Distance ``(V,)`` from each point to the nearest vertex or face centroid of a mesh.
+
+    A cheap stand-in for the distance to the surface: exact enough for the
+    filter's width, which only needs its scale.  The search tree is kept while
+    ``caster`` (the mesh's Embree scene, rebuilt whenever the mesh moves) is the same
+    object.
+    """
+    from scipy.spatial import cKDTree
+
+    if caster is not None and _SITES and _SITES[0][0] is caster:
+        tree = _SITES[0][1]
+    else:
+        v = np.asarray(mesh_vertices, dtype=np.float64)
+        tree = cKDTree(np.concatenate([v, v[np.asarray(faces)].mean(axis=1)]))
+        _SITES[:] = [(caster, tree)] if caster is not None else []
+    d, _ = tree.query(np.asarray(points, dtype=np.float64), k=1)
+    return d
+
+
+def sphere_distance(points, centers, radii) -> np.ndarray:
+    """Distance ``(V,)`` from each point to a union of spheres (0 inside one)."""
+    # relative to the spheres' centroid, in float32 (a filter width needs no more)
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    o = c.mean(axis=0)
+    p = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - o).astype(np.float32)
+    c = (c - o).astype(np.float32)
+    r = np.asarray(radii, dtype=np.float32).reshape(-1)
+    d2 = np.einsum("vk,vk->v", p, p)[:, None] - 2.0 * (p @ c.T) + np.einsum("sk,sk->s", c, c)
+    d = np.sqrt(np.maximum(d2, 0.0)) - r[None, :]
+    return np.maximum(0.0, d.min(axis=1)).astype(np.float64)
+
+
+def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
+    """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
+    (-1 for a neighbour facing away by more than ``FILTER_MIN_COS``: a wall's receivers
+    are not a floor's) and distances, kept while the same receivers come back."""
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    if _NEIGHBOURS and _NEIGHBOURS[0][0].shape == p.shape and np.array_equal(
+            _NEIGHBOURS[0][0], p) and np.array_equal(_NEIGHBOURS[0][1], nrm):
+        return _NEIGHBOURS[0][2:]
+    k = min(FILTER_NEIGHBOURS, len(p))
+    dist, idx = cKDTree(p).query(p, k=k)
+    dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
+    idx = np.where(np.einsum("vk,vnk->vn", nrm, nrm[idx]) >= FILTER_MIN_COS, idx, -1)
+    _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist)]
+    return idx, dist
+
+
+def surface_filter(values, width, idx, dist) -> np.ndarray:
+    """Gaussian filter of per-vertex values over neighbouring receivers, ``(R, C)``.
+
+    Each filtered receiver ``v`` averages the values of its neighbours within
+    ``2 width_v``, weighted by ``exp(-|p_u - p_v|^2 / 2 width_v^2) - exp(-2)`` (a
+    Gaussian lowered to 0 at the cut); a receiver of width 0 keeps its value.
+
+    Parameters
+    ----------
+    values : array_like, shape (N, C)
+    width : array_like, shape (R,)
+        Standard deviation of each filtered receiver's Gaussian (world units).
+    idx, dist : ndarray, shape (R, K)
+        Each filtered receiver's neighbours (indices into the ``N`` rows, -1 for none)
+        and their distances, itself first (:func:`neighbours`).
+    """
+    from scipy import sparse
+
+    x = np.asarray(values, dtype=np.float64)
+    sigma = np.asarray(width, dtype=np.float32).reshape(-1, 1)
+    inside = (idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
+    u = np.where(inside, dist, 0.0).astype(np.float32) / np.where(sigma > 0, sigma, 1.0)
+    # lowered to 0 at the cut (2 widths): no step where a neighbour enters the window
+    w = np.where(inside, np.maximum(np.exp(-0.5 * u * u) - np.float32(_CUT), 0.0), 0.0)
+    w[sigma[:, 0] <= 0, 0] = 1.0  # a receiver of width 0 keeps its own value
+    k = idx.shape[1]
+    m = sparse.csr_matrix((w.ravel(), np.maximum(idx, 0).ravel(), np.arange(0, w.size + 1, k)),
+                          shape=(len(w), len(x)))
+    return (m @ x) / w.sum(axis=1, dtype=np.float64)[:, None]
+
+
+def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
+                  spheres=None, lights=()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The traced part of an object's shadow on receivers, and each one's hand-over weight.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (R, 3)
+        The receivers (world space) and their unit normals.
+    vertices, faces : array_like, shapes (V, 3) and (F, 3)
+        The posed mesh (its bounding sphere: the box centre and the farthest vertex).
+    caster : RayCaster
+        Its Embree scene.
+    order : int
+        Shading order.
+    n_dirs : int
+        Rays of a receiver whose cone fills its hemisphere.
+    spheres : tuple of ndarray, shapes (S, 3) and (S,), optional
+        Spheres bounding the mesh (its blocker's): the filter's distance to the mesh
+        is the distance to their union, never more than the true one (a contact
+        shadow is never filtered wider than its distance allows); without them, the
+        distance to the mesh's nearest vertex or face centroid.
+    lights : sequence of (position (3,), radius)
+        Spherical lights: a receiver that sees one behind the object is traced
+        however far (:func:`light_weights`).
+
+    Returns
+    -------
+    rows : ndarray of int, shape (T,)
+        Indices into ``points`` of the receivers of weight above 0.
+    weight : ndarray, shape (T,)
+        Their weights of the traced mesh (the rest is the spheres').
+    visibility : ndarray, shape (T, order^2) float64
+        The filtered traced visibility.
+    """
+    from shtools.fields.self_visibility import bounding_cones
+
+    v = np.asarray(vertices, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
+    axis, cos_half = bounding_cones(p, nrm, center, radius)
+    weight = handover_weights(cone_rays(cos_half, n_dirs))
+    for position, light_radius in lights:
+        weight = np.maximum(weight, light_weights(p, axis, cos_half, center, radius,
+                                                  position, light_radius))
+    rows = np.flatnonzero(weight > 0)
+    weight = weight[rows]
+    if not rows.size:
+        return rows, weight, np.zeros((0, order * order))
+    g = set_visibility(p[rows], nrm[rows], caster, axis[rows], cos_half[rows], order, n_dirs)
+    idx, dist = neighbours(p, nrm)
+    # neighbours among the traced receivers only (row of each in ``rows``, -1 if none)
+    where = np.full(len(p) + 1, -1)
+    where[rows] = np.arange(len(rows))
+    local = where[idx[rows]]  # idx -1 (facing away) reads the sentinel
+    # receivers with no blocked ray around them keep the exact constant
+    hit = np.zeros(len(rows) + 1, dtype=bool)
+    hit[:-1] = g[:, 1:].any(axis=1) | (g[:, 0] != SQRT_4PI)
+    busy = np.flatnonzero(hit[local].any(axis=1))
+    if busy.size:
+        at = rows[busy]
+        if spheres is not None and len(spheres[1]):
+            near = sphere_distance(p[at], *spheres)
+        else:
+            near = nearest_distance(p[at], v, faces, caster)
+        width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
+        around = local[busy]
+        g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
+    return rows, weight, g

@@ -1,0 +1,137 @@
+"""A traced object's shadow on the ground (shtools.scene.traced_shadows): the shared
+direction set against closed forms, the hand-over weights, the surface filter."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import trimesh
+
+from shtools.geometry.raycast import RayCaster
+from shtools.scene.traced_shadows import (
+    FILTER_NEIGHBOURS,
+    HANDOVER_RAYS,
+    handover_weights,
+    neighbours,
+    set_visibility,
+    surface_filter,
+    traced_ground,
+    world_directions,
+)
+
+
+def _unit_sphere():
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    v = sphere.vertices / np.linalg.norm(sphere.vertices, axis=1)[:, None]
+    return v, sphere.faces, RayCaster(v, sphere.faces)
+
+
+def test_world_directions_are_an_equal_area_set():
+    d = world_directions(512)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, rtol=1e-12)
+    # equal-area bands about +Y: the mean of y over the set is exactly 0, of y^2 is 1/3 up to
+    # the midpoint rule's O(1/n^2)
+    assert abs(d[:, 1].mean()) < 1e-12
+    assert abs((d[:, 1] ** 2).mean() - 1.0 / 3.0) < 1e-5
+
+
+def test_set_visibility_of_a_sphere_is_its_cap_in_closed_form():
+    """From distance D the unit sphere blocks the cap of half-angle a = asin(1/D) about
+    the direction to it: g_00 = (4 pi - 2 pi (1 - cos a)) / sqrt(4 pi) and, along the
+    axis, the band-1 coefficient -sqrt(3 / 4 pi) * pi sin^2 a (the integral of
+    cos over the cap)."""
+    from shtools.fields.self_visibility import bounding_cones
+
+    _, _, caster = _unit_sphere()
+    dist = np.array([1.5, 2.5, 4.0])
+    pts = np.column_stack([np.zeros(3), np.zeros(3), -dist])
+    nrm = np.tile([0.0, 0.0, 1.0], (3, 1))  # facing the sphere: the cap is above
+    axis, cos_half = bounding_cones(pts, nrm, np.zeros(3), 1.0)
+    g = set_visibility(pts, nrm, caster, axis, cos_half, 2, 4096)
+    a = np.arcsin(1.0 / dist)
+    g00 = (4 * math.pi - 2 * math.pi * (1 - np.cos(a))) / math.sqrt(4 * math.pi)
+    # real SH y_1,0 = sqrt(3 / 4 pi) z (index 2 of order 2)
+    g10 = -math.sqrt(3 / (4 * math.pi)) * math.pi * np.sin(a) ** 2
+    # 8,192 directions of 1.5e-3 sr each: the cap's rim cuts ~ sqrt(k) of them
+    np.testing.assert_allclose(g[:, 0], g00, rtol=0, atol=4e-3)
+    np.testing.assert_allclose(g[:, 2], g10, rtol=0, atol=4e-3)
+
+
+def test_handover_weights_and_the_receivers_traced():
+    """The cone of the unit sphere from distance D holds n (1 - sqrt(1 - 1/D^2)) rays at
+    hemisphere density n (closed form): weight 0 at or below HANDOVER_RAYS[0] rays (not
+    traced: those receivers keep the blocker), 1 at or above HANDOVER_RAYS[1], a
+    smoothstep between."""
+    v, f, caster = _unit_sphere()
+    d = np.array([1.2, 2.0, 2.6, 3.0, 3.4, 3.6, 6.0])
+    pts = np.column_stack([np.zeros_like(d), np.zeros_like(d), -d])
+    nrm = np.tile([0.0, 0.0, 1.0], (len(d), 1))
+    rays = 96 * (1.0 - np.sqrt(1.0 - 1.0 / d ** 2))
+    want = np.clip((rays - HANDOVER_RAYS[0]) / (HANDOVER_RAYS[1] - HANDOVER_RAYS[0]), 0, 1)
+    want = want * want * (3 - 2 * want)
+    rows, w, g = traced_ground(pts, nrm, v, f, caster, 3, 96)
+    assert rows.tolist() == np.flatnonzero(want > 0).tolist() == [0, 1, 2, 3, 4, 5]
+    np.testing.assert_allclose(w, want[rows], rtol=1e-12)
+    assert w[0] == 1.0 and 0 < w[-1] < 1 and np.all(np.diff(w) <= 0) and g.shape == (6, 9)
+    np.testing.assert_allclose(handover_weights([0.0, 100.0]), [0.0, 1.0])
+
+
+def test_surface_filter_keeps_linear_fields_and_zero_widths():
+    """A symmetric Gaussian average of a linear field on a regular grid is the field
+    (inside, where every neighbour has its mirror image); a receiver of width 0 keeps
+    its value; receivers facing away are no neighbours."""
+    n = 15
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    pts = np.column_stack([i.ravel() * 0.1, np.zeros(n * n), j.ravel() * 0.1])
+    nrm = np.tile([0.0, 1.0, 0.0], (n * n, 1))
+    x = np.column_stack([1.0 + 2.0 * pts[:, 0] - pts[:, 2], pts[:, 0] * 0 + 3.0])
+    idx, dist = neighbours(pts, nrm)
+    assert idx.shape == (n * n, FILTER_NEIGHBOURS) and np.all(idx[:, 0] == np.arange(n * n))
+    width = np.full(n * n, 0.1)
+    width[0] = 0.0
+    y = surface_filter(x, width, idx, dist)
+    inside = (i.ravel() >= 3) & (i.ravel() < n - 3) & (j.ravel() >= 3) & (j.ravel() < n - 3)
+    np.testing.assert_allclose(y[inside], x[inside], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(y[0], x[0])
+    noisy = x + np.random.default_rng(0).normal(0, 0.1, x.shape)
+    flipped = nrm.copy()
+    flipped[::2] *= -1.0  # every other receiver faces away: only the others are averaged
+    idx, dist = neighbours(pts, flipped)
+    assert np.all((idx < 0) | (idx % 2 == np.arange(n * n)[:, None] % 2))
+    y = surface_filter(noisy, np.full(n * n, 0.1), idx, dist)
+    k = 7 * n + 8  # an inside receiver facing up (odd index)
+    up = np.flatnonzero(flipped[:, 1] > 0)
+    assert k in up
+    d2 = ((pts[up] - pts[k]) ** 2).sum(axis=1)
+    # the nearest FILTER_NEIGHBOURS of k hold every same-facing receiver within 2 widths
+    near = d2 <= (2 * 0.1) ** 2 + 1e-12
+    wts = np.exp(-0.5 * d2[near] / 0.01) - math.exp(-2.0)
+    want = (wts[:, None] * noisy[up][near]).sum(axis=0) / wts.sum()
+    np.testing.assert_allclose(y[k], want, rtol=1e-6)  # weights in float32
+
+
+def test_runtime_splits_a_cluster_whose_rows_skip_different_blockers():
+    """Only the receivers of weight above 0 skip the traced object's blocker, so one
+    receiver cluster may hold rows that skip it and rows that do not: the runtime
+    splits it, each row getting what it would alone."""
+    from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker
+    from shtools.runtime.clusters import ReceiverClusters
+
+    pts = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.2, 0.0, 0.0], [0.3, 0.0, 0.0]])
+    nrm = np.tile([0.0, 1.0, 0.0], (4, 1))
+    a = SphereBlocker(centers=np.array([[0.1, 1.0, 0.0]]), radii=np.array([0.5]))
+    given = np.zeros((2, 16), dtype=np.float32)
+    given[:, 0] = 3.0
+    given[:, 2] = 0.5
+    rt = ShadowRuntime(ShadowSettings(order=4, processes=1))
+    one = ReceiverClusters.from_labels([0, 0, 0, 0])
+    g = rt.visibility(pts, nrm, [a], clusters=one, self_visibility=[
+        SelfVisibility(None, np.array([0, 1]), blocker=0, visibility=given)])
+    plain = rt.visibility(pts, nrm, [a], clusters=one)
+    # rows 0, 1 skip the sphere: the given visibility times exp(0) (float32 product)
+    np.testing.assert_allclose(g[:2], given, rtol=0, atol=2e-6)
+    np.testing.assert_allclose(g[2:], plain[2:], rtol=0, atol=1e-6)
+    assert one.split([0, 0, 0, 0]) is one
+    split = one.split([1, 1, 0, 0])
+    assert split.n_clusters == 2 and split.labels[0] == split.labels[1] != split.labels[2]
