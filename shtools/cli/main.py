@@ -38,6 +38,7 @@ COMMANDS = {
     "field": "shtools.cli.field:field",
     "light": "shtools.cli.light:light",
     "bake": "shtools.cli.bake:bake",
+    "cache": "shtools.cli.cache:cache",
     "export": "shtools.cli.export:export",
     "eval": "shtools.cli.eval:eval_cmd",
     "info": "shtools.cli.assets:info",

@@ -436,6 +436,7 @@ def bake_to_file(
     workers: int | None = None,
     progress=None,
     split_frames: bool | None = None,
+    cache=None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -446,8 +447,11 @@ def bake_to_file(
     wall time is the frames and their writes), ``vertex_frames_per_second``
     (frames x vertices per wall second after the set-up), ``method``,
     ``output``, ``pool`` (scheduler, workers, per-worker task counts and
-    seconds).  ``processes``, ``scheduler``, ``workers`` and ``split_frames`` as in
-    :func:`bake_scene`; ``progress`` a progress factory
+    seconds), ``cache`` (the set-up cache's location, ``enabled``, ``hits`` and
+    ``misses``; :mod:`shtools.cache`).  ``cache`` is the
+    :class:`~shtools.cache.SetupCache` (None: the environment's default, False:
+    none; the asset is the same bytes either way).  ``processes``, ``scheduler``,
+    ``workers`` and ``split_frames`` as in :func:`bake_scene`; ``progress`` a progress factory
     (:mod:`shtools.progress`) for the set-up and the frames; ``force`` bakes past
     :func:`check_bake_size`'s limits.
     """
@@ -457,7 +461,7 @@ def bake_to_file(
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
         raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
-    prepared = prepare_scene(scene, progress=progress)
+    prepared = prepare_scene(scene, progress=progress, cache=cache)
     frames = range(scene.settings.frames) if frames is None else frames
     if not force:
         check_bake_size(len(frames), prepared.n_vertices, store_visibility,
@@ -492,6 +496,7 @@ def bake_to_file(
         "method": method or scene.settings.method,
         "output": os.fspath(output),
         "pool": pool,
+        "cache": prepared.cache.summary(),
         # not stored in the asset: its bytes must not depend on how it was computed
         "processes": processes,
     }

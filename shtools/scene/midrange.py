@@ -14,7 +14,6 @@ asset or inline ``coeffs`` (only order ``n`` is known).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,7 +82,7 @@ class MidrangeEnvironment:
         return out
 
 
-def prepare_midrange(scene, env_sh, inputs: dict) -> MidrangeEnvironment | None:
+def prepare_midrange(scene, env_sh, inputs: dict, cache=None) -> MidrangeEnvironment | None:
     """The scene's finite environment sphere, or None for an environment at infinity.
 
     Parameters
@@ -93,6 +92,8 @@ def prepare_midrange(scene, env_sh, inputs: dict) -> MidrangeEnvironment | None:
         The environment as the bake prepared it (intensity and rotation applied).
     inputs : dict
         Provenance; a scaling asset is added.
+    cache : shtools.cache.SetupCache, optional
+        Where an image projected again at the scaling order is read from or stored.
     """
     env = scene.environment
     if env.radius is None or env_sh is None:
@@ -122,11 +123,9 @@ def prepare_midrange(scene, env_sh, inputs: dict) -> MidrangeEnvironment | None:
                                     k_range=(0.0, DEFAULT_KMAX))
     coeffs = env_sh
     if env.kind == "image" and scale_order > order:
-        from shtools.lighting.environment import project_environment
+        from shtools.scene.prepare import projected_environment
 
-        coeffs, _ = project_environment(env.path, scale_order,
-                                        rotate_y=math.degrees(env.rotate))
-        coeffs = np.asarray(coeffs, dtype=float) * env.intensity
+        coeffs = projected_environment(env.path, scale_order, env.rotate, cache) * env.intensity
     return MidrangeEnvironment(np.asarray(env.center, dtype=float), float(env.radius),
                                ScalingTable(table), np.asarray(coeffs, dtype=float), order,
                                scene.path)

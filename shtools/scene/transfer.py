@@ -53,8 +53,13 @@ def uses_self_visibility(obj, default: bool = True) -> bool:
     return bool(choice) and obj.spec.receives and obj.spec.blocks and obj.motion is None
 
 
-def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None
-                    ) -> tuple[np.ndarray, Path | None]:
+#: Algorithm version of the cached self-visibility log (:mod:`shtools.cache`): raise it
+#: when :func:`object_self_log`'s traced result changes.
+SELF_LOG_VERSION = 1
+
+
+def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None,
+                    cache=None) -> tuple[np.ndarray, Path | None]:
     """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32.
 
     From the first source that applies: the ``transfer`` asset the scene names
@@ -70,6 +75,9 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         The runtime's accumulation order.
     log : callable, optional
         Progress messages.
+    cache : shtools.cache.SetupCache, optional
+        Where the traced log (and a convex mesh's zero) is read from when its
+        mesh, normals and order were traced before, and stored otherwise.
 
     Returns
     -------
@@ -77,10 +85,7 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     path : Path or None
         The ``transfer`` asset read (for the bake's inputs), None otherwise.
     """
-    import trimesh
-
     source = getattr(obj.spec, "self_visibility", None)
-    size = acc_order * acc_order
     if isinstance(source, str | Path):
         return _from_asset(obj, Path(source), acc_order), Path(source)
     stored = getattr(obj.blocker_data, "self_log", None)
@@ -89,16 +94,32 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         # accumulation order (fields sampled before it was stored there) would cost
         # accuracy (dragon: 3.5 % instead of 2.4 %), so such an object is traced
         return stored, None
-    mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
+    if cache is None:
+        return _traced_self_log(obj, acc_order, log), None
+    from shtools.fields.self_visibility import DEFAULT_DIRECTIONS, LOG_FLOOR
+
+    parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
+             "faces": np.asarray(obj.faces), "order": int(acc_order),
+             "n_dirs": DEFAULT_DIRECTIONS, "floor": LOG_FLOOR}
+    got = cache.fetch("self_log", SELF_LOG_VERSION, parts,
+                      lambda: {"log": _traced_self_log(obj, acc_order, log)})
+    return got["log"], None
+
+
+def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
+    """The self-visibility log ``(V, acc_order^2)`` float32 ray traced now (zero if convex)."""
+    import trimesh
+
     if is_convex(obj.vertices, obj.faces):
-        return np.zeros((len(obj.vertices), size), dtype=np.float32), None
+        return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
     from shtools.fields.self_visibility import mesh_transfer
 
+    mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if log:
         log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
-            "cache it with 'shtools transfer')")
+            "the set-up cache keeps it for the next bake)")
     _, f, _ = mesh_transfer(mesh, acc_order, normals=obj.normals)
-    return f.astype(np.float32), None
+    return f.astype(np.float32)
 
 
 #: A closed mesh whose volume is within this fraction of its convex hull's is convex.
@@ -274,8 +295,27 @@ def traced_shadow_visibility(points, normals, vertices, caster, order: int,
                                    n_dirs=n_dirs).astype(np.float32)
 
 
-def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE) -> np.ndarray:
-    """Rest-pose local visibility log ``(V, acc_order^2)`` float32 of a skinned object."""
+#: Algorithm version of the cached local visibility log (:mod:`shtools.cache`).
+LOCAL_LOG_VERSION = 1
+
+
+def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE, *,
+                     cache=None) -> np.ndarray:
+    """Rest-pose local visibility log ``(V, acc_order^2)`` float32 of a skinned object.
+
+    ``cache`` (:class:`shtools.cache.SetupCache`): read from it when the same rest
+    mesh was traced at this order and distance before, stored in it otherwise.
+    """
+    if cache is None:
+        return _traced_local_log(obj, acc_order, distance)
+    parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
+             "faces": np.asarray(obj.faces), "order": int(acc_order),
+             "distance": float(distance)}
+    return cache.fetch("local_log", LOCAL_LOG_VERSION, parts,
+                       lambda: {"log": _traced_local_log(obj, acc_order, distance)})["log"]
+
+
+def _traced_local_log(obj, acc_order: int, distance: float) -> np.ndarray:
     import trimesh
 
     from shtools.fields.self_visibility import self_visibility, self_visibility_log
