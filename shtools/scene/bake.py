@@ -41,6 +41,7 @@ from shtools.scene.shadows import (
     BakeRun,
     bake_method_names,
     shade_frame,
+    visibility_needed,
 )
 
 #: the three jobs' public names, importable from here as before the split
@@ -121,6 +122,9 @@ class FrameBaker:
         self.with_meshes = self.method.needs_meshes or any(
             LIGHT_SHADOWS[spec.shadows].needs_meshes for spec in scene.lights)
         self.store_visibility = store_visibility
+        #: False: no environment and only lights shadowed without the SH visibility
+        #: (ssoc, raytrace): the frames evaluate no visibility (shadows.visibility_needed)
+        self.needs_visibility = visibility_needed(prepared, store_visibility)
         self.runtime = ShadowRuntime(runtime_settings(scene, method, processes),
                                      tables=prepared.tables, part_pool=part_pool)
         self.run = BakeRun(prepared, self.runtime, method, raytrace_dirs)
@@ -140,9 +144,10 @@ class FrameBaker:
     def frame(self, frame: int, t: float) -> FrameResult:
         """Pose, shadow and shade scene frame ``frame`` at time ``t``."""
         start = time.perf_counter()
+        # the traced shadows and self-visibilities of a frame only feed its visibility
         state = pose_frame(self.run.prepared, float(t), with_meshes=self.with_meshes,
-                           clusters=self.run.cache.get("clusters"))
-        vis = self.method.visibility(self.run, state)
+                           trace=self.needs_visibility, clusters=self.run.cache.get("clusters"))
+        vis = self.method.visibility(self.run, state) if self.needs_visibility else None
         setup = self.run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
         radiance = shade_frame(self.run, state, vis)
         return FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
@@ -318,7 +323,9 @@ def bake_scene(
                         prepared.receivers_move()))
         # Clusters from the scene's frame 0, whatever range is baked: a partial
         # bake (--frames 2:4) gives the same values as those frames of a full one.
-        clusters = bake_clusters(prepared, method, 0.0)
+        # (none when the frames evaluate no visibility: nothing shades through it)
+        clusters = (bake_clusters(prepared, method, 0.0)
+                    if visibility_needed(prepared, store_visibility) else None)
         items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
         if split_frames is None:  # few frames for a cluster: share each frame instead
             from shtools.runtime.parallel import FRAME_PARTS
