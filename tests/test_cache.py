@@ -232,13 +232,13 @@ def _count_transfers(monkeypatch):
     import shtools.fields.self_visibility as sv
 
     calls = []
-    real = sv.mesh_transfer
+    real = sv.hemisphere_transfer
 
     def counting(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(sv, "mesh_transfer", counting)
+    monkeypatch.setattr(sv, "hemisphere_transfer", counting)
     return calls
 
 

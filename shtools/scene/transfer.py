@@ -2,7 +2,7 @@
 
 A rigid object that both receives and casts (``role = "both"``, no skin) is
 shadowed on its own vertices by its **real mesh**: its self-visibility is ray
-traced once in its own frame (:func:`shtools.fields.self_visibility.mesh_transfer`,
+traced once in its own frame (:func:`shtools.fields.self_visibility.hemisphere_transfer`,
 or read from a ``transfer`` asset), and every frame the runtime adds its log,
 rotated with the object, to the log of every *other* blocker
 (:class:`shtools.runtime.SelfVisibility`).  The object's own spheres then shadow
@@ -55,7 +55,7 @@ def uses_self_visibility(obj, default: bool = True) -> bool:
 
 #: Algorithm version of the cached self-visibility log (:mod:`shtools.cache`): raise it
 #: when :func:`object_self_log`'s traced result changes.
-SELF_LOG_VERSION = 1
+SELF_LOG_VERSION = 2
 
 
 def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None,
@@ -96,11 +96,11 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         return stored, None
     if cache is None:
         return _traced_self_log(obj, acc_order, log), None
-    from shtools.fields.self_visibility import DEFAULT_DIRECTIONS, LOG_FLOOR
+    from shtools.fields.self_visibility import LOG_FLOOR, TRANSFER_DIRECTIONS
 
     parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
              "faces": np.asarray(obj.faces), "order": int(acc_order),
-             "n_dirs": DEFAULT_DIRECTIONS, "floor": LOG_FLOOR}
+             "estimator": "hemisphere", "n_dirs": TRANSFER_DIRECTIONS, "floor": LOG_FLOOR}
     got = cache.fetch("self_log", SELF_LOG_VERSION, parts,
                       lambda: {"log": _traced_self_log(obj, acc_order, log)})
     return got["log"], None
@@ -112,13 +112,15 @@ def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
 
     if is_convex(obj.vertices, obj.faces):
         return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
-    from shtools.fields.self_visibility import mesh_transfer
+    from shtools.fields.self_visibility import hemisphere_transfer
 
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if log:
         log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
             "the set-up cache keeps it for the next bake)")
-    _, f, _ = mesh_transfer(mesh, acc_order, normals=obj.normals)
+    # rays over each vertex's own hemisphere only: fewer than the product rule of
+    # `shtools transfer` casts, at no larger error (fields.self_visibility.TRANSFER_DIRECTIONS)
+    _, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
     return f.astype(np.float32)
 
 
