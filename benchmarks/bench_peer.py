@@ -46,7 +46,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data"
+#: real meshes and probes (``SHTOOLS_SHARED_DATA`` overrides, as for the tests)
+DATA = Path(os.environ.get("SHTOOLS_SHARED_DATA", REPO.parent / "shared" / "data"))
 BUILD = REPO / "build" / "bench_peer"
 #: Directions of the reference ray tracer.
 REFERENCE_DIRECTIONS = 3200

@@ -23,6 +23,7 @@ is ``time.process_time`` per vertex (Embree's threads included).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -30,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data"
+#: real meshes and probes (``SHTOOLS_SHARED_DATA`` overrides, as for the tests)
+DATA = Path(os.environ.get("SHTOOLS_SHARED_DATA", REPO.parent / "shared" / "data"))
 MESHES = ("stanford-bunny", "armadillo", "dragon")
 RAYS = (512, 800, 1024, 1280, 1600)
 ORDER = 6
@@ -83,7 +85,7 @@ def _hemisphere_rows(mesh, normals, rows, n_rays: int) -> np.ndarray:
     from shtools.fields.self_visibility import hemisphere_visibility
     from shtools.geometry.raycast import RayCaster
 
-    caster = RayCaster.from_meshes([mesh])
+    caster = RayCaster(np.asarray(mesh.vertices), np.asarray(mesh.faces), robust=False)
     return hemisphere_visibility(np.asarray(mesh.vertices)[rows], normals, caster, ORDER,
                                  n_dirs=n_rays)
 
