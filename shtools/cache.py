@@ -1,8 +1,8 @@
 """The set-up cache: what a bake computes before its frames, stored once by content.
 
-A bake's set-up (the exact self-transfers of its rigid objects, sphere fits and
-their trees, the local visibility of skinned objects, environment images
-projected to SH) depends only on its inputs, so it is computed once and read
+A bake's set-up (the exact self-transfers of its rigid objects, sphere fits made
+on the fly, the local visibility of skinned objects, environment images projected
+to SH, mid-range scaling tables) depends only on its inputs, so it is computed once and read
 back on every later bake of the same inputs (``docs/cache.md``).
 
 * **Key.** The SHA-256 of everything the result depends on: the arrays the

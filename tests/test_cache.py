@@ -331,3 +331,25 @@ def test_a_corrupt_entry_in_a_bake_is_recomputed_with_one_warning(tmp_path, run_
     assert summary["cache"]["misses"] == 1
     assert sum(line.startswith("warning:") for line in err.splitlines()) == 1, err
     assert (tmp_path / "a.h5").read_bytes() == (tmp_path / "b.h5").read_bytes()
+
+
+def test_a_midrange_scaling_table_is_built_once(tmp_path):
+    """The mid-range environment's scaling table (built in memory when the scene names
+    no scaling asset) comes back from the cache equal, scalars as the same Python values."""
+    from shtools.scene.midrange import DEFAULT_KMAX, DEFAULT_SAMPLES, _scaling_table
+    from shtools.sh.scaling import build_scaling_table
+
+    cache, warnings = _cache(tmp_path / "c")
+    first = _scaling_table(4, cache)
+    second = _scaling_table(4, cache)
+    assert (cache.hits, cache.misses) == (1, 1) and warnings == []
+    # built independently, without a cache
+    want = build_scaling_table(4, "midrange", samples=DEFAULT_SAMPLES,
+                               k_range=(0.0, DEFAULT_KMAX))
+    for table in (first, second):
+        assert table.keys() == want.keys()
+        for k, v in want.items():
+            if isinstance(v, np.ndarray):
+                assert table[k].dtype == v.dtype and table[k].tobytes() == v.tobytes(), k
+            else:
+                assert type(table[k]) is type(v) and table[k] == v, k

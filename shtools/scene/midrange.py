@@ -115,12 +115,9 @@ def prepare_midrange(scene, env_sh, inputs: dict, cache=None) -> MidrangeEnviron
         inputs["environment.scaling"] = env.scaling
         scale_order = int(table["order"])
     else:
-        from shtools.sh.scaling import build_scaling_table
-
         scale_order = (min(order + EXTRA_BANDS, MAX_SCALING_ORDER) if env.kind == "image"
                        else order)
-        table = build_scaling_table(scale_order, "midrange", samples=DEFAULT_SAMPLES,
-                                    k_range=(0.0, DEFAULT_KMAX))
+        table = _scaling_table(scale_order, cache)
     coeffs = env_sh
     if env.kind == "image" and scale_order > order:
         from shtools.scene.prepare import projected_environment
@@ -129,3 +126,25 @@ def prepare_midrange(scene, env_sh, inputs: dict, cache=None) -> MidrangeEnviron
     return MidrangeEnvironment(np.asarray(env.center, dtype=float), float(env.radius),
                                ScalingTable(table), np.asarray(coeffs, dtype=float), order,
                                scene.path)
+
+
+#: Algorithm version of a cached mid-range scaling table (:mod:`shtools.cache`).
+SCALING_TABLE_VERSION = 1
+
+
+def _scaling_table(order: int, cache=None) -> dict:
+    """The plain mid-range scaling table at ``order`` built in memory (read from
+    ``cache`` when it was built before): its arrays, and its scalars as Python values."""
+    from shtools.sh.scaling import build_scaling_table
+
+    def build():
+        return build_scaling_table(order, "midrange", samples=DEFAULT_SAMPLES,
+                                   k_range=(0.0, DEFAULT_KMAX))
+
+    if cache is None:
+        return build()
+    parts = {"order": int(order), "function": "midrange", "samples": DEFAULT_SAMPLES,
+             "k_range": [0.0, DEFAULT_KMAX]}
+    got = cache.fetch("scaling_table", SCALING_TABLE_VERSION, parts, build)
+    # a hit stores scalars as 0-d arrays: the same Python values back, on a miss too
+    return {k: (np.asarray(v).item() if np.ndim(v) == 0 else v) for k, v in got.items()}

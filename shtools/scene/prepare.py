@@ -253,8 +253,8 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
 
     ``cache`` is the set-up cache (:class:`shtools.cache.SetupCache`): the
     self-visibility of rigid objects, the local visibility of skinned ones,
-    sphere fits and projected environment images are read from it when their
-    inputs were computed before, and stored in it otherwise.  None: the
+    sphere fits, projected environment images and mid-range scaling tables are
+    read from it when their inputs were computed before, and stored in it otherwise.  None: the
     environment's default (:meth:`~shtools.cache.SetupCache.from_environment`);
     False: no cache.  The prepared scene is the same either way.
 
