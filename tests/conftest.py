@@ -3,6 +3,7 @@ stacks of every process of a test that hangs (see ``pytest_timeout_set_timer`` b
 
 from __future__ import annotations
 
+import itertools
 import os
 import signal
 import threading
@@ -30,6 +31,37 @@ def run_cli():
         return code, out.getvalue(), err.getvalue()
 
     return run
+
+
+_CACHE_COUNT = itertools.count()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _setup_cache_session(tmp_path_factory):
+    """The set-up cache (``shtools.cache``) of the whole session in its temp folder, never
+    the user's ``~/.cache`` (module fixtures that bake and CLI subprocesses inherit it)."""
+    saved = {k: os.environ.get(k) for k in ("SHTOOLS_CACHE", "SHTOOLS_NO_CACHE",
+                                            "SHTOOLS_CACHE_SIZE")}
+    base = tmp_path_factory.mktemp("setup-cache")
+    os.environ["SHTOOLS_CACHE"] = str(base / "session")
+    os.environ.pop("SHTOOLS_NO_CACHE", None)
+    os.environ.pop("SHTOOLS_CACHE_SIZE", None)
+    yield base
+    for k, v in saved.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
+
+
+@pytest.fixture(autouse=True)
+def _setup_cache(_setup_cache_session, monkeypatch, request):
+    """A set-up cache folder of each test's own: a test sees only the entries it made, so
+    a test that counts what a bake computes counts the same with or without other tests."""
+    name = "".join(c if c.isalnum() else "_" for c in request.node.nodeid)[-80:]
+    path = _setup_cache_session / f"{next(_CACHE_COUNT)}-{name}"
+    monkeypatch.setenv("SHTOOLS_CACHE", str(path))
+    return path
 
 
 @pytest.fixture

@@ -14,6 +14,7 @@ from shtools.cli._common import (
     scheduler_options,
     setting_type,
 )
+from shtools.cli.cache import cache_options, open_cache
 from shtools.scene.shadows import bake_method_names
 
 
@@ -41,10 +42,11 @@ from shtools.scene.shadows import bake_method_names
                    "a frame.  Same bytes.")
 @click.option("--force", is_flag=True,
               help="Bake even past the size limits (1e9 vertex-frames, 16 GiB of output).")
+@cache_options
 @json_option
 @errors_name("scene")
 def bake(scene, output, frames_text, method, store_visibility, processes, scheduler, workers,
-         split_frames, force, as_json):
+         split_frames, force, cache_dir, no_cache, as_json):
     """Bake SCENE (TOML) frame by frame into the bake asset OUTPUT.
 
     Frames are independent tasks spread over the local cores (or a Dask
@@ -63,7 +65,7 @@ def bake(scene, output, frames_text, method, store_visibility, processes, schedu
     summary = bake_to_file(parsed, output, frames=frames, method=method,
                            store_visibility=store_visibility, processes=processes,
                            scheduler=scheduler, workers=workers, progress=progress, force=force,
-                           split_frames=split_frames)
+                           split_frames=split_frames, cache=open_cache(cache_dir, no_cache))
     human = (
         f"baked {summary['frames']} frame(s) x {summary['vertices']} vertices "
         f"({summary['method']}) in {summary['seconds']:.2f} s "

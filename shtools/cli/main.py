@@ -39,6 +39,7 @@ COMMANDS = {
     "field": "shtools.cli.field:field",
     "light": "shtools.cli.light:light",
     "bake": "shtools.cli.bake:bake",
+    "cache": "shtools.cli.cache:cache",
     "export": "shtools.cli.export:export",
     "relight": "shtools.cli.relight:relight",
     "view": "shtools.cli.view:view",

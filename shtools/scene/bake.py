@@ -41,6 +41,7 @@ from shtools.scene.shadows import (
     BakeRun,
     bake_method_names,
     shade_frame,
+    visibility_needed,
 )
 
 #: the three jobs' public names, importable from here as before the split
@@ -121,6 +122,9 @@ class FrameBaker:
         self.with_meshes = self.method.needs_meshes or any(
             LIGHT_SHADOWS[spec.shadows].needs_meshes for spec in scene.lights)
         self.store_visibility = store_visibility
+        #: False: no environment and only lights shadowed without the SH visibility
+        #: (ssoc, raytrace): the frames evaluate no visibility (shadows.visibility_needed)
+        self.needs_visibility = visibility_needed(prepared, store_visibility)
         self.runtime = ShadowRuntime(runtime_settings(scene, method, processes),
                                      tables=prepared.tables, part_pool=part_pool)
         self.run = BakeRun(prepared, self.runtime, method, raytrace_dirs)
@@ -140,9 +144,10 @@ class FrameBaker:
     def frame(self, frame: int, t: float) -> FrameResult:
         """Pose, shadow and shade scene frame ``frame`` at time ``t``."""
         start = time.perf_counter()
+        # the traced shadows and self-visibilities of a frame only feed its visibility
         state = pose_frame(self.run.prepared, float(t), with_meshes=self.with_meshes,
-                           clusters=self.run.cache.get("clusters"))
-        vis = self.method.visibility(self.run, state)
+                           trace=self.needs_visibility, clusters=self.run.cache.get("clusters"))
+        vis = self.method.visibility(self.run, state) if self.needs_visibility else None
         setup = self.run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
         radiance = shade_frame(self.run, state, vis)
         return FrameResult(frame, float(t), np.asarray(radiance, dtype=np.float32),
@@ -318,7 +323,9 @@ def bake_scene(
                         prepared.receivers_move()))
         # Clusters from the scene's frame 0, whatever range is baked: a partial
         # bake (--frames 2:4) gives the same values as those frames of a full one.
-        clusters = bake_clusters(prepared, method, 0.0)
+        # (none when the frames evaluate no visibility: nothing shades through it)
+        clusters = (bake_clusters(prepared, method, 0.0)
+                    if visibility_needed(prepared, store_visibility) else None)
         items = [(int(f), float(t)) for f, t in zip(frames, times, strict=True)]
         if split_frames is None:  # few frames for a cluster: share each frame instead
             from shtools.runtime.parallel import FRAME_PARTS
@@ -440,6 +447,7 @@ def bake_to_file(
     workers: int | None = None,
     progress=None,
     split_frames: bool | None = None,
+    cache=None,
 ) -> dict:
     """Bake ``scene`` into the asset ``output``; returns a summary dict.
 
@@ -450,8 +458,11 @@ def bake_to_file(
     wall time is the frames and their writes), ``vertex_frames_per_second``
     (frames x vertices per wall second after the set-up), ``method``,
     ``output``, ``pool`` (scheduler, workers, per-worker task counts and
-    seconds).  ``processes``, ``scheduler``, ``workers`` and ``split_frames`` as in
-    :func:`bake_scene`; ``progress`` a progress factory
+    seconds), ``cache`` (the set-up cache's location, ``enabled``, ``hits`` and
+    ``misses``; :mod:`shtools.cache`).  ``cache`` is the
+    :class:`~shtools.cache.SetupCache` (None: the environment's default, False:
+    none; the asset is the same bytes either way).  ``processes``, ``scheduler``,
+    ``workers`` and ``split_frames`` as in :func:`bake_scene`; ``progress`` a progress factory
     (:mod:`shtools.progress`) for the set-up and the frames; ``force`` bakes past
     :func:`check_bake_size`'s limits.
     """
@@ -461,7 +472,7 @@ def bake_to_file(
     if str(parent) and not parent.is_dir():  # fail before minutes of fitting, not after
         raise AssetError("output folder does not exist; create it first", output)
     start = time.perf_counter()
-    prepared = prepare_scene(scene, progress=progress)
+    prepared = prepare_scene(scene, progress=progress, cache=cache)
     frames = range(scene.settings.frames) if frames is None else frames
     if not force:
         check_bake_size(len(frames), prepared.n_vertices, store_visibility,
@@ -496,6 +507,7 @@ def bake_to_file(
         "method": method or scene.settings.method,
         "output": os.fspath(output),
         "pool": pool,
+        "cache": prepared.cache.summary(),
         # not stored in the asset: its bytes must not depend on how it was computed
         "processes": processes,
     }

@@ -70,12 +70,15 @@ class PrepareContext:
         ``name -> path`` of the files read; a kind adds its assets for provenance.
     progress : callable or None
         Progress factory (:mod:`shtools.progress`) for long preparations (fits, trees).
+    cache : shtools.cache.SetupCache or None
+        The set-up cache, for what a kind computes from its inputs alone (fits).
     """
 
     settings: Any
     model: Any = None
     inputs: dict[str, Path] = field(default_factory=dict)
     progress: Any = None
+    cache: Any = None
 
 
 class BlockerKind(ABC):
@@ -233,20 +236,32 @@ def _fit_options() -> dict[str, tuple[Any, Any]]:
 class FitSpheres(SphereSetKind):
     name, value, hint = "fit", "count", "'fit' (number of spheres to fit)"
     options = _fit_options()
+    #: algorithm version of a cached fit (:mod:`shtools.cache`)
+    version = 1
 
     def branching(self, spec):
         return spec.options["branching"]
 
     def load(self, spec, prep, ctx):
-        import trimesh
+        def fit():
+            import trimesh
 
-        from shtools.geometry.sphere_fit import fit_spheres
+            from shtools.geometry.sphere_fit import fit_spheres
 
-        mesh = trimesh.Trimesh(prep.vertices, prep.faces, process=False)
-        s = fit_spheres(mesh, spec.count, method=spec.options["method"],
-                        seed=spec.options["seed"], progress=ctx.progress,
-                        _desc=f"fit {prep.spec.name}")
-        prep.centers, prep.radii = s.centers, s.radii
+            mesh = trimesh.Trimesh(prep.vertices, prep.faces, process=False)
+            s = fit_spheres(mesh, spec.count, method=spec.options["method"],
+                            seed=spec.options["seed"], progress=ctx.progress,
+                            _desc=f"fit {prep.spec.name}")
+            return {"centers": np.asarray(s.centers), "radii": np.asarray(s.radii)}
+
+        if ctx.cache is None:
+            got = fit()
+        else:
+            parts = {"vertices": np.asarray(prep.vertices), "faces": np.asarray(prep.faces),
+                     "count": int(spec.count), "method": str(spec.options["method"]),
+                     "seed": int(spec.options["seed"])}
+            got = ctx.cache.fetch("fit", self.version, parts, fit)
+        prep.centers, prep.radii = got["centers"], got["radii"]
 
 
 class ExactSphere(SphereSetKind):

@@ -81,6 +81,7 @@ class SSOCLight(LightShadow):
 
     name = "ssoc"
     needs_meshes = True
+    uses_visibility = False
 
     def radiance(self, run, state, visibility, lights):
         from shtools.runtime.shading import sphere_light_unshadowed
@@ -111,6 +112,7 @@ class RaytraceLight(LightShadow):
 
     name = "raytrace"
     needs_meshes = True
+    uses_visibility = False
 
     def radiance(self, run, state, visibility, lights):
         from shtools.reference.light_fraction import light_visible_fraction

@@ -14,7 +14,6 @@ asset or inline ``coeffs`` (only order ``n`` is known).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,7 +82,7 @@ class MidrangeEnvironment:
         return out
 
 
-def prepare_midrange(scene, env_sh, inputs: dict) -> MidrangeEnvironment | None:
+def prepare_midrange(scene, env_sh, inputs: dict, cache=None) -> MidrangeEnvironment | None:
     """The scene's finite environment sphere, or None for an environment at infinity.
 
     Parameters
@@ -93,6 +92,8 @@ def prepare_midrange(scene, env_sh, inputs: dict) -> MidrangeEnvironment | None:
         The environment as the bake prepared it (intensity and rotation applied).
     inputs : dict
         Provenance; a scaling asset is added.
+    cache : shtools.cache.SetupCache, optional
+        Where an image projected again at the scaling order is read from or stored.
     """
     env = scene.environment
     if env.radius is None or env_sh is None:
@@ -114,19 +115,36 @@ def prepare_midrange(scene, env_sh, inputs: dict) -> MidrangeEnvironment | None:
         inputs["environment.scaling"] = env.scaling
         scale_order = int(table["order"])
     else:
-        from shtools.sh.scaling import build_scaling_table
-
         scale_order = (min(order + EXTRA_BANDS, MAX_SCALING_ORDER) if env.kind == "image"
                        else order)
-        table = build_scaling_table(scale_order, "midrange", samples=DEFAULT_SAMPLES,
-                                    k_range=(0.0, DEFAULT_KMAX))
+        table = _scaling_table(scale_order, cache)
     coeffs = env_sh
     if env.kind == "image" and scale_order > order:
-        from shtools.lighting.environment import project_environment
+        from shtools.scene.prepare import projected_environment
 
-        coeffs, _ = project_environment(env.path, scale_order,
-                                        rotate_y=math.degrees(env.rotate))
-        coeffs = np.asarray(coeffs, dtype=float) * env.intensity
+        coeffs = projected_environment(env.path, scale_order, env.rotate, cache) * env.intensity
     return MidrangeEnvironment(np.asarray(env.center, dtype=float), float(env.radius),
                                ScalingTable(table), np.asarray(coeffs, dtype=float), order,
                                scene.path)
+
+
+#: Algorithm version of a cached mid-range scaling table (:mod:`shtools.cache`).
+SCALING_TABLE_VERSION = 1
+
+
+def _scaling_table(order: int, cache=None) -> dict:
+    """The plain mid-range scaling table at ``order`` built in memory (read from
+    ``cache`` when it was built before): its arrays, and its scalars as Python values."""
+    from shtools.sh.scaling import build_scaling_table
+
+    def build():
+        return build_scaling_table(order, "midrange", samples=DEFAULT_SAMPLES,
+                                   k_range=(0.0, DEFAULT_KMAX))
+
+    if cache is None:
+        return build()
+    parts = {"order": int(order), "function": "midrange", "samples": DEFAULT_SAMPLES,
+             "k_range": [0.0, DEFAULT_KMAX]}
+    got = cache.fetch("scaling_table", SCALING_TABLE_VERSION, parts, build)
+    # a hit stores scalars as 0-d arrays: the same Python values back, on a miss too
+    return {k: (np.asarray(v).item() if np.ndim(v) == 0 else v) for k, v in got.items()}

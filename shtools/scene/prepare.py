@@ -83,6 +83,8 @@ class PreparedScene:
     inputs: dict[str, Path] = field(default_factory=dict)
     #: a finite environment sphere (shtools.scene.midrange), None at infinity
     midrange: object | None = None
+    #: the set-up cache the preparation used (shtools.cache.SetupCache; its hits, misses)
+    cache: object | None = None
 
     @property
     def receivers(self) -> list[PreparedObject]:
@@ -140,16 +142,37 @@ def _object_geometry(obj: ObjectSpec) -> tuple[PreparedObject, object]:
                           np.asarray(mesh.faces, np.int64)), None
 
 
-def _object_blocker(prep: PreparedObject, model, settings, inputs: dict, progress=None) -> None:
+def _object_blocker(prep: PreparedObject, model, settings, inputs: dict, progress=None,
+                    cache=None) -> None:
     """Prepare the object's blocker with its kind (spheres, tree, skin binding, ...)."""
     spec = prep.spec.blocker
     if spec is None:
         return
     blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs,
-                                                                  progress))
+                                                                  progress, cache))
 
 
-def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
+#: Algorithm version of a cached environment projection (:mod:`shtools.cache`).
+ENVIRONMENT_VERSION = 1
+
+
+def projected_environment(path, order: int, rotate: float, cache=None) -> np.ndarray:
+    """An environment image's radiance SH ``(order^2, 3)``, rotated by ``rotate`` radians
+    about +y (:func:`shtools.lighting.environment.project_environment`), read from
+    ``cache`` when the same image bytes were projected at this order before."""
+    from shtools.lighting.environment import project_environment
+
+    def compute():
+        coeffs, _ = project_environment(path, order, rotate_y=math.degrees(rotate))
+        return {"coeffs": np.asarray(coeffs, dtype=float)}
+
+    if cache is None:
+        return compute()["coeffs"]
+    parts = {"image": Path(path), "order": int(order), "rotate": float(rotate)}
+    return cache.fetch("environment", ENVIRONMENT_VERSION, parts, compute)["coeffs"]
+
+
+def _environment(scene: Scene, inputs: dict, cache=None) -> np.ndarray | None:
     env = scene.environment
     order = scene.settings.order
     if env.kind is None:
@@ -175,10 +198,8 @@ def _environment(scene: Scene, inputs: dict) -> np.ndarray | None:
                              "window = \"none\"", env.path)
         inputs["environment"] = env.path
     else:
-        from shtools.lighting.environment import project_environment
-
         # the same code path as `shtools light project`; the runtime windows later
-        coeffs, _ = project_environment(env.path, order, rotate_y=math.degrees(env.rotate))
+        coeffs = projected_environment(env.path, order, env.rotate, cache)
         inputs["environment"] = env.path
     coeffs = np.asarray(coeffs, dtype=float) * env.intensity
     if env.rotate and env.kind != "image":
@@ -223,12 +244,19 @@ def scene_files(scene: Scene) -> list[Path]:
 
 
 def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
-                  progress=None) -> PreparedScene:
+                  progress=None, cache=None) -> PreparedScene:
     """Load meshes, blockers, skins, environment and tables of a parsed scene.
 
     ``progress`` is a progress factory (:mod:`shtools.progress`): one bar over
     the objects, the environment and the tables, plus the bars of sphere fits
     and trees built on the fly.
+
+    ``cache`` is the set-up cache (:class:`shtools.cache.SetupCache`): the
+    self-visibility of rigid objects, the local visibility of skinned ones,
+    sphere fits, projected environment images and mid-range scaling tables are
+    read from it when their inputs were computed before, and stored in it otherwise.  None: the
+    environment's default (:meth:`~shtools.cache.SetupCache.from_environment`);
+    False: no cache.  The prepared scene is the same either way.
 
     Raises
     ------
@@ -236,9 +264,14 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
         A file cannot be used, a skinned glTF has no skin or animation, SH
         orders disagree between assets, a bound set does not match its rig.
     """
+    from shtools.cache import SetupCache
     from shtools.progress import silent
     from shtools.scene.midrange import prepare_midrange
 
+    if cache is None:
+        cache = SetupCache.from_environment()
+    elif cache is False:
+        cache = SetupCache(enabled=False)
     inputs: dict[str, Path] = {}
     objects = []
     # steps: every object, then the environment (an HDR is projected here), the tables
@@ -250,19 +283,20 @@ def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,
             prep, model = _object_geometry(obj)
             if obj.mesh is not None:
                 inputs[f"{obj.name}.mesh"] = obj.mesh
-            _object_blocker(prep, model, scene.settings, inputs, progress)
+            _object_blocker(prep, model, scene.settings, inputs, progress, cache)
             objects.append(prep)
             bar.update(1)
-        _self_visibility(scene, objects, inputs, log)
-        env_sh = _environment(scene, inputs)
+        _self_visibility(scene, objects, inputs, log, cache)
+        env_sh = _environment(scene, inputs, cache)
         bar.update(1)
         tables = _tables(scene, inputs)
         bar.update(1)
     return PreparedScene(scene, objects, env_sh, tables, inputs,
-                         prepare_midrange(scene, env_sh, inputs))
+                         prepare_midrange(scene, env_sh, inputs, cache), cache)
 
 
-def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log) -> None:
+def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, log,
+                     cache=None) -> None:
     """Self-visibility logs of role-"both" objects (:mod:`shtools.scene.transfer`)."""
     from shtools.scene.transfer import (
         object_local_log,
@@ -276,7 +310,7 @@ def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, 
     acc = st.resolved_acc_order()
     for prep in objects:
         if uses_self_visibility(prep, st.self_visibility):
-            prep.self_log, path = object_self_log(prep, acc, log=log)
+            prep.self_log, path = object_self_log(prep, acc, log=log, cache=cache)
             if path is not None:
                 inputs[f"{prep.spec.name}.transfer"] = path
         elif uses_traced_visibility(prep, st.self_visibility):
@@ -284,4 +318,4 @@ def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, 
         elif uses_local_visibility(prep, st.local_visibility):
             if log:
                 log(f"ray tracing the local visibility of {prep.spec.name}")
-            prep.local_log = object_local_log(prep, acc)
+            prep.local_log = object_local_log(prep, acc, cache=cache)

@@ -284,13 +284,17 @@ class LightShadow(ABC):
     joins_environment: ClassVar[bool] = False
     #: posed blocker meshes are needed in the FrameState
     needs_meshes: ClassVar[bool] = False
+    #: reads the frame's SH visibility (False: a frame whose environment and lights
+    #: all do without it evaluates no SHEXP visibility; :func:`visibility_needed`)
+    uses_visibility: ClassVar[bool] = True
 
     @abstractmethod
-    def radiance(self, run: BakeRun, state, visibility: np.ndarray,
+    def radiance(self, run: BakeRun, state, visibility: np.ndarray | None,
                  lights: list) -> np.ndarray:
         """Outgoing radiance ``(V, 3)`` from ``lights`` (SphereLight) at the receivers.
 
-        ``state`` is the posed FrameState, ``visibility`` the frame's SH visibility.
+        ``state`` is the posed FrameState, ``visibility`` the frame's SH visibility
+        (None when no light's way :attr:`uses_visibility` and nothing else needs it).
         """
 
 
@@ -320,12 +324,27 @@ def register_light_shadow(way: LightShadow) -> LightShadow:
 register_light_shadow(ShexpLight())
 
 
-def shade_frame(run: BakeRun, state, visibility: np.ndarray) -> np.ndarray:
+def visibility_needed(prepared, store_visibility: bool = False) -> bool:
+    """Whether a bake's frames need the SH visibility of the visibility method.
+
+    Only to shade the environment (at infinity or mid-range), the lights whose
+    way :attr:`~LightShadow.uses_visibility` (``shexp``, ``auto``), or to store
+    it.  Otherwise (no environment, only lights shadowed by ``ssoc`` or
+    ``raytrace``) a frame evaluates neither the visibility nor what only feeds
+    it (traced shadows on the ground, traced self-visibility of skinned objects).
+    """
+    if store_visibility or prepared.env_sh is not None or prepared.midrange is not None:
+        return True
+    return any(LIGHT_SHADOWS[spec.shadows].uses_visibility for spec in prepared.scene.lights)
+
+
+def shade_frame(run: BakeRun, state, visibility: np.ndarray | None) -> np.ndarray:
     """Radiance ``(V, 3)`` of a posed frame: environment and every light, each its own way.
 
     The environment and the lights whose way joins it are shaded in one
     :meth:`~shtools.runtime.ShadowRuntime.shade` call; every other way adds
-    its lights' radiance.
+    its lights' radiance.  ``visibility`` None (:func:`visibility_needed` is
+    false: no environment, no light that joins it) starts from zero radiance.
     """
     groups: dict[str, list] = {}
     for light, way in zip(state.lights, state.light_shadows, strict=True):
@@ -333,10 +352,16 @@ def shade_frame(run: BakeRun, state, visibility: np.ndarray) -> np.ndarray:
     joined = [light for way, group in groups.items() if LIGHT_SHADOWS[way].joins_environment
               for light in group]
     env = run.prepared.env_sh
-    if run.prepared.midrange is not None:  # a finite environment sphere: per-vertex SH
-        env = run.prepared.midrange.radiance_sh(state.vertices)
-    radiance = run.runtime.shade(visibility, state.vertices, state.normals, env,
-                                 sphere_lights=joined)
+    if visibility is None:
+        if joined or env is not None or run.prepared.midrange is not None:
+            raise ValueError("the frame's visibility is needed to shade its environment "
+                             "and the lights that join it")
+        radiance = np.zeros((len(state.vertices), 3))
+    else:
+        if run.prepared.midrange is not None:  # a finite environment sphere: per-vertex SH
+            env = run.prepared.midrange.radiance_sh(state.vertices)
+        radiance = run.runtime.shade(visibility, state.vertices, state.normals, env,
+                                     sphere_lights=joined)
     for way, group in groups.items():
         if not LIGHT_SHADOWS[way].joins_environment:
             radiance = radiance + LIGHT_SHADOWS[way].radiance(run, state, visibility, group)

@@ -2,7 +2,7 @@
 
 A rigid object that both receives and casts (``role = "both"``, no skin) is
 shadowed on its own vertices by its **real mesh**: its self-visibility is ray
-traced once in its own frame (:func:`shtools.fields.self_visibility.mesh_transfer`,
+traced once in its own frame (:func:`shtools.fields.self_visibility.hemisphere_transfer`,
 or read from a ``transfer`` asset), and every frame the runtime adds its log,
 rotated with the object, to the log of every *other* blocker
 (:class:`shtools.runtime.SelfVisibility`).  The object's own spheres then shadow
@@ -54,8 +54,13 @@ def uses_self_visibility(obj, default: bool = True) -> bool:
     return bool(choice) and obj.spec.receives and obj.spec.blocks and obj.motion is None
 
 
-def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None
-                    ) -> tuple[np.ndarray, Path | None]:
+#: Algorithm version of the cached self-visibility log (:mod:`shtools.cache`): raise it
+#: when :func:`object_self_log`'s traced result changes.
+SELF_LOG_VERSION = 2
+
+
+def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None,
+                    cache=None) -> tuple[np.ndarray, Path | None]:
     """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32.
 
     From the first source that applies: the ``transfer`` asset the scene names
@@ -71,6 +76,9 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         The runtime's accumulation order.
     log : callable, optional
         Progress messages.
+    cache : shtools.cache.SetupCache, optional
+        Where the traced log (and a convex mesh's zero) is read from when its
+        mesh, normals and order were traced before, and stored otherwise.
 
     Returns
     -------
@@ -78,10 +86,7 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     path : Path or None
         The ``transfer`` asset read (for the bake's inputs), None otherwise.
     """
-    import trimesh
-
     source = getattr(obj.spec, "self_visibility", None)
-    size = acc_order * acc_order
     if isinstance(source, str | Path):
         return _from_asset(obj, Path(source), acc_order), Path(source)
     stored = getattr(obj.blocker_data, "self_log", None)
@@ -90,16 +95,34 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         # accumulation order (fields sampled before it was stored there) would cost
         # accuracy (dragon: 3.5 % instead of 2.4 %), so such an object is traced
         return stored, None
-    mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
-    if is_convex(obj.vertices, obj.faces):
-        return np.zeros((len(obj.vertices), size), dtype=np.float32), None
-    from shtools.fields.self_visibility import mesh_transfer
+    if cache is None:
+        return _traced_self_log(obj, acc_order, log), None
+    from shtools.fields.self_visibility import LOG_FLOOR, TRANSFER_DIRECTIONS
 
+    parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
+             "faces": np.asarray(obj.faces), "order": int(acc_order),
+             "estimator": "hemisphere", "n_dirs": TRANSFER_DIRECTIONS, "floor": LOG_FLOOR}
+    got = cache.fetch("self_log", SELF_LOG_VERSION, parts,
+                      lambda: {"log": _traced_self_log(obj, acc_order, log)})
+    return got["log"], None
+
+
+def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
+    """The self-visibility log ``(V, acc_order^2)`` float32 ray traced now (zero if convex)."""
+    import trimesh
+
+    if is_convex(obj.vertices, obj.faces):
+        return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
+    from shtools.fields.self_visibility import hemisphere_transfer
+
+    mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if log:
         log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
-            "cache it with 'shtools transfer')")
-    _, f, _ = mesh_transfer(mesh, acc_order, normals=obj.normals)
-    return f.astype(np.float32), None
+            "the set-up cache keeps it for the next bake)")
+    # rays over each vertex's own hemisphere only: fewer than the product rule of
+    # `shtools transfer` casts, at no larger error (fields.self_visibility.TRANSFER_DIRECTIONS)
+    _, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
+    return f.astype(np.float32)
 
 
 #: A closed mesh whose volume is within this fraction of its convex hull's is convex.
@@ -216,8 +239,27 @@ def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int, *,
                                  n_dirs=n_dirs).astype(np.float32)
 
 
-def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE) -> np.ndarray:
-    """Rest-pose local visibility log ``(V, acc_order^2)`` float32 of a skinned object."""
+#: Algorithm version of the cached local visibility log (:mod:`shtools.cache`).
+LOCAL_LOG_VERSION = 1
+
+
+def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE, *,
+                     cache=None) -> np.ndarray:
+    """Rest-pose local visibility log ``(V, acc_order^2)`` float32 of a skinned object.
+
+    ``cache`` (:class:`shtools.cache.SetupCache`): read from it when the same rest
+    mesh was traced at this order and distance before, stored in it otherwise.
+    """
+    if cache is None:
+        return _traced_local_log(obj, acc_order, distance)
+    parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
+             "faces": np.asarray(obj.faces), "order": int(acc_order),
+             "distance": float(distance)}
+    return cache.fetch("local_log", LOCAL_LOG_VERSION, parts,
+                       lambda: {"log": _traced_local_log(obj, acc_order, distance)})["log"]
+
+
+def _traced_local_log(obj, acc_order: int, distance: float) -> np.ndarray:
     import trimesh
 
     from shtools.fields.self_visibility import self_visibility, self_visibility_log

@@ -190,7 +190,7 @@ def test_one_field_asset_shadows_the_object_and_the_ground_like_ray_tracing(
     def no_tracing(*args, **kwargs):
         raise AssertionError("the bake ray-traced the self-visibility the field holds")
 
-    monkeypatch.setattr(sv, "mesh_transfer", no_tracing)
+    monkeypatch.setattr(sv, "hemisphere_transfer", no_tracing)
     monkeypatch.setattr(sv, "self_visibility", no_tracing)
     rad = {}
     for name, field, extra, obj_extra in (
@@ -229,13 +229,13 @@ def test_an_o_v_below_the_accumulation_order_is_traced_at_bake_time(torus_dir, m
     import shtools.fields.self_visibility as sv
 
     calls = []
-    real = sv.mesh_transfer
+    real = sv.hemisphere_transfer
 
     def counting(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(sv, "mesh_transfer", counting)
+    monkeypatch.setattr(sv, "hemisphere_transfer", counting)
     for obj_extra, traced in (("", True), ("self_visibility = false", False)):
         path = torus_dir / "t4.toml"
         path.write_text(TORUS_SCENE.format(extra="", env=ENV, field="t4.field.h5",

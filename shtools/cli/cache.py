@@ -1,0 +1,83 @@
+"""``shtools cache info|clear``: the set-up cache (:mod:`shtools.cache`), and the
+``--cache DIR`` / ``--no-cache`` options of the commands that use it."""
+
+from __future__ import annotations
+
+import click
+
+from shtools.cli._common import json_option, report
+
+
+def cache_options(f):
+    """``--cache DIR`` and ``--no-cache`` (passed as ``cache_dir`` and ``no_cache``)."""
+    f = click.option("--no-cache", is_flag=True,
+                     help="Compute the set-up (self-visibility, fits, projected images) "
+                          "without reading or writing the set-up cache; same bytes.")(f)
+    return click.option("--cache", "cache_dir", metavar="DIR", type=click.Path(file_okay=False),
+                        default=None,
+                        help="Set-up cache folder (default: $SHTOOLS_CACHE, else "
+                             "$XDG_CACHE_HOME/shtools, else ~/.cache/shtools).")(f)
+
+
+def _warn(message: str) -> None:
+    click.echo(f"warning: {message}", err=True)
+
+
+def open_cache(cache_dir, no_cache: bool = False):
+    """The :class:`~shtools.cache.SetupCache` the options name (warnings on stderr)."""
+    from shtools.cache import SetupCache
+
+    if cache_dir is None:
+        cache = SetupCache.from_environment(warn=_warn)
+    else:
+        cache = SetupCache(cache_dir, warn=_warn)
+    if no_cache:
+        cache.enabled = False
+    return cache
+
+
+@click.group("cache")
+def cache():
+    """The set-up cache: what bakes compute before their frames, kept by content.
+
+    A second bake of unchanged inputs reads its set-up (exact self-visibility,
+    sphere fits, projected environment images) from here.  Location:
+    $SHTOOLS_CACHE, else $XDG_CACHE_HOME/shtools, else ~/.cache/shtools; size
+    bound $SHTOOLS_CACHE_SIZE (default 2G, least recently used entries go
+    first); SHTOOLS_NO_CACHE=1 or `bake --no-cache` turn it off.
+    """
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n} B"  # pragma: no cover
+
+
+@cache.command("info")
+@click.option("--cache", "cache_dir", metavar="DIR", type=click.Path(file_okay=False),
+              default=None, help="Cache folder (default: as `shtools bake` uses).")
+@json_option
+def info(cache_dir, as_json):
+    """Location, size and entries of the set-up cache."""
+    summary = open_cache(cache_dir).info()
+    kinds = ", ".join(f"{n} {k}" for k, n in summary["kinds"].items())
+    report(summary, as_json,
+           f"{summary['location']}: {summary['entries']} entries"
+           f"{f' ({kinds})' if kinds else ''}, {_size(summary['bytes'])} of at most "
+           f"{_size(summary['max_bytes'])}"
+           f"{'' if summary['enabled'] else ' (off: SHTOOLS_NO_CACHE is set)'}")
+
+
+@cache.command("clear")
+@click.option("--cache", "cache_dir", metavar="DIR", type=click.Path(file_okay=False),
+              default=None, help="Cache folder (default: as `shtools bake` uses).")
+@json_option
+def clear(cache_dir, as_json):
+    """Remove every entry of the set-up cache."""
+    c = open_cache(cache_dir)
+    removed = c.clear()
+    report({"location": str(c.location), "removed": removed}, as_json,
+           f"removed {removed} entries from {c.location}")
