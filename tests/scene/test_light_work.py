@@ -62,11 +62,11 @@ rotate = [20.0, 0.0, 0.0]
 @pytest.fixture
 def counts(monkeypatch):
     """Calls of the runtime's visibility and of the traced ground shadows."""
-    import shtools.scene.transfer as transfer
+    import shtools.scene.traced_shadows as traced_shadows
     from shtools.runtime import ShadowRuntime
 
     calls = {"visibility": 0, "traced": 0}
-    visibility, traced = ShadowRuntime.visibility, transfer.traced_shadow_visibility
+    visibility, traced = ShadowRuntime.visibility, traced_shadows.traced_ground
 
     def counting_visibility(self, *args, **kwargs):
         calls["visibility"] += 1
@@ -77,7 +77,7 @@ def counts(monkeypatch):
         return traced(*args, **kwargs)
 
     monkeypatch.setattr(ShadowRuntime, "visibility", counting_visibility)
-    monkeypatch.setattr(transfer, "traced_shadow_visibility", counting_traced)
+    monkeypatch.setattr(traced_shadows, "traced_ground", counting_traced)
     return calls
 
 
