@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from helpers.scenes import torus_and_ring
 
 from shtools.cache import SetupCache, cache_key, parse_size
 
@@ -187,15 +188,7 @@ def test_parse_size():
 
 # ------------------------------------------------------------------- bakes
 def _torus_scene(folder: Path, settings: str = "", blocker: str = 'spheres = "ring.h5"'):
-    from shtools.data_formats.spheres import write_spheres
-    from shtools.geometry.sphere_set import SphereSet
-
-    torus = trimesh.creation.torus(major_radius=0.6, minor_radius=0.25, major_sections=16,
-                                   minor_sections=8)
-    torus.export(folder / "torus.obj")
-    phi = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
-    centers = 0.6 * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
-    write_spheres(folder / "ring.h5", SphereSet(centers, np.full(8, 0.35), 0.0, 1.0, "ring"))
+    torus_and_ring(folder, major=0.6, minor=0.25, sphere_radius=0.35)
     (folder / "scene.toml").write_text(f"""
 [settings]
 order = 3
