@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from helpers.rig import ground_scene_head
 from helpers.scenes import torus_and_ring
 
 from shtools.cache import SetupCache, cache_key, parse_size
@@ -189,20 +190,8 @@ def test_parse_size():
 # ------------------------------------------------------------------- bakes
 def _torus_scene(folder: Path, settings: str = "", blocker: str = 'spheres = "ring.h5"'):
     torus_and_ring(folder, major=0.6, minor=0.25, sphere_radius=0.35)
-    (folder / "scene.toml").write_text(f"""
-[settings]
-order = 3
-frames = 1
-{settings}
-[environment]
-coeffs = [[5.0, 5.0, 5.0], [0.0, 0.0, 0.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0],
-          [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [3, 3], subdivisions = 8 }}
-role = "receiver"
-
+    (folder / "scene.toml").write_text(ground_scene_head(
+        settings, size=3, subdivisions=8, frames=1, fps=None) + f"""
 [[objects]]
 name = "torus"
 mesh = "torus.obj"
