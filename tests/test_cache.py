@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from helpers.calls import count_calls
 from helpers.rig import ground_scene_head
 from helpers.scenes import torus_and_ring
 
@@ -213,15 +214,7 @@ def _bake(run_cli, scene, out, *extra):
 def _count_transfers(monkeypatch):
     import shtools.fields.self_visibility as sv
 
-    calls = []
-    real = sv.hemisphere_transfer
-
-    def counting(*args, **kwargs):
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(sv, "hemisphere_transfer", counting)
-    return calls
+    return count_calls(monkeypatch, sv, "hemisphere_transfer")
 
 
 def test_a_second_bake_reads_its_self_visibility_and_writes_the_same_bytes(
