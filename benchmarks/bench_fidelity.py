@@ -82,7 +82,7 @@ def _ensure(path: Path, *args) -> float:
     return _run(*args, "-o", path)
 
 
-def _placement(mesh_path: Path, height: float, x: float, z: float, yaw: float = 0.0):
+def placement(mesh_path: Path, height: float, x: float, z: float, yaw: float = 0.0):
     """TOML transform lines putting a mesh of the given height on the ground at (x, z)."""
     from shtools.geometry.mesh import load_mesh
 
@@ -113,7 +113,7 @@ def _rigid(name, mesh_key, spheres, height, x, z, yaw, pre: dict) -> str:
     _MESH_OF_TREE[str(tree)] = (name, mesh)
     return (f'[[objects]]\nname = "{name}"\nmesh = "{mesh}"\nrole = "both"\n'
             f'blocker = {{ tree = "{tree}" }}\nself_visibility = "{tr}"\n'
-            + _placement(mesh, height, x, z, yaw))
+            + placement(mesh, height, x, z, yaw))
 
 
 #: tree asset -> (object name, mesh), filled by :func:`_rigid`

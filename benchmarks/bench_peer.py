@@ -45,6 +45,11 @@ from pathlib import Path
 
 import numpy as np
 
+if __package__:  # run by ``python -m benchmarks``
+    from benchmarks.bench_fidelity import placement
+else:  # run as a script: its folder is sys.path[0]
+    from bench_fidelity import placement
+
 REPO = Path(__file__).resolve().parents[1]
 #: real meshes and probes (``SHTOOLS_SHARED_DATA`` overrides, as for the tests)
 DATA = Path(os.environ.get("SHTOOLS_SHARED_DATA", REPO.parent / "shared" / "data"))
@@ -98,25 +103,12 @@ class Peer:
         return self.one - (~vis).astype(np.float32) @ self.yw
 
 
-def _placement(mesh_path: Path, height: float, x: float, z: float, yaw: float = 0.0) -> str:
-    from shtools.geometry.mesh import load_mesh
-
-    lo, hi = load_mesh(mesh_path).bounds
-    s = height / (hi[1] - lo[1])
-    cx, cz = 0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2])
-    c, sn = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
-    tx = x - s * (c * cx + sn * cz)
-    tz = z - s * (-sn * cx + c * cz)
-    return (f"scale = {s:.6g}\ntranslate = [{tx:.6g}, {-s * lo[1]:.6g}, {tz:.6g}]\n"
-            f"rotate = [0.0, {yaw:.6g}, 0.0]\n")
-
-
 def _object(name: str, mesh: str, spheres: int, height: float, x: float, z: float,
             yaw: float) -> str:
     path = DATA / "meshes" / mesh
     return (f'[[objects]]\nname = "{name}"\nmesh = "{path}"\nrole = "both"\n'
             f'blocker = {{ fit = {spheres}, method = "kmeans" }}\n'
-            + _placement(path, height, x, z, yaw))
+            + placement(path, height, x, z, yaw))
 
 
 def _real_scene(name: str, probe: str, ground: tuple[float, int], objects: str) -> Path:

@@ -13,6 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from helpers.calls import count_calls
+from helpers.rig import ground_scene_head
+from helpers.scenes import torus_and_ring
 
 from shtools.cache import SetupCache, cache_key, parse_size
 
@@ -187,29 +190,9 @@ def test_parse_size():
 
 # ------------------------------------------------------------------- bakes
 def _torus_scene(folder: Path, settings: str = "", blocker: str = 'spheres = "ring.h5"'):
-    from shtools.data_formats.spheres import write_spheres
-    from shtools.geometry.sphere_set import SphereSet
-
-    torus = trimesh.creation.torus(major_radius=0.6, minor_radius=0.25, major_sections=16,
-                                   minor_sections=8)
-    torus.export(folder / "torus.obj")
-    phi = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
-    centers = 0.6 * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
-    write_spheres(folder / "ring.h5", SphereSet(centers, np.full(8, 0.35), 0.0, 1.0, "ring"))
-    (folder / "scene.toml").write_text(f"""
-[settings]
-order = 3
-frames = 1
-{settings}
-[environment]
-coeffs = [[5.0, 5.0, 5.0], [0.0, 0.0, 0.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0],
-          [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-
-[[objects]]
-name = "ground"
-primitive = {{ type = "plane", size = [3, 3], subdivisions = 8 }}
-role = "receiver"
-
+    torus_and_ring(folder, major=0.6, minor=0.25, sphere_radius=0.35)
+    (folder / "scene.toml").write_text(ground_scene_head(
+        settings, size=3, subdivisions=8, frames=1, fps=None) + f"""
 [[objects]]
 name = "torus"
 mesh = "torus.obj"
@@ -231,15 +214,7 @@ def _bake(run_cli, scene, out, *extra):
 def _count_transfers(monkeypatch):
     import shtools.fields.self_visibility as sv
 
-    calls = []
-    real = sv.hemisphere_transfer
-
-    def counting(*args, **kwargs):
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(sv, "hemisphere_transfer", counting)
-    return calls
+    return count_calls(monkeypatch, sv, "hemisphere_transfer")
 
 
 def test_a_second_bake_reads_its_self_visibility_and_writes_the_same_bytes(

@@ -39,16 +39,6 @@ from pathlib import Path
 from shtools.errors import InputError
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    """True when ``a`` and ``b`` name one file (hard links and symlinks included)."""
-    try:
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-    except OSError:
-        pass
-    return os.path.realpath(a) == os.path.realpath(b)
-
-
 def planned(option: str, output: str | os.PathLike,
             files: Iterable[str | os.PathLike]) -> dict[str, Path]:
     """The outputs of an option that writes several files, labelled for :func:`guard_outputs`.
@@ -93,6 +83,8 @@ def guard_outputs(outputs: Mapping[str, str | os.PathLike | None],
     InputError
         The first problem found, naming the output path (or the option when empty).
     """
+    from shtools.data_formats._base import same_file
+
     ins = [Path(p) for p in inputs if p is not None and os.fspath(p) != ""]
     seen: list[tuple[str, Path]] = []
     for option, value in outputs.items():
@@ -114,11 +106,11 @@ def guard_outputs(outputs: Mapping[str, str | os.PathLike | None],
             raise InputError(f"exists and is read-only; make it writable (chmod u+w) or "
                              f"choose another {option} path", out)
         for src in ins:
-            if _same_file(out, src):
+            if same_file(out, src):
                 raise InputError(f"is also an input ({src}); writing it would destroy the "
                                  f"input, choose another {option} path", out)
         for other_option, other in seen:
-            if _same_file(out, other):
+            if same_file(out, other):
                 raise InputError(f"is given as both {other_option} and {option}; give two "
                                  "different files", out)
         folder = out.parent if str(out.parent) else Path(".")

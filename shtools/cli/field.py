@@ -138,14 +138,7 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     write_field(output, fld, inputs={"mesh": mesh_path}, parameters=parameters)
     fixed = shells * resolution * resolution * order * order
     summary = {
-        "output": output,
-        "shells": shells,
-        "resolution": [int(r) for r in fld.resolution],
-        "bytes": fld.stored_bytes(),
-        "fixed_bytes": fixed,
-        "reduction_percent": round(100 * (1 - fld.stored_bytes() / fixed), 2),
-        "cumulative_error": [round(float(e), 6) for e in fld.reduction_error],
-        "bounding_radius": fld.bounding_radius,
+        **_stored_summary(output, shells, fld, fixed),
         "rays": rep.rays,
         "rays_without_cull": rep.rays_uncull,
         "seconds": {k: round(v, 3) for k, v in rep.seconds.items()},
@@ -162,6 +155,21 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         human += (f"; open mesh ({fld.attrs['boundary_edges']} boundary edges): rays leak "
                   "through its holes")
     report(summary, as_json, human)
+
+
+def _stored_summary(output, shells: int, fld, fixed: int) -> dict:
+    """The summary keys of a sampled field (shadow or radiance) about what it stores:
+    ``fixed`` is the value count of the same shells at full resolution."""
+    return {
+        "output": output,
+        "shells": shells,
+        "resolution": [int(r) for r in fld.resolution],
+        "bytes": fld.stored_bytes(),
+        "fixed_bytes": fixed,
+        "reduction_percent": round(100 * (1 - fld.stored_bytes() / fixed), 2),
+        "cumulative_error": [round(float(e), 6) for e in fld.reduction_error],
+        "bounding_radius": fld.bounding_radius,
+    }
 
 
 def _sample_radiance(mesh_path, emission, output, params, error_scale, scheduler, workers,
@@ -189,14 +197,7 @@ def _sample_radiance(mesh_path, emission, output, params, error_scale, scheduler
                          parameters=parameters)
     fixed = params.shells * R0 * R0 * 3 * params.order ** 2
     summary = {
-        "output": output,
-        "shells": params.shells,
-        "resolution": [int(r) for r in fld.resolution],
-        "bytes": fld.stored_bytes(),
-        "fixed_bytes": fixed,
-        "reduction_percent": round(100 * (1 - fld.stored_bytes() / fixed), 2),
-        "cumulative_error": [round(float(e), 6) for e in fld.reduction_error],
-        "bounding_radius": fld.bounding_radius,
+        **_stored_summary(output, params.shells, fld, fixed),
         "emitter_radius": fld.emitter_radius,
         "radiance": [float(x) for x in fld.radiance],
         "rays": rep.rays,

@@ -190,6 +190,28 @@ def write_field(path: str | os.PathLike, fld: ShadowField, *, inputs=None, param
                        parameters=parameters, compression="gzip")
 
 
+def shell_resolution(asset, path: str | os.PathLike) -> np.ndarray:
+    """The ``(C, 2)`` int64 shell resolutions of a read shell-field asset (``field`` or
+    ``srf``), after checking it samples its shells in this package's layout.
+
+    Raises
+    ------
+    AssetError
+        When the asset's ``pole_axis`` or ``phi_origin`` differs from :data:`LAYOUT_ATTRS`.
+    """
+    layout = {k: asset.attrs.get(k) for k in ("pole_axis", "phi_origin")}
+    if layout != {k: LAYOUT_ATTRS[k] for k in layout}:
+        raise AssetError(f"unsupported field layout {layout}; resample it with this shtools", path)
+    return np.asarray(asset["shell_resolution"], dtype=np.int64)
+
+
+def stack_shells(asset, n_shells: int, name: str) -> np.ndarray:
+    """The per-shell datasets ``shells/<c>/<name>`` of a read asset, each flattened and
+    stacked: shape ``(n_shells, k)`` float32."""
+    return np.stack([np.asarray(asset[f"shells/{c}/{name}"]).reshape(-1)
+                     for c in range(n_shells)]).astype(np.float32)
+
+
 def read_field(path: str | os.PathLike) -> ShadowField:
     """Read and validate a ``field`` asset.
 
@@ -198,14 +220,11 @@ def read_field(path: str | os.PathLike) -> ShadowField:
     ShadowField
     """
     asset = read_asset(path, "field")
-    res = np.asarray(asset["shell_resolution"], dtype=np.int64)
+    res = shell_resolution(asset, path)
     C = res.shape[0]
-    layout = {k: asset.attrs.get(k) for k in ("pole_axis", "phi_origin")}
-    if layout != {k: LAYOUT_ATTRS[k] for k in layout}:
-        raise AssetError(f"unsupported field layout {layout}; resample it with this shtools", path)
 
     def stack(name):
-        return np.stack([asset[f"shells/{c}/{name}"] for c in range(C)]).astype(np.float32)
+        return stack_shells(asset, C, name)
 
     skip = {"format", "format_version", "sh_order", "sh_convention", "bounding_radius"}
     return ShadowField(

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shtools.data_formats._base import DatasetSpec, Schema, read_asset, register, write_asset
-from shtools.data_formats.field import LAYOUT_ATTRS
+from shtools.data_formats.field import LAYOUT_ATTRS, shell_resolution, stack_shells
 from shtools.errors import AssetError
 
 #: Colour channels of an RCV.
@@ -185,15 +185,11 @@ def read_radiance_field(path: str | os.PathLike) -> RadianceField:
     RadianceField
     """
     asset = read_asset(path, "srf")
-    res = np.asarray(asset["shell_resolution"], dtype=np.int64)
+    res = shell_resolution(asset, path)
     C = res.shape[0]
-    layout = {k: asset.attrs.get(k) for k in ("pole_axis", "phi_origin")}
-    if layout != {k: LAYOUT_ATTRS[k] for k in layout}:
-        raise AssetError(f"unsupported field layout {layout}; resample it with this shtools", path)
 
     def stack(name):
-        return np.stack([np.asarray(asset[f"shells/{c}/{name}"]).reshape(-1)
-                         for c in range(C)]).astype(np.float32)
+        return stack_shells(asset, C, name)
 
     skip = {"format", "format_version", "sh_order", "sh_convention", "bounding_radius",
             "emitter_radius", "emitter_area"}

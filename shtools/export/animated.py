@@ -123,6 +123,41 @@ def colour_change(display: np.ndarray, base: np.ndarray, base_srgb: np.ndarray):
     return delta, moved.max(axis=1) * 255.0 >= KEEP_STEP
 
 
+def colour_changes(bake: Bake, positions: list[int], *, quantity: str, scale: float,
+                   curve: str, progress=None):
+    """The first frame's display colours, then each later frame's change from them.
+
+    Parameters
+    ----------
+    bake : Bake
+    positions : list of int
+        Frame positions in the bake, the first one the base.
+    quantity, scale, curve
+        As for :func:`shtools.export.quantity.display_linear`.
+    progress : callable, optional
+        Progress factory (:mod:`shtools.progress`), one step per frame.
+
+    Yields
+    ------
+    base : ndarray, shape (V, 3) float32
+        First: the first frame's display colours, linear [0, 1].
+    t, delta, keep : int, ndarray (V, 3), ndarray of bool (V,)
+        Then, for each later position ``t``, :func:`colour_change` from ``base``.
+    """
+    from shtools.progress import silent
+
+    base = base_srgb = None
+    with (progress or silent)(positions, desc="glb", unit="frames") as steps:
+        for t in steps:
+            display = np.clip(display_linear(bake, t, quantity, scale, curve), 0.0, 1.0)
+            if base is None:
+                base = display.astype(np.float32)
+                base_srgb = srgb_encode(base)
+                yield base
+                continue
+            yield (t, *colour_change(display, base, base_srgb))
+
+
 def key_times(frames: list[int], fps: float) -> np.ndarray:
     """Key times (seconds, float32) of exported ``frames``: one per frame from 0, plus a
     closing key one frame step after the last.
@@ -245,8 +280,6 @@ def write_animated_glb(path: str | os.PathLike, bake: Bake, positions: list[int]
         (object names), ``targets`` (counts of dense, sparse, shared and empty
         colour targets) and ``bytes`` of the file.
     """
-    from shtools.progress import silent
-
     frames = [int(bake.frame_index[t]) for t in positions]
     fps = float(bake.attrs.get("fps", 24.0))
     buf = _Buffer()
@@ -265,23 +298,18 @@ def write_animated_glb(path: str | os.PathLike, bake: Bake, positions: list[int]
                         "position": FrameTargets(buf, count, 3, bounds=True),
                         "normal": FrameTargets(buf, count, 3)})
 
-    base = None
-    with (progress or silent)(positions, desc="glb", unit="frames") as steps:
-        for k, t in enumerate(steps):
-            display = np.clip(display_linear(bake, t, quantity, scale, curve), 0.0, 1.0)
-            if k == 0:
-                base = display.astype(np.float32)
-                base_srgb = srgb_encode(base)
-                continue
-            delta, keep = colour_change(display, base, base_srgb)
-            for obj in objects:
-                rows = slice(obj["lo"], obj["hi"])
-                obj["colour"].add_colour(delta[rows], keep[rows])
-                if obj["deform"]:
-                    for name, frame_values in (("position", bake.frame_vertices),
-                                               ("normal", bake.frame_normals)):
-                        now = np.asarray(frame_values(t)[rows], dtype=np.float64)
-                        obj[name].add_float(now - frame_values(positions[0])[rows])
+    changes = colour_changes(bake, positions, quantity=quantity, scale=scale, curve=curve,
+                             progress=progress)
+    base = next(changes, None)
+    for t, delta, keep in changes:
+        for obj in objects:
+            rows = slice(obj["lo"], obj["hi"])
+            obj["colour"].add_colour(delta[rows], keep[rows])
+            if obj["deform"]:
+                for name, frame_values in (("position", bake.frame_vertices),
+                                           ("normal", bake.frame_normals)):
+                    now = np.asarray(frame_values(t)[rows], dtype=np.float64)
+                    obj[name].add_float(now - frame_values(positions[0])[rows])
 
     nodes, meshes, channels, samplers = [], [], [], []
     n_targets = len(positions) - 1

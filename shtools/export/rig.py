@@ -133,11 +133,8 @@ def _add_colour_animation(gltf: pygltflib.GLTF2, blob: bytearray, bake: Bake,
                           positions: list[int], model, lo: int, rig_path: Path, *,
                           quantity: str, scale: float, curve: str, progress) -> None:
     """Add the frames' colours as one-hot morph targets and a ``bake`` weights animation."""
-    from shtools.export.animated import FrameTargets, colour_change, key_times, one_hot_weights
+    from shtools.export.animated import FrameTargets, colour_changes, key_times, one_hot_weights
     from shtools.export.gltf import _Buffer
-    from shtools.export.quantity import display_linear
-    from shtools.export.tonemap import srgb_encode
-    from shtools.progress import silent
 
     meshes = {m for m, _, _, _ in model.primitives}
     for m in sorted(meshes):
@@ -151,18 +148,13 @@ def _add_colour_animation(gltf: pygltflib.GLTF2, blob: bytearray, bake: Bake,
     buf = _Buffer()  # appends to the rig's own buffer, views and accessors
     buf.blob, buf.views, buf.accessors = blob, gltf.bufferViews, gltf.accessors
     tracks = {(m, p): FrameTargets(buf, count, 3) for m, p, _, count in model.primitives}
-    base = base_srgb = None
-    with (progress or silent)(positions, desc="glb", unit="frames") as steps:
-        for k, t in enumerate(steps):
-            display = np.clip(display_linear(bake, t, quantity, scale, curve), 0.0, 1.0)
-            if k == 0:
-                base = display.astype(np.float32)
-                base_srgb = srgb_encode(base)
-                continue
-            delta, keep = colour_change(display, base, base_srgb)
-            for m, p, start, count in model.primitives:
-                rows = slice(lo + start, lo + start + count)
-                tracks[m, p].add_colour(delta[rows], keep[rows])
+    changes = colour_changes(bake, positions, quantity=quantity, scale=scale, curve=curve,
+                             progress=progress)
+    base = next(changes, None)
+    for _t, delta, keep in changes:
+        for m, p, start, count in model.primitives:
+            rows = slice(lo + start, lo + start + count)
+            tracks[m, p].add_colour(delta[rows], keep[rows])
     n_targets = len(positions) - 1
     for m, p, start, count in model.primitives:
         prim = gltf.meshes[m].primitives[p]

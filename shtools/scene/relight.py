@@ -364,13 +364,14 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     """
     import h5py
 
+    from shtools.data_formats._base import same_file
     from shtools.data_formats.bake import BakeWriter, read_bake
     from shtools.progress import silent
 
     start = time.perf_counter()
     for src in (bake, light) + (() if scene is None or not isinstance(scene, str | os.PathLike)
                                  else (scene,)):
-        if _same_file(output, src):
+        if same_file(output, src):
             raise InputError(f"is also an input ({src}); choose another output", output)
     b = read_bake(bake)
     if b.visibility is None:  # before reading the light: the bake is what is missing
@@ -426,14 +427,3 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),
             "lights": 0 if scene is None else len(scene.lights)}
-
-
-def _same_file(a, b) -> bool:
-    """True when ``a`` and ``b`` name one file (links included)."""
-    a, b = Path(a), Path(b)
-    try:
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-    except OSError:
-        pass
-    return os.path.realpath(a) == os.path.realpath(b)

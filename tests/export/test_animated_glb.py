@@ -9,12 +9,12 @@ does not go through the exporter's own code.
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 import pygltflib
 import pytest
+from helpers.exports import export_json
 
 from shtools.data_formats.bake import write_bake
 from shtools.export.tonemap import srgb_encode
@@ -79,18 +79,11 @@ def bake_file(tmp_path_factory):
     return path
 
 
-def _export(run_cli, bake_file, out, *args):
-    code, stdout, stderr = run_cli("export", bake_file, "-o", out, "--fixed-exposure",
-                                   "--json", *args)
-    assert code == 0, stderr
-    return json.loads(stdout)
-
-
 @pytest.mark.parametrize("frames_text", ["5:10", "5:10:2"])
 def test_frames_decode_to_the_single_frame_exports(run_cli, bake_file, tmp_path, khronos,
                                                    glb, frames_text):
     out = tmp_path / "shot.glb"
-    summary = _export(run_cli, bake_file, out, "--frames", frames_text)
+    summary = export_json(run_cli, bake_file, out, "--frames", frames_text)
     assert summary["files"] == [str(out)] and sorted(tmp_path.iterdir()) == [out]
     frames = list(range(5, 10, 2 if frames_text.endswith(":2") else 1))
     gltf = pygltflib.GLTF2().load(str(out))
@@ -101,7 +94,7 @@ def test_frames_decode_to_the_single_frame_exports(run_cli, bake_file, tmp_path,
     assert gltf.meshes[3].primitives[0].targets in ([], None)  # 'post' never changes
     for frame in frames:
         single = tmp_path / f"single{frame}.glb"
-        _export(run_cli, bake_file, single, "--frame", frame)
+        export_json(run_cli, bake_file, single, "--frame", frame)
         ref = pygltflib.GLTF2().load(str(single))
         time = (frame - frames[0]) / FPS
         for o in range(len(names)):
@@ -124,13 +117,13 @@ def test_three_js_plays_the_frames_of_the_single_frame_exports(run_cli, bake_fil
     """three.js's own loader and animation mixer, at each frame's time, show the colours
     and positions of ``--frame F`` (three.js r170, as the Makefile pins it)."""
     out = tmp_path / "shot.glb"
-    _export(run_cli, bake_file, out, "--frames", "5:10")
+    export_json(run_cli, bake_file, out, "--frames", "5:10")
     # half-way through each frame's interval (STEP holds a frame until the next key;
     # a key's own time, stored as float32, may round just past the double asked for)
     shown = threejs(out, [(f - FRAMES[0] + 0.5) / FPS for f in FRAMES])
     for frame, view in zip(FRAMES, shown, strict=True):
         single = tmp_path / f"single{frame}.glb"
-        _export(run_cli, bake_file, single, "--frame", frame)
+        export_json(run_cli, bake_file, single, "--frame", frame)
         ref = pygltflib.GLTF2().load(str(single))
         for mesh in ref.meshes:
             attrs = mesh.primitives[0].attributes
@@ -145,7 +138,7 @@ def test_three_js_plays_the_frames_of_the_single_frame_exports(run_cli, bake_fil
 def test_targets_are_sparse_shared_or_dense_as_their_content_asks(run_cli, bake_file,
                                                                   tmp_path):
     out = tmp_path / "shot.glb"
-    _export(run_cli, bake_file, out, "--frames", "5:10")
+    export_json(run_cli, bake_file, out, "--frames", "5:10")
     gltf = pygltflib.GLTF2().load(str(out))
     ground = gltf.meshes[0].primitives[0].targets
     assert len(ground) == len(FRAMES) - 1
@@ -164,7 +157,7 @@ def test_targets_are_sparse_shared_or_dense_as_their_content_asks(run_cli, bake_
 
 
 def test_sequence_option_and_single_frame_keep_the_old_files(run_cli, bake_file, tmp_path):
-    summary = _export(run_cli, bake_file, tmp_path / "s.glb", "--frames", "5:7", "--sequence")
+    summary = export_json(run_cli, bake_file, tmp_path / "s.glb", "--frames", "5:7", "--sequence")
     assert summary["files"] == [str(tmp_path / "s.0005.glb"), str(tmp_path / "s.0006.glb")]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.0005.glb", "s.0006.glb"]
     gltf = pygltflib.GLTF2().load(str(tmp_path / "s.0005.glb"))

@@ -8,12 +8,12 @@ through USD's own validators and the GLBs through the Khronos glTF validator
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 import pygltflib
 import pytest
+from helpers.exports import export_json
 
 from shtools.data_formats.bake import read_bake, write_bake
 from shtools.export.tonemap import aces
@@ -51,20 +51,13 @@ def bake_file(tmp_path_factory):
     return path
 
 
-def _export(run_cli, bake_file, out, *args):
-    code, stdout, stderr = run_cli("export", bake_file, "-o", out, "--fixed-exposure",
-                                   "--json", *args)
-    assert code == 0, stderr
-    return json.loads(stdout)
-
-
 # ----------------------------------------------------------------------------- USD
 @pytest.mark.parametrize("suffix", [".usda", ".usdc"])
 def test_usd_reads_back_value_for_value(run_cli, bake_file, tmp_path, suffix):
     from pxr import Usd, UsdGeom
 
     out = tmp_path / f"baked{suffix}"
-    summary = _export(run_cli, bake_file, out)
+    summary = export_json(run_cli, bake_file, out)
     bake = read_bake(bake_file)
     stage = Usd.Stage.Open(str(out))
     assert stage.GetTimeCodesPerSecond() == FPS and stage.GetFramesPerSecond() == FPS
@@ -102,7 +95,7 @@ def test_usd_passes_the_usd_validators(run_cli, bake_file, tmp_path):
     from pxr import Usd, UsdValidation
 
     out = tmp_path / "baked.usdc"
-    _export(run_cli, bake_file, out, "--frames", "5:9:2")
+    export_json(run_cli, bake_file, out, "--frames", "5:9:2")
     registry = UsdValidation.ValidationRegistry()
     validators = registry.GetOrLoadAllValidators()
     assert len(validators) > 10  # the geometry, shading, stage-metadata... suites are loaded
@@ -131,7 +124,7 @@ def _accessor(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
 
 def test_glb_sequence_keeps_objects_and_frames(run_cli, bake_file, tmp_path, khronos):
     out = tmp_path / "shot.glb"
-    summary = _export(run_cli, bake_file, out, "--frames", "5:9:2", "--quantity", "irradiance",
+    summary = export_json(run_cli, bake_file, out, "--frames", "5:9:2", "--quantity", "irradiance",
                       "--sequence")
     files = [tmp_path / "shot.0005.glb", tmp_path / "shot.0007.glb"]
     assert summary["files"] == [str(f) for f in files] and not out.exists()
@@ -197,7 +190,7 @@ def test_vat_texture_and_uvs_index_every_vertex_and_frame(run_cli, bake_file, tm
     import OpenEXR
 
     out = tmp_path / "fx.exr"
-    summary = _export(run_cli, bake_file, out, "--frames", "6:9")
+    summary = export_json(run_cli, bake_file, out, "--frames", "6:9")
     bake = read_bake(bake_file)
     with OpenEXR.File(str(out)) as f:
         tex = np.asarray(f.channels()["RGB"].pixels)
@@ -268,7 +261,7 @@ def test_usd_writes_uniform_values_once_as_constant_primvars(run_cli, bake_file,
     from pxr import Usd, UsdGeom
 
     out = tmp_path / "baked.usda"
-    _export(run_cli, bake_file, out)
+    export_json(run_cli, bake_file, out)
     stage = Usd.Stage.Open(str(out))
     for path, albedo in (("/World/ground", [0.5] * 3), ("/World/my_ball", [0.9, 0.2, 0.1])):
         primvars = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(path))
@@ -295,7 +288,7 @@ def test_usd_writes_uniform_values_once_as_constant_primvars(run_cli, bake_file,
                albedo=albedo, object_offsets=[0, V, 2 * V], object_names=["flat", "dot"],
                fps=1.0)
     out = tmp_path / "uniform.usda"
-    _export(run_cli, path, out)
+    export_json(run_cli, path, out)
     stage = Usd.Stage.Open(str(out))
     flat = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/flat"))
     dot = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/dot"))

@@ -108,6 +108,15 @@ def test_haar_reduction_keeps_a_sharp_feature_and_collapses_a_constant():
     assert math.isfinite(red.cumulative_error)
 
 
+def _ground_grid():
+    """A 9 x 9 grid of receivers over [-1.2, 1.2]^2 in the plane z = 0, facing +z:
+    points and normals, shape (81, 3) each."""
+    xs = np.linspace(-1.2, 1.2, 9)
+    X, Y = np.meshgrid(xs, xs)
+    pts = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
+    return pts, np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+
+
 def test_haar_field_shadow_matches_ray_tracing_under_a_small_bright_light():
     import trimesh
 
@@ -118,10 +127,7 @@ def test_haar_field_shadow_matches_ray_tracing_under_a_small_bright_light():
     box = trimesh.creation.box((1.0, 0.6, 0.4))
     box.apply_translation([0.0, 0.0, 0.8])
     fld, _ = build_haar_field(box, shells=16, resolution=16, map_size=32, min_resolution=8)
-    xs = np.linspace(-1.2, 1.2, 9)
-    X, Y = np.meshgrid(xs, xs)
-    pts = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
-    nrm = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    pts, nrm = _ground_grid()
     dirs, w = direction_map(32)
     # a sun: the cells within 12 degrees of a direction 25 degrees off the zenith
     sun = np.array([math.sin(0.44), 0.0, math.cos(0.44)])
@@ -155,10 +161,7 @@ def test_two_haar_occluders_combine_by_the_product_of_their_maps():
     # 32 shells: the ground reaches 4 bounding radii of each (the paper's 6.4 V_r)
     fa, _ = build_haar_field(a, shells=32, resolution=16, map_size=32, min_resolution=8)
     fb, _ = build_haar_field(b, shells=32, resolution=16, map_size=32, min_resolution=8)
-    xs = np.linspace(-1.2, 1.2, 9)
-    X, Y = np.meshgrid(xs, xs)
-    pts = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
-    nrm = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    pts, nrm = _ground_grid()
     dirs, w = direction_map(32)
     env = np.ones((len(dirs), 3))
     got = haar_radiance(fa.visibility_maps(pts) * fb.visibility_maps(pts), env, nrm, dirs, w)

@@ -114,16 +114,16 @@ coeffs = [[1.0, 1.0, 1.0], [0, 0.6, 0], [0, 0.5, 0], [0, 0, 0],
 GROUND_VERTICES = 21 * 21
 
 
-def ground_scene_head(settings: str = "", *, size: float = 4.0, subdivisions: int = 24) -> str:
-    """Scene text up to a receiver-only ground plane: order 3, 2 frames at 2 fps, a sky
-    brighter above (bands 0 and 1), ``settings`` more ``[settings]`` lines; the rigid
-    traced-shadow and self-visibility tests append their objects."""
+def ground_scene_head(settings: str = "", *, size: float = 4.0, subdivisions: int = 24,
+                      frames: int = 2, fps: float | None = 2) -> str:
+    """Scene text up to a receiver-only ground plane: order 3, ``frames`` frames at
+    ``fps`` (``None``: the scene default), a sky brighter above (bands 0 and 1),
+    ``settings`` more ``[settings]`` lines; the tests append their objects."""
+    timing = f"frames = {frames}\n" + ("" if fps is None else f"fps = {fps:g}\n")
     return f"""
 [settings]
 order = 3
-frames = 2
-fps = 2
-{settings}
+{timing}{settings}
 [environment]
 coeffs = [[5.0, 5.0, 5.0], [0.0, 0.0, 0.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0],
           [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]

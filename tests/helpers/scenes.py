@@ -43,3 +43,27 @@ def ground(name: str = "ground", *, size: float = 2.0, subdivisions: int = 2,
     return {"name": name, "role": role,
             "primitive": {"type": "plane", "size": [size, size],
                           "subdivisions": subdivisions}, **keys}
+
+
+def torus_and_ring(folder: Path, *, major: float, minor: float, sphere_radius: float,
+                   plane: str = "xy", sections: tuple[int, int] = (16, 8), spheres: int = 8,
+                   name: str = "ring.h5") -> None:
+    """Write ``torus.obj`` (a trimesh torus about +z of ``sections`` = (major, minor)
+    sections) and the sphere set ``name``: ``spheres`` spheres of ``sphere_radius``
+    evenly on a circle of radius ``major`` about the origin in the ``plane`` (``"xy"``,
+    the torus's own, or ``"xz"``)."""
+    import numpy as np
+    import trimesh
+
+    from shtools.data_formats.spheres import write_spheres
+    from shtools.geometry.sphere_set import SphereSet
+
+    folder = Path(folder)
+    trimesh.creation.torus(major_radius=major, minor_radius=minor, major_sections=sections[0],
+                           minor_sections=sections[1]).export(folder / "torus.obj")
+    phi = np.linspace(0.0, 2 * np.pi, spheres, endpoint=False)
+    circle = {"xy": (np.cos(phi), np.sin(phi), np.zeros_like(phi)),
+              "xz": (np.cos(phi), np.zeros_like(phi), np.sin(phi))}[plane]
+    centers = major * np.stack(circle, axis=1)
+    write_spheres(folder / name,
+                  SphereSet(centers, np.full(spheres, sphere_radius), 0.0, 1.0, "ring"))

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trimesh
+from helpers.scenes import torus_and_ring
 
 from shtools.reference.look import bounding_sphere, look_metrics
 from shtools.runtime import ShadowRuntime
@@ -40,15 +40,8 @@ rotate = [60.0, 0.0, 0.0]
 
 
 def _scene(folder):
-    from shtools.data_formats.spheres import write_spheres
-    from shtools.geometry.sphere_set import SphereSet
-
-    trimesh.creation.torus(major_radius=0.6, minor_radius=0.25, major_sections=32,
-                           minor_sections=16).export(folder / "torus.obj")
-    phi = np.linspace(0.0, 2 * math.pi, 12, endpoint=False)
-    centers = 0.6 * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
-    write_spheres(folder / "torus_spheres.h5",
-                  SphereSet(centers, np.full(12, math.hypot(0.25, 0.16)), 0.0, 1.0, "ring"))
+    torus_and_ring(folder, major=0.6, minor=0.25, sphere_radius=math.hypot(0.25, 0.16),
+                   sections=(32, 16), spheres=12, name="torus_spheres.h5")
     (folder / "scene.toml").write_text(SCENE)
     return load_scene(folder / "scene.toml")
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
+from helpers.scenes import torus_and_ring
 
 from shtools.scene.bake import bake_scene
 from shtools.scene.scene import parse_scene
@@ -15,15 +15,7 @@ ZERO_SKY = "[environment]\ncoeffs = [" + ", ".join(["[0.0, 0.0, 0.0]"] * 9) + "]
 
 
 def _scene(folder, shadows: str, environment: str = "", extra_light: str = ""):
-    from shtools.data_formats.spheres import write_spheres
-    from shtools.geometry.sphere_set import SphereSet
-
-    torus = trimesh.creation.torus(major_radius=0.5, minor_radius=0.2, major_sections=16,
-                                   minor_sections=8)
-    torus.export(folder / "torus.obj")
-    phi = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
-    centers = 0.5 * np.stack([np.cos(phi), np.zeros_like(phi), np.sin(phi)], axis=1)
-    write_spheres(folder / "ring.h5", SphereSet(centers, np.full(8, 0.3), 0.0, 1.0, "ring"))
+    torus_and_ring(folder, major=0.5, minor=0.2, sphere_radius=0.3, plane="xz")
     text = f"""
 [settings]
 order = 3
