@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1] / "shtools"
 ALLOWED = {
     "errors": set(),
     "progress": set(),  # the progress protocol, a leaf like errors
-    "tasks": {"errors"},
+    "tasks": {"errors"},  # a package: pool, workers, dask_cluster
     "sh": {"errors"},
     "data_formats": {"errors", "sh"},
     "runtime": {"errors", "tasks", "sh", "data_formats"},
