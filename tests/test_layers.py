@@ -95,7 +95,6 @@ def test_every_layer_exists_or_is_planned(pkg):
 KNOWN_CYCLES = {
     "scene: the kinds registry (scene/kinds.py) and the modules registering into it":
         ("shtools.scene.*",),
-    "export: writer <-> vat": ("shtools.export.writer", "shtools.export.vat"),
 }
 
 
