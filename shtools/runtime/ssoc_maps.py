@@ -2,7 +2,7 @@
 
 Silhouette edges are extruded along their image-space normals into quads (or round
 caps at corners) and rasterised; every texel keeps the 6-tuple of its nearest edge
-(Mo, Popescu and Wyman, "Soft shadow occlusion camera", Sec. 3.2).  The choices
+(Mo et al., "The Soft Shadow Occlusion Camera", Sec. 3.2).  The choices
 the paper leaves open are listed in :mod:`shtools.runtime.ssoc`, which reads these
 maps per receiver.
 """
