@@ -528,12 +528,13 @@ def _previous_tracing(active: bool):
                                      n_dirs=n_dirs).astype(np.float32)
 
     def multiply(runtime, g, self_visibility):
-        if runtime._products is None:
-            runtime._products = QuadratureProducts(runtime.order, np.float32)
+        terms = runtime._self  # the runtime's SelfTerms keeps the products between frames
+        if terms.products is None:
+            terms.products = QuadratureProducts(runtime.order, np.float32)
         for sv in self_visibility or ():
             if sv.visibility is not None:
                 rows = np.arange(g.shape[0])[sv.rows]
-                g[rows] = runtime._products.product(g[rows], sv.visibility[:, :g.shape[1]])
+                g[rows] = terms.products.product(g[rows], sv.visibility[:, :g.shape[1]])
         return g
 
     saved = bake.bake_clusters, transfer.traced_self_visibility, ShadowRuntime._multiply_self

@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1] / "shtools"
 ALLOWED = {
     "errors": set(),
     "progress": set(),  # the progress protocol, a leaf like errors
-    "tasks": {"errors"},
+    "tasks": {"errors"},  # a package: pool, workers, dask_cluster
     "cache": set(),  # the set-up cache: stdlib and numpy only
     "sh": {"errors"},
     "data_formats": {"errors", "sh"},
@@ -96,8 +96,6 @@ def test_every_layer_exists_or_is_planned(pkg):
 KNOWN_CYCLES = {
     "scene: the kinds registry (scene/kinds.py) and the modules registering into it":
         ("shtools.scene.*",),
-    "runtime: evaluator <-> parallel": ("shtools.runtime.evaluator", "shtools.runtime.parallel"),
-    "export: writer <-> vat": ("shtools.export.writer", "shtools.export.vat"),
 }
 
 

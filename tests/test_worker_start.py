@@ -17,7 +17,7 @@ import threading
 
 import pytest
 
-from shtools.runtime import ShadowSettings
+from shtools.runtime import ShadowRuntime, ShadowSettings
 from shtools.runtime.parallel import VertexWorkers, workers_supported
 from shtools.tasks import task_pool
 
@@ -68,7 +68,8 @@ def test_frame_pool_workers_do_not_inherit_a_held_lock(held_by_another_thread):
 
 def test_frame_part_workers_do_not_inherit_a_held_lock(held_by_another_thread):
     # shtools.runtime.parallel: the processes that share one large frame
-    workers = VertexWorkers(1, ShadowSettings(processes=2), None)  # default tables
+    workers = VertexWorkers(1, ShadowSettings(processes=2), None,  # default tables
+                            ShadowRuntime)
     try:
         assert workers.result(workers._pool.submit(_lock_is_free)) is True
     finally:

@@ -102,8 +102,8 @@ def write_vat(
         ``rows_per_frame``, ``height``).
     """
     from shtools.export.gltf import write_glb_objects
+    from shtools.export.objects import mesh_objects
     from shtools.export.quantity import raw_values
-    from shtools.export.writer import mesh_objects
     from shtools.progress import silent
 
     out = Path(path)

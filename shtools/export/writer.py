@@ -20,6 +20,7 @@ import numpy as np
 
 from shtools.data_formats.bake import Bake
 from shtools.errors import InputError
+from shtools.export.objects import mesh_objects
 from shtools.export.png import (
     View,
     contact_sheet,
@@ -121,24 +122,6 @@ def output_files(bake: Bake, output: str | os.PathLike, *, frame: int | None = N
 
         return vat_files(out, bake, positions)
     return [out]
-
-
-def mesh_objects(bake: Bake, t: int, quantity: str, scale: float, curve: str, uv1=None):
-    """The bake's receiver objects at asset frame ``t`` as :class:`GlbObject` s."""
-    from shtools.export.gltf import GlbObject
-    from shtools.export.quantity import raw_values
-
-    verts = np.asarray(bake.frame_vertices(t), dtype=np.float64)
-    normals = np.asarray(bake.frame_normals(t), dtype=np.float64)
-    display = display_linear(bake, t, quantity, scale, curve)
-    raw = raw_values(bake, t, quantity)
-    out = []
-    for o, name in enumerate(bake.object_names):
-        lo, hi = int(bake.object_offsets[o]), int(bake.object_offsets[o + 1])
-        out.append(GlbObject(name, verts[lo:hi], bake.object_faces(o), display[lo:hi],
-                             normals[lo:hi], raw[lo:hi], f"_{quantity.upper()}",
-                             None if uv1 is None else uv1[lo:hi]))
-    return out
 
 
 def export_bake(

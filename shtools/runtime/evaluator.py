@@ -1,12 +1,16 @@
-"""The per-frame evaluator: :class:`ShadowRuntime` (see ``docs/architecture.md``, runtime)."""
+"""The per-frame evaluator: :class:`ShadowRuntime` (see ``docs/architecture.md``, runtime).
+
+Its parts live beside it: the frame's cuts and split (:mod:`~shtools.runtime.frame_work`),
+the shadow-field parts (:mod:`~shtools.runtime.frame_parts`), the objects' own
+self-visibility (:mod:`~shtools.runtime.self_visibility`), the shading caches
+(:mod:`~shtools.runtime.shading_cache`) and the worker processes
+(:mod:`~shtools.runtime.parallel`).
+"""
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
-import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,10 +18,18 @@ from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
 from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
-from shtools.runtime.deformable import DeformableBlocker
-from shtools.runtime.fast_exp import FAST_METHODS, QuadratureProducts, fast_exp
-from shtools.runtime.fields import FieldBlocker, field_log_visibility, field_product_visibility
-from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
+from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
+from shtools.runtime.fields import FieldBlocker
+from shtools.runtime.frame_parts import (
+    DEFORMABLE_RECEIVER_PAIRS,
+    PART_BLOCKERS,
+    NoField,
+    PartBlockers,
+    combine_parts,
+    own_rows,
+    part_blockers,
+)
+from shtools.runtime.frame_work import FrameWork, frame_work
 from shtools.runtime.log_table import CapLogTable
 from shtools.runtime.parallel import (
     FRAME_PARTS,
@@ -25,39 +37,17 @@ from shtools.runtime.parallel import (
     PoolParts,
     VertexWorkers,
     resolve_processes,
-    split_clusters,
 )
+from shtools.runtime.self_visibility import SelfTerms
 from shtools.runtime.settings import ShadowSettings
-from shtools.runtime.shading import (
-    cosine_transfer,
-    desaturate_negative,
-    environment_matrices,
-    lit_transfer,
-)
+from shtools.runtime.shading import desaturate_negative
 from shtools.runtime.shading import shade as _shade
+from shtools.runtime.shading_cache import ShadingCache
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
-from shtools.sh import product as sh_product
-from shtools.sh import rotation_matrix
 
-#: Blockers evaluated per part of a frame (in the worker processes too) and
-#: combined as ``settings.field_space`` says: rigid and deformable shadow fields.
-PART_BLOCKERS = (FieldBlocker, DeformableBlocker)
-#: A deformable field at one receiver (lookup, scaling, exp) costs about as much CPU
-#: as this many sphere-receiver pairs; it weighs receivers when a frame is split
-#: (``MIN_PARALLEL_PAIRS``, cluster costs): the CPU of one deformable receiver over
-#: that of one sphere-receiver pair, exp included (order 4, acc 6, either field space).
-DEFORMABLE_RECEIVER_PAIRS = 64
-
-
-def _self_rows(sv: SelfVisibility, n_vertices: int, covered: int) -> np.ndarray:
-    """Indices ``(R,)`` of the rows ``sv.rows`` selects among ``n_vertices``; they must
-    number ``covered``, the vertices its log or visibility holds."""
-    rows = np.arange(n_vertices)[sv.rows]
-    if rows.shape[0] != covered:
-        raise InputError(f"self-visibility covers {covered} vertices but its rows select "
-                         f"{rows.shape[0]}")
-    return rows
+#: Re-exported: these moved beside the evaluator and are still importable from here.
+__all__ = ["DEFORMABLE_RECEIVER_PAIRS", "PART_BLOCKERS", "FrameWork", "ShadowRuntime"]
 
 
 class ShadowRuntime:
@@ -112,10 +102,8 @@ class ShadowRuntime:
         self._kernels = [BlockKernel(self.table) for _ in range(self.settings.threads)]
         self._auto_clusters: ReceiverClusters | None = None
         self._auto_groups: np.ndarray | None = None
-        self._rotated_logs: dict = {}  # id(log) -> (log, rotation, rotated log), last frame
-        self._transfer_cache: tuple[np.ndarray, np.ndarray] | None = None
-        self._products: QuadratureProducts | None = None  # self-visibility products
-        self._lit_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._self = SelfTerms(self.order, self.acc_order)  # self-visibility and its caches
+        self._shading = ShadingCache(self.order, self.settings)
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         self._exp_zero: np.ndarray | None = None  # exp(0) at the shading order
         #: processes sharing the per-vertex stages (worker processes start on the
@@ -277,7 +265,7 @@ class ShadowRuntime:
         """
         rest = [b for b in blockers if not isinstance(b, PART_BLOCKERS)]
         if rest or self_visibility:
-            f = self.log_visibility(pts, nrm, [_NoField() if isinstance(b, PART_BLOCKERS)
+            f = self.log_visibility(pts, nrm, [NoField() if isinstance(b, PART_BLOCKERS)
                                                else b for b in blockers], clusters,
                                     self_visibility=self_visibility)
         else:
@@ -285,7 +273,7 @@ class ShadowRuntime:
                                "seconds": {}, "processes": 1}
             f = None
         stats = self.last_stats
-        own = _own_rows(self_visibility, pts.shape[0], blockers)
+        own = own_rows(self_visibility, pts.shape[0], blockers)
         blocks = self._part_blockers(blockers, own, pts.shape[0])
         stats["field_pairs"] = pts.shape[0] * (len(blocks.fields) + DEFORMABLE_RECEIVER_PAIRS
                                                * len(blocks.deformables))
@@ -300,7 +288,8 @@ class ShadowRuntime:
             g[:] = self._field_part(tasks[0][2])
         else:
             if self._workers is None:
-                self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables)
+                self._workers = VertexWorkers(self.processes - 1, self.settings, self.tables,
+                                              ShadowRuntime)
             try:
                 futures = [self._workers.submit(task) for _, _, task in tasks[1:]]
                 a, b, task = tasks[0]
@@ -320,72 +309,13 @@ class ShadowRuntime:
         return self._combine_parts(blocks, pts, nrm, f)
 
     def _part_blockers(self, blockers, skip: dict | None, n_vertices: int
-                       ) -> _PartBlockers | None:
-        """The frame's shadow fields (rigid, deformable) for :meth:`_combine_parts`, or None.
+                       ) -> PartBlockers | None:
+        """:func:`~shtools.runtime.frame_parts.part_blockers` with this runtime's settings."""
+        return part_blockers(self.settings, blockers, skip, n_vertices)
 
-        ``skip``: position in ``blockers`` -> bool mask ``(V,)`` of the rows a
-        deformable field is not evaluated on (its object's own rows).  The
-        deformable samples are turned into their axis frames here, once, before
-        the parts go to the workers.
-        """
-        s = self.settings
-        space = s.resolved_field_space("deformable")
-        fields, deformables = [], []
-        for k, b in enumerate(blockers):
-            if isinstance(b, FieldBlocker):
-                mask = None
-                if b.skip_rows is not None:
-                    mask = np.zeros(n_vertices, dtype=bool)
-                    mask[np.asarray(b.skip_rows, dtype=np.int64)] = True
-                fields.append((b, mask))
-            elif isinstance(b, DeformableBlocker):
-                b.prepare(log=space == "log")
-                deformables.append((b, None if not skip else skip.get(k)))
-        if not (fields or deformables):
-            return None
-        return _PartBlockers(s.resolved_field_space("rigid"), space, fields, deformables)
-
-    def _combine_parts(self, blocks: _PartBlockers, pts, nrm, f) -> np.ndarray:
-        """Visibility ``(V', n*n)`` float32 of receivers with the other blockers' log sum
-        ``f (V', n_acc^2)`` (or None) and the shadow fields ``blocks``.
-
-        Fields combined in ``"log"`` space add their logs to ``f`` and one exp
-        follows; those in ``"product"`` space are then multiplied in with
-        truncated SH products at the accumulation order -- deformable fields
-        first, then rigid ones (nearest first) -- and the result is truncated to
-        the shading order.
-        """
-        m = self.acc_order
-        if f is not None and not f.any():
-            f = None  # nothing else blocks these receivers: no exp of zeros
-        fields = [fb for fb, _ in blocks.fields]
-        log_fields = fields if blocks.rigid_space == "log" else []
-        log_deformables = blocks.deformable_space == "log" and bool(blocks.deformables)
-        if log_fields or log_deformables:
-            f = (np.zeros((pts.shape[0], m * m), dtype=np.float32) if f is None
-                 else np.array(f, dtype=np.float32))
-            if log_fields:
-                field_log_visibility(pts, nrm, log_fields, self.order, m, out=f)
-            if log_deformables:
-                for d, rows in _deformable_rows(blocks, pts.shape[0]):
-                    f[rows] += d.log_visibility(pts[rows], nrm[rows], m)
-        base = None if f is None else self.exponentiate(f)
-        if blocks.deformables and not log_deformables:
-            g = np.zeros((pts.shape[0], m * m))
-            if base is None:
-                g[:, 0] = math.sqrt(4.0 * math.pi)
-            else:
-                g[:, :base.shape[1]] = base
-            for d, rows in _deformable_rows(blocks, pts.shape[0]):
-                g[rows] = sh_product(g[rows], d.visibility(pts[rows], nrm[rows], m), m)
-            base = g
-        if fields and not log_fields:
-            return field_product_visibility(pts, nrm, fields, self.order, m,
-                                            base=base).astype(np.float32)
-        if base is None:  # nothing blocks these receivers
-            base = np.zeros((pts.shape[0], self.order * self.order), dtype=np.float32)
-            base[:, 0] = math.sqrt(4.0 * math.pi)
-        return np.ascontiguousarray(base[:, :self.order * self.order], dtype=np.float32)
+    def _combine_parts(self, blocks: PartBlockers, pts, nrm, f) -> np.ndarray:
+        """:func:`~shtools.runtime.frame_parts.combine_parts` at this runtime's orders."""
+        return combine_parts(blocks, pts, nrm, f, self.order, self.acc_order, self.exponentiate)
 
     def _other_logs(self, pts, nrm, blockers: list, skip: dict | None = None, *,
                     in_parts: bool = False) -> np.ndarray | None:
@@ -396,7 +326,7 @@ class ShadowRuntime:
         self-visibility covers).  ``in_parts``: leave out the shadow fields the
         frame's parts evaluate (:data:`PART_BLOCKERS`).
         """
-        left_out = (SphereBlocker, _NoField, *(PART_BLOCKERS if in_parts else ()))
+        left_out = (SphereBlocker, NoField, *(PART_BLOCKERS if in_parts else ()))
         others = [(k, b) for k, b in enumerate(blockers) if not isinstance(b, left_out)]
         if not others:
             return None
@@ -440,166 +370,17 @@ class ShadowRuntime:
         self.close()
 
     def _self_terms(self, self_visibility, n_vertices: int, blockers: list):
-        """Rotated self-visibility logs ``(V, n_acc^2)`` and the own blocker each row skips.
-
-        Returns ``(None, None, None)`` without self-visibility; ``exclude``
-        (:class:`_Skipped`) says which *sphere* blockers each row skips (several on a
-        row that several traced objects shadow, e.g. the ground); ``skip`` maps the position of a
-        log blocker (e.g. a deformable field) named by a self-visibility to the
-        bool mask ``(V,)`` of the rows it skips.  A rotated log is kept while its
-        object's rotation does not change (static objects).
-        """
-        if not self_visibility:
-            self._rotated_logs = {}
-            return None, None, None
-        size = self.acc_order * self.acc_order
-        sphere_index = {}  # position in `blockers` -> position among the sphere blockers
-        for k, b in enumerate(blockers):
-            if isinstance(b, SphereBlocker):
-                sphere_index[k] = len(sphere_index)
-        extra = np.zeros((n_vertices, size), dtype=np.float32)
-        skipped = np.zeros((n_vertices, len(sphere_index)), dtype=bool)
-        skip = {}
-        kept = {}
-        for sv in self_visibility:
-            if not isinstance(sv, SelfVisibility):
-                raise InputError(f"self_visibility must hold SelfVisibility objects, got "
-                                 f"{type(sv).__name__}")
-            if sv.log is not None and sv.log.shape[1] != size:
-                raise InputError(
-                    f"self-visibility log has {sv.log.shape[1]} coefficients but the runtime "
-                    f"accumulates at order {self.acc_order} ({size}); rebuild the transfer "
-                    f"with --order {self.acc_order}")
-            given = sv.log if sv.log is not None else sv.visibility
-            rows = _self_rows(sv, n_vertices, given.shape[0])
-            if sv.log is not None:  # a visibility is multiplied in after the exp
-                extra[rows] += self._rotated_log(sv, kept)
-            for k in sv.skipped:
-                if k in sphere_index:
-                    skipped[rows, sphere_index[k]] = True
-                elif 0 <= k < len(blockers) and isinstance(blockers[k], LogBlocker):
-                    skip.setdefault(k, np.zeros(n_vertices, dtype=bool))[rows] = True
-                else:
-                    raise InputError(f"self-visibility names blocker {k}, which is not "
-                                     f"one of the {len(blockers)} blockers given")
-        self._rotated_logs = kept
-        if all(sv.log is None for sv in self_visibility):
-            extra = None  # visibilities only: nothing to add before the exp
-        return extra, (_Skipped.of(skipped) if skipped.any() else None), (skip or None)
-
-    def _rotated_log(self, sv: SelfVisibility, kept: dict) -> np.ndarray:
-        """``sv.log (R, n_acc*n_acc)`` turned with its object; remembered in ``kept``
-        while the rotation holds (static objects pay the rotation once)."""
-        if sv.rotation is None or np.allclose(sv.rotation, np.eye(3), atol=1e-12):
-            return sv.log
-        cached = self._rotated_logs.get(id(sv.log))
-        # the entry holds the source array itself: an id alone can be reused by a
-        # new array once the old one is freed
-        if cached is not None and cached[0] is sv.log and np.array_equal(cached[1], sv.rotation):
-            log = cached[2]
-        else:
-            d = rotation_matrix(sv.rotation, self.acc_order).astype(np.float32)
-            log = sv.log @ d.T
-        kept[id(sv.log)] = (sv.log, sv.rotation.copy(), log)
-        return log
+        """:meth:`~shtools.runtime.self_visibility.SelfTerms.terms` of this frame."""
+        return self._self.terms(self_visibility, n_vertices, blockers)
 
     def _multiply_self(self, g: np.ndarray, self_visibility) -> np.ndarray:
-        """``g`` with the self-visibilities given as visibility multiplied into their rows.
-
-        The exact truncated SH product at the shading order (quadrature); on rows
-        where ``g`` is a constant (no other blocker reaches them: ``exp(0)``) the
-        product is the given visibility times that constant, and on rows where the
-        given visibility is exactly 1 (a traced shadow none of whose rays was blocked:
-        most of a ground) it is ``g`` itself, with no quadrature.
-        """
-        given = [sv for sv in self_visibility or () if sv.visibility is not None]
-        if not given:
-            return g
-        size = self.order * self.order
-        if self._products is None:
-            self._products = QuadratureProducts(self.order, np.float32)
-        for sv in given:
-            values = sv.visibility
-            rows = _self_rows(sv, g.shape[0], values.shape[0])
-            k = values.shape[1]
-            if math.isqrt(k) ** 2 != k:
-                raise InputError(f"self-visibility has {k} coefficients, not an SH order's n*n")
-            vis = np.zeros((rows.shape[0], size), dtype=np.float32)
-            vis[:, :min(k, size)] = values[:, :size]
-            sub = g[rows]
-            flat = ~sub[:, 1:].any(axis=1)  # constant: c Y_00 = c / sqrt(4 pi) everywhere
-            out = vis * (sub[:, :1] * np.float32(1.0 / math.sqrt(4.0 * math.pi)))
-            one = ~vis[:, 1:].any(axis=1) & (vis[:, 0] == np.float32(math.sqrt(4.0 * math.pi)))
-            out[one] = sub[one]
-            full = ~flat & ~one
-            if full.any():
-                out[full] = self._products.product(sub[full], vis[full])
-            g[rows] = out
-        return g
+        """:meth:`~shtools.runtime.self_visibility.SelfTerms.multiply` into ``g``."""
+        return self._self.multiply(g, self_visibility)
 
     def _frame_work(self, pts, blockers, clusters, exclude=None) -> FrameWork:
-        """Cuts, ratio weights and per-cluster sphere lists of a frame (this process).
-
-        ``exclude`` (:class:`_Skipped`): the sphere blockers each receiver skips.
-        """
-        s = self.settings
-        stats = {"pairs": 0, "pairs_evaluated": 0, "clusters": 0, "seconds": {},
-                 "processes": 1}
-        self.last_stats = stats
-        t0 = time.process_time()
-        if exclude is not None and exclude.masks.shape == (1, len(blockers)) and \
-                exclude.masks.all():
-            # every receiver skips every sphere set (their objects' real meshes were
-            # traced on all of them): nothing to accumulate, no cuts to make
-            stats["seconds"]["cuts"] = time.process_time() - t0
-            stats["spheres_per_vertex"] = 0.0
-            return FrameWork(centers=np.zeros((0, 3)), radii=np.zeros(0))
-        if not s.hierarchy and exclude is None:
-            centers, radii = leaf_spheres(blockers)
-            stats["seconds"]["cuts"] = time.process_time() - t0
-            stats["pairs"] = stats["pairs_evaluated"] = pts.shape[0] * centers.shape[0]
-            stats["spheres_per_vertex"] = float(centers.shape[0])
-            return FrameWork(centers=centers, radii=radii)
-        forest = build_forest(blockers)
-        if not s.hierarchy:
-            # every leaf everywhere, but per exclusion group: one "cluster" per group
-            clusters = ReceiverClusters.from_labels(exclude.labels)
-            in_cut = np.broadcast_to(forest.is_leaf, (clusters.n_clusters, forest.n_nodes))
-            weights = np.ones((clusters.n_clusters, forest.n_nodes, self.acc_order))
-        else:
-            if clusters is None:
-                clusters = self._clusters_for(
-                    pts, None if exclude is None else exclude.labels)
-            if clusters.n_vertices != pts.shape[0]:
-                raise InputError(
-                    f"clusters were built for {clusters.n_vertices} vertices but "
-                    f"{pts.shape[0]} were given; call clusters() on this receiver set"
-                )
-            if exclude is not None:  # a cluster's receivers must skip the same blockers
-                clusters = clusters.split(exclude.labels)
-            cl_centers, cl_radii = clusters.bounds(pts)
-            cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
-            weights = ratio_weights(forest, cuts, cl_centers, self.table,
-                                    s.resolved_theta_min())
-            in_cut = cuts.in_cut
-        if exclude is not None:
-            in_cut = in_cut & ~_excluded_nodes(clusters, exclude, forest.blocker)
-        sizes = in_cut.sum(axis=1)
-        s_max = max(1, int(sizes.max(initial=0)))
-        # each cluster's cut nodes first (stable), padded with radius 0
-        node_idx = np.argsort(~in_cut, axis=1, kind="stable")[:, :s_max]
-        valid = np.arange(s_max)[None, :] < sizes[:, None]
-        any_inner = bool((in_cut & ~forest.is_leaf[None, :]).any())
-        work = FrameWork(
-            order=clusters.order, offsets=clusters.offsets, sizes=sizes,
-            centers=forest.centers[node_idx],
-            radii=np.where(valid, forest.radii[node_idx], 0.0),
-            weights=(np.take_along_axis(weights, node_idx[:, :, None], axis=1)
-                     if any_inner else None))
-        stats["seconds"]["cuts"] = time.process_time() - t0
-        stats["pairs"] = int((np.diff(clusters.offsets) * sizes).sum())
-        stats["clusters"] = clusters.n_clusters
-        stats["spheres_per_vertex"] = stats["pairs"] / max(1, pts.shape[0])
+        """:func:`~shtools.runtime.frame_work.frame_work` of this frame (sets ``last_stats``)."""
+        work, self.last_stats = frame_work(self.settings, self.table, pts, blockers, clusters,
+                                           exclude, self._clusters_for)
         return work
 
     def _accumulate(self, task, stats: dict) -> np.ndarray:
@@ -624,7 +405,7 @@ class ShadowRuntime:
                                    kernels=self._kernels, stats=stats)
 
     def _split_visibility(self, work: FrameWork, pts, nrm, extra=None,
-                          blocks: _PartBlockers | None = None,
+                          blocks: PartBlockers | None = None,
                           receiver_cost: float = 0.0) -> np.ndarray:
         """Visibility of a frame evaluated as ``FRAME_PARTS`` independent parts.
 
@@ -645,7 +426,8 @@ class ShadowRuntime:
         processes = 1
         if self._part_pool is not None and len(parts) > 1:
             if self._pool_parts is None:
-                self._pool_parts = PoolParts(self._part_pool, self.settings, self.tables)
+                self._pool_parts = PoolParts(self._part_pool, self.settings, self.tables,
+                                             ShadowRuntime)
             results = self._pool_parts.map([task for _, task in parts])
             for (rows, _), (g_part, count) in zip(parts, results, strict=True):
                 g[rows] = g_part
@@ -658,7 +440,7 @@ class ShadowRuntime:
         else:
             if self._workers is None:
                 self._workers = VertexWorkers(min(self.processes, FRAME_PARTS) - 1,
-                                              self.settings, self.tables)
+                                              self.settings, self.tables, ShadowRuntime)
             try:
                 queued = [(rows, task, self._workers.submit(task)) for rows, task in parts[1:]]
                 g[parts[0][0]], evaluated = self.run_part(parts[0][1])
@@ -742,11 +524,11 @@ class ShadowRuntime:
         """
         s = self.settings
         pts, nrm = _check_receivers(vertices, normals)
-        transfer, changed = self._cosine_transfer(nrm)
+        transfer, changed = self._shading.cosine_transfer(nrm)
         env_transfer = None
         if (env_sh is not None and local_visibility is None and form == "tabulated"
                 and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
-            env_transfer = self._lit_transfer(env_sh, transfer, changed)
+            env_transfer = self._shading.lit_transfer(env_sh, transfer, changed)
         out = _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                      window_kind=s.resolved_window(), window_h=s.window_h,
                      local_visibility=local_visibility, form=form, transfer=transfer,
@@ -754,50 +536,6 @@ class ShadowRuntime:
         if s.deringing == "desaturate":
             out = desaturate_negative(out)
         return out
-
-    def _cosine_transfer(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
-
-        Static receivers (most of a scene) keep their tabulated transfer across
-        frames, as the paper keeps L_H per normal.
-
-        Returns
-        -------
-        transfer : ndarray, shape (V, n*n) float32
-        changed : ndarray of int or None
-            Rows recomputed by this call (None: all of them).
-        """
-        cached = self._transfer_cache
-        if cached is None or cached[0].shape != normals.shape:
-            transfer = cosine_transfer(normals, self.order)
-            self._transfer_cache = (normals.copy(), transfer)
-            return transfer, None
-        old_n, transfer = cached
-        changed = np.flatnonzero(np.any(old_n != normals, axis=1))
-        if changed.size:
-            transfer[changed] = cosine_transfer(normals[changed], self.order)
-            old_n[changed] = normals[changed]
-        return transfer, changed
-
-    def _lit_transfer(self, env_sh, transfer: np.ndarray, changed: np.ndarray | None
-                      ) -> np.ndarray:
-        """L_H = L * H(N) per vertex (V, 3, n*n), kept while the light is unchanged.
-
-        Rows are refreshed where the normal changed (``changed``), all of them
-        when the light, the window or the receivers changed.
-        """
-        s = self.settings
-        env = np.array(env_sh, dtype=np.float64)
-        cached = self._lit_cache
-        if (cached is None or changed is None or cached[1].shape[0] != transfer.shape[0]
-                or cached[0].shape != env.shape or not np.array_equal(cached[0], env)):
-            mats = environment_matrices(env, self.order, s.resolved_window(), s.window_h)
-            self._lit_cache = (env, lit_transfer(transfer, mats), mats)
-            return self._lit_cache[1]
-        _, l_h, mats = cached
-        if changed.size:
-            l_h[changed] = lit_transfer(transfer[changed], mats)
-        return l_h
 
     def _clusters_for(self, pts: np.ndarray, groups=None) -> ReceiverClusters:
         same_groups = (groups is None and self._auto_groups is None) or (
@@ -808,73 +546,6 @@ class ShadowRuntime:
             self._auto_clusters = self.clusters(pts, groups=groups)
             self._auto_groups = None if groups is None else np.array(groups)
         return self._auto_clusters
-
-
-@dataclass
-class FrameWork:
-    """What one frame accumulates: per-cluster sphere lists, or one list for all.
-
-    Attributes
-    ----------
-    centers : ndarray, shape (C, S, 3) or (S, 3)
-        Cut spheres of each cluster (padded), or the leaf spheres (no hierarchy).
-    radii : ndarray, shape (C, S) or (S,)
-    order, offsets : ndarray of int, shapes (V,), (C + 1,) or None
-        Receivers sorted by cluster and the cluster boundaries.
-    sizes : ndarray of int, shape (C,) or None
-        Valid spheres per cluster.
-    weights : ndarray, shape (C, S, n_acc) or None
-        Ratio weights (eq. 37) where inner tree nodes are used.
-    """
-
-    centers: np.ndarray
-    radii: np.ndarray
-    order: np.ndarray | None = None
-    offsets: np.ndarray | None = None
-    sizes: np.ndarray | None = None
-    weights: np.ndarray | None = None
-
-    def task(self, pts, nrm) -> tuple:
-        """The whole frame as one task for :meth:`ShadowRuntime.run_part`."""
-        if self.order is None:
-            return ("spheres", pts, nrm, self.centers, self.radii)
-        return ("clusters", pts, nrm, self.order, self.offsets, self.centers, self.radii,
-                self.weights, self.sizes)
-
-    def split(self, pts, nrm, parts: int, receiver_cost: float = 0.0
-              ) -> list[tuple[np.ndarray, tuple]]:
-        """``parts`` tasks of about equal work, with the receiver rows each covers.
-
-        Clusters are dealt whole (:func:`split_clusters`, cost = receivers x
-        (cut size + ``receiver_cost``, the per-receiver work of other blockers));
-        without a hierarchy the receivers are cut into equal ranges.  Empty parts
-        are dropped.
-        """
-        pts32 = np.asarray(pts, dtype=np.float32)
-        nrm32 = np.asarray(nrm, dtype=np.float32)
-        if self.order is None:
-            bounds = np.linspace(0, pts.shape[0], parts + 1).astype(np.int64)
-            return [(np.arange(a, b), ("spheres", pts32[a:b], nrm32[a:b], self.centers,
-                                       self.radii))
-                    for a, b in itertools.pairwise(bounds) if b > a]
-        counts = np.diff(self.offsets)
-        groups = split_clusters(counts * (self.sizes + receiver_cost), parts)
-        cluster_of = np.repeat(np.arange(counts.size), counts)  # cluster of each order slot
-        part_of = np.empty(counts.size, dtype=np.int64)
-        for k, group in enumerate(groups):
-            part_of[group] = k
-        slot_part = part_of[cluster_of]
-        out = []
-        for k, group in enumerate(groups):
-            rows = self.order[slot_part == k]  # cluster by cluster, ascending
-            if rows.size == 0:
-                continue
-            offsets = np.concatenate([[0], np.cumsum(counts[group])])
-            out.append((rows, ("clusters", pts32[rows], nrm32[rows], np.arange(rows.size),
-                               offsets, self.centers[group], self.radii[group],
-                               None if self.weights is None else self.weights[group],
-                               self.sizes[group])))
-        return out
 
 
 def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
@@ -917,105 +588,3 @@ def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
     return a + b
 
 
-@dataclass
-class _Skipped:
-    """The sphere blockers each receiver row skips, as a label per row and one mask per label.
-
-    Attributes
-    ----------
-    labels : ndarray of int, shape (V,)
-        ``0..L-1``; rows with the same label skip the same blockers.  Ordered as the
-        sets' bitmasks would be (nothing skipped first, then by highest blocker), so a
-        scene whose rows skip at most one blocker each keeps its clusters.
-    masks : ndarray of bool, shape (L, S)
-        Sphere blockers (positions among the sphere blockers) each label skips.
-    """
-
-    labels: np.ndarray
-    masks: np.ndarray
-
-    @classmethod
-    def of(cls, skipped: np.ndarray) -> _Skipped:
-        """From a ``(V, S)`` bool matrix of skipped sphere blockers."""
-        n_sets = skipped.shape[1]
-        if n_sets > 62:  # rows as bit codes need S < 63; the row-wise unique is slower
-            masks, labels = np.unique(skipped[:, ::-1], axis=0, return_inverse=True)
-            return cls(labels.reshape(-1).astype(np.int64), masks[:, ::-1])
-        # a row's code has bit s for blocker s: sorting codes sorts the rows by their
-        # highest skipped blocker first, the order documented above
-        bits = np.left_shift(np.int64(1), np.arange(n_sets, dtype=np.int64))
-        codes, labels = np.unique(skipped.astype(np.int64) @ bits, return_inverse=True)
-        return cls(labels.reshape(-1).astype(np.int64), (codes[:, None] & bits) != 0)
-
-
-def _excluded_nodes(clusters: ReceiverClusters, exclude: _Skipped,
-                    node_blocker: np.ndarray) -> np.ndarray:
-    """``(C, M)`` bool: forest nodes of the blockers each cluster's receivers skip.
-
-    Raises InputError when a cluster mixes receivers that skip different blockers.
-    """
-    labels = exclude.labels
-    counts = np.diff(clusters.offsets)
-    first = labels[clusters.order[clusters.offsets[:-1]]]
-    if not np.array_equal(labels[clusters.order], np.repeat(first, counts)):
-        raise InputError("receiver clusters mix vertices of different self-visibility "
-                         "objects; build the clusters with groups = object id per vertex")
-    return exclude.masks[first][:, node_blocker]
-
-
-class _NoField:
-    """Stands in for a shadow field in :meth:`ShadowRuntime.log_visibility` when the
-    fields are evaluated separately (keeps the other blockers' indices)."""
-
-    def log_visibility(self, points, normals, order):
-        return np.zeros((np.asarray(points).shape[0], order * order), dtype=np.float32)
-
-
-@dataclass
-class _PartBlockers:
-    """The shadow fields of a frame (or of one part's rows), as the parts evaluate them.
-
-    Attributes
-    ----------
-    rigid_space, deformable_space : {"log", "product"}
-        How each kind combines (``settings.resolved_field_space``).
-    fields : list of (FieldBlocker, ndarray of bool (V,) or None)
-        Rigid fields and the rows each skips (its own object's).
-    deformables : list of (DeformableBlocker, ndarray of bool (V,) or None)
-        Deformable fields and the rows each skips (its object's own rows, which
-        a self-visibility covers).
-    """
-
-    rigid_space: str
-    deformable_space: str
-    fields: list
-    deformables: list
-
-    def take(self, rows: np.ndarray) -> _PartBlockers:
-        """The same blockers for receiver rows ``rows`` (masks cut, skip rows renumbered)."""
-        fields = [(dataclasses.replace(fb, skip_rows=None if mask is None
-                                       else np.flatnonzero(mask[rows])),
-                   None if mask is None else mask[rows]) for fb, mask in self.fields]
-        deformables = [(d, None if mask is None else mask[rows])
-                       for d, mask in self.deformables]
-        return _PartBlockers(self.rigid_space, self.deformable_space, fields, deformables)
-
-
-def _deformable_rows(blocks: _PartBlockers, n_rows: int):
-    """``(blocker, rows)`` of each deformable field, rows it is evaluated on (not skipped)."""
-    for d, mask in blocks.deformables:
-        rows = np.arange(n_rows) if mask is None else np.flatnonzero(~mask)
-        if rows.size:
-            yield d, rows
-
-
-def _own_rows(self_visibility, n_vertices: int, blockers: list) -> dict | None:
-    """Position of each deformable field a self-visibility names -> bool mask ``(V,)``
-    of its object's rows (the field skips them)."""
-    skip = {}
-    for sv in self_visibility or ():
-        for k in sv.skipped:
-            if 0 <= k < len(blockers) and isinstance(blockers[k], DeformableBlocker):
-                mask = skip.setdefault(k, np.zeros(n_vertices, dtype=bool))
-                mask[np.arange(n_vertices)[sv.rows]] = True
-    return skip or None

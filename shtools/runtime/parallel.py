@@ -124,13 +124,16 @@ class VertexWorkers:
         The runtime's settings (workers run single-process).
     tables : dict
         Log/OL tables of the runtime.
+    runtime_type : type
+        The evaluator class each worker builds (``ShadowRuntime``; passed in, so
+        this module does not import the evaluator that uses it).
     """
 
-    def __init__(self, count: int, settings, tables: dict):
+    def __init__(self, count: int, settings, tables: dict, runtime_type):
         self._pool = ProcessPoolExecutor(max_workers=int(count), mp_context=worker_context(),
                                          initializer=_init_worker,
-                                         initargs=(settings, tables, os.getpid(),
-                                                   blas_threads()))
+                                         initargs=(runtime_type, settings, tables,
+                                                   os.getpid(), blas_threads()))
         self._stop = _PoolStop(self._pool)
         self._close = weakref.finalize(self, _shutdown, self._stop)
 
@@ -176,16 +179,18 @@ class PoolParts:
         The runtime's settings (the workers run single-process).
     tables : dict
         Log/OL tables of the runtime.
+    runtime_type : type
+        The evaluator class each worker builds (``ShadowRuntime``).
     """
 
-    def __init__(self, pool, settings, tables: dict):
+    def __init__(self, pool, settings, tables: dict, runtime_type):
         import uuid
         from contextlib import ExitStack
         from dataclasses import replace
 
         self._pool = pool
         self._stack = ExitStack()
-        job = _PartJob(replace(settings, processes=1), tables, uuid.uuid4().hex)
+        job = _PartJob(runtime_type, replace(settings, processes=1), tables, uuid.uuid4().hex)
         self._shared = self._stack.enter_context(pool.share(job, setup=_pool_runtime))
 
     def map(self, tasks: list) -> list[tuple[np.ndarray, int]]:
@@ -200,8 +205,9 @@ class PoolParts:
 
 @dataclass
 class _PartJob:
-    """What the part tasks of one runtime share: its settings and tables."""
+    """What the part tasks of one runtime share: its class, settings and tables."""
 
+    runtime_type: type
     settings: object
     tables: dict
     token: str  # tells one runtime's job from another's in a long-lived worker
@@ -215,10 +221,8 @@ def _pool_runtime(job: _PartJob):
     """This worker's runtime for ``job`` (built once: the pool's per-worker set-up)."""
     runtime = _POOL_RUNTIME.get(job.token)
     if runtime is None:
-        from shtools.runtime.evaluator import ShadowRuntime
-
         _POOL_RUNTIME.clear()
-        runtime = _POOL_RUNTIME[job.token] = ShadowRuntime(job.settings, tables=job.tables)
+        runtime = _POOL_RUNTIME[job.token] = job.runtime_type(job.settings, tables=job.tables)
     return runtime
 
 
@@ -296,7 +300,7 @@ def _shutdown(stop: _PoolStop, kill: bool = False) -> None:
         time.sleep(0.005)
 
 
-def _init_worker(settings, tables, parent_pid, blas) -> None:
+def _init_worker(runtime_type, settings, tables, parent_pid, blas) -> None:
     from dataclasses import replace
 
     die_with_parent(parent_pid)
@@ -309,10 +313,8 @@ def _init_worker(settings, tables, parent_pid, blas) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
-    from shtools.runtime.evaluator import ShadowRuntime
-
     global _WORKER_RUNTIME
-    _WORKER_RUNTIME = ShadowRuntime(replace(settings, processes=1), tables=tables)
+    _WORKER_RUNTIME = runtime_type(replace(settings, processes=1), tables=tables)
 
 
 def _run_task(task):

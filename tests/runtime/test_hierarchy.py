@@ -81,7 +81,7 @@ def test_hierarchical_close_to_flat_accumulation(blob_scene, monkeypatch):
     monkeypatch.setattr(hierarchy_mod, "ratio_weights",
                         lambda forest, cuts, *a, **k: np.ones((len(cuts.in_cut),
                                                                forest.n_nodes, 4)))
-    monkeypatch.setattr("shtools.runtime.evaluator.ratio_weights", hierarchy_mod.ratio_weights)
+    monkeypatch.setattr("shtools.runtime.frame_work.ratio_weights", hierarchy_mod.ratio_weights)
     no_ratio = _radiance(ShadowRuntime(ShadowSettings(order=4, acc_order=4,
                                                       vertices_per_cluster=100)),
                          v, nrm, blockers)

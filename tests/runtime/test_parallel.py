@@ -179,10 +179,11 @@ def test_stopped_workers_let_the_process_exit(stop, tmp_path):
     (tmp_path / "stop_helpers.py").write_text(STOP_HELPERS)
     script = textwrap.dedent("""
         import os, signal, struct, sys, time
-        from shtools.runtime import ShadowSettings
+        from shtools.runtime import ShadowRuntime, ShadowSettings
         from shtools.runtime.parallel import VertexWorkers
 
-        workers = VertexWorkers(1, ShadowSettings(processes=2), None)  # default tables
+        workers = VertexWorkers(1, ShadowSettings(processes=2), None,  # default tables
+                                ShadowRuntime)
     """) + textwrap.dedent(STOPS[stop]) + 'print("stopped", flush=True)\nsys.exit(3)\n'
     # the test's folder on the script's (and its workers') path, for stop_helpers
     path = os.pathsep.join(p for p in (str(tmp_path), os.environ.get("PYTHONPATH")) if p)

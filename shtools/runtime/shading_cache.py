@@ -1,0 +1,74 @@
+"""Per-vertex shading terms kept between frames: cosine transfer and lit transfer.
+
+Static receivers (most of a scene) keep their normals, and a scene's light often
+holds still: the runtime then reuses H(N) and L_H = L * H(N) row by row instead of
+projecting them again each frame, as the paper keeps L_H per normal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shtools.runtime.shading import cosine_transfer, environment_matrices, lit_transfer
+
+
+class ShadingCache:
+    """H(N) and L_H of the last frame, refreshed where normals or the light changed.
+
+    Parameters
+    ----------
+    order : int
+        Shading SH order.
+    settings : ShadowSettings
+        The runtime's settings (their window, read at each light change).
+    """
+
+    def __init__(self, order: int, settings):
+        self.order = order
+        self.settings = settings
+        self._transfer: tuple[np.ndarray, np.ndarray] | None = None
+        self._lit: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def cosine_transfer(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
+
+        Static receivers (most of a scene) keep their tabulated transfer across
+        frames, as the paper keeps L_H per normal.
+
+        Returns
+        -------
+        transfer : ndarray, shape (V, n*n) float32
+        changed : ndarray of int or None
+            Rows recomputed by this call (None: all of them).
+        """
+        cached = self._transfer
+        if cached is None or cached[0].shape != normals.shape:
+            transfer = cosine_transfer(normals, self.order)
+            self._transfer = (normals.copy(), transfer)
+            return transfer, None
+        old_n, transfer = cached
+        changed = np.flatnonzero(np.any(old_n != normals, axis=1))
+        if changed.size:
+            transfer[changed] = cosine_transfer(normals[changed], self.order)
+            old_n[changed] = normals[changed]
+        return transfer, changed
+
+    def lit_transfer(self, env_sh, transfer: np.ndarray, changed: np.ndarray | None
+                     ) -> np.ndarray:
+        """L_H = L * H(N) per vertex (V, 3, n*n), kept while the light is unchanged.
+
+        Rows are refreshed where the normal changed (``changed``), all of them
+        when the light, the window or the receivers changed.
+        """
+        s = self.settings
+        env = np.array(env_sh, dtype=np.float64)
+        cached = self._lit
+        if (cached is None or changed is None or cached[1].shape[0] != transfer.shape[0]
+                or cached[0].shape != env.shape or not np.array_equal(cached[0], env)):
+            mats = environment_matrices(env, self.order, s.resolved_window(), s.window_h)
+            self._lit = (env, lit_transfer(transfer, mats), mats)
+            return self._lit[1]
+        _, l_h, mats = cached
+        if changed.size:
+            l_h[changed] = lit_transfer(transfer[changed], mats)
+        return l_h

@@ -1,0 +1,101 @@
+"""Independent tasks on this machine's cores or on a Dask cluster: one engine for the pipeline.
+
+A bake's frames, a batch of sphere fits and a field's shells are independent
+pieces of work.  :func:`task_pool` runs them on one of three schedulers behind
+one interface, :class:`TaskPool`:
+
+``"inline"``
+    In the calling process, one task after the other (one worker; nothing to
+    set up).  Used for a single task, one worker, or where worker processes
+    cannot be started (:func:`worker_context`).
+``None`` / ``"processes"`` (the default)
+    Worker processes on this machine
+    (:class:`concurrent.futures.ProcessPoolExecutor`), forked by
+    multiprocessing's fork server (:func:`worker_context`): the state the tasks
+    share is pickled once to each worker when it starts; results come back
+    pickled.
+a Dask scheduler
+    ``"local"`` starts a :class:`distributed.LocalCluster` of ``workers``
+    single-threaded worker processes here (and stops it afterwards);
+    ``"tcp://HOST:PORT"`` or the path of a scheduler file (``dask scheduler
+    --scheduler-file``) joins an existing cluster (SLURM/PBS via
+    dask-jobqueue, Kubernetes, ...).  The shared state is scattered once to
+    every worker; assets it names travel by path, so the workers need the
+    same shared storage (``docs/scale-out.md``).
+
+A worker's one-time set-up of the shared state (building a runtime from a
+prepared scene, ...) runs before its first task (:meth:`TaskPool.share`), so
+it is start-up time (``setup_seconds``), not the first task's.
+
+Results are yielded **in submission order** while at most ``window`` tasks are
+in flight, so the caller (the one writer of an asset) never holds more than
+``window`` results however long the run: memory is bounded by the window, not
+by the number of tasks.
+
+Faults.  A local worker that dies (killed, out of memory) breaks the process
+pool; the pool is rebuilt and the unfinished tasks are submitted again, up to
+:data:`MAX_RESUBMITS` times.  On Dask the scheduler itself reruns the tasks of
+a worker that died (its ``allowed-failures``).  Tasks are pure functions of
+their inputs, so a rerun gives the same bytes.  Ctrl-C or SIGTERM in the
+caller cancels the pending tasks and stops the local workers (and a
+``LocalCluster`` started here) before the exception propagates.
+
+This module imports only the standard library; ``dask``/``distributed`` are
+imported when a Dask scheduler is asked for (``pip install shtools[distributed]``).
+"""
+
+from shtools.tasks.dask_cluster import (
+    CONNECT_TIMEOUT,
+    EMBEDDED_CLUSTER_CONFIG,
+    LOCAL_NAMES,
+    MAX_SCHEDULER_FILE,
+    SCHEMES,
+    check_scheduler,
+)
+from shtools.tasks.pool import (
+    MAX_RESUBMITS,
+    WINDOW_PER_WORKER,
+    Shared,
+    TaskPool,
+    WorkerStats,
+    task_pool,
+)
+from shtools.tasks.workers import (
+    HELD_SIGNALS,
+    MAX_LOCAL_WORKERS,
+    TRACKER_WARNINGS,
+    WORKER_PRELOAD,
+    blas_threads,
+    can_start_workers,
+    default_workers,
+    die_with_parent,
+    start_worker,
+    use_blas_threads,
+    worker_context,
+)
+
+__all__ = [
+    "CONNECT_TIMEOUT",
+    "EMBEDDED_CLUSTER_CONFIG",
+    "HELD_SIGNALS",
+    "LOCAL_NAMES",
+    "MAX_LOCAL_WORKERS",
+    "MAX_RESUBMITS",
+    "MAX_SCHEDULER_FILE",
+    "SCHEMES",
+    "TRACKER_WARNINGS",
+    "WINDOW_PER_WORKER",
+    "WORKER_PRELOAD",
+    "Shared",
+    "TaskPool",
+    "WorkerStats",
+    "blas_threads",
+    "can_start_workers",
+    "check_scheduler",
+    "default_workers",
+    "die_with_parent",
+    "start_worker",
+    "task_pool",
+    "use_blas_threads",
+    "worker_context",
+]
