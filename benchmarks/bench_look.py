@@ -56,8 +56,10 @@ def _fidelity():
     return module
 
 
-def scenes(quick: bool, demo: Path | None, field: Path | None = None) -> dict[str, dict]:
-    """Scene files (written to ``CACHE``) and the frames to measure."""
+def scenes(quick: bool, demo: Path | None, field: Path | None = None,
+           only: set | None = None) -> dict[str, dict]:
+    """Scene files (written to ``CACHE``) and the frames to measure (``only`` of the
+    teapot scenes: the other scenes' assets are not built)."""
     fid = _fidelity()
     fid.DATA = DATA
     fid.CACHE.mkdir(parents=True, exist_ok=True)
@@ -70,6 +72,9 @@ def scenes(quick: bool, demo: Path | None, field: Path | None = None) -> dict[st
         path.write_text(f"[settings]\norder = 4\nframes = {frames}\nfps = {fps}\n\n"
                         f'[environment]\nimage = "{env}"\n\n{body}')
         return path
+
+    if field is not None and only and only <= set(FIELD_SCENES):
+        return field_scenes(write, Path(field))
 
     if quick:
         body = fid._ground(3.0, 40) + fid._rigid("spot", "spot.obj", 24, 1.0, 0.0, 0.0, 30.0,
@@ -91,6 +96,10 @@ def scenes(quick: bool, demo: Path | None, field: Path | None = None) -> dict[st
     return out
 
 
+#: The teapot field scenes: ground size and subdivisions.
+FIELD_SCENES = {"teapot14": (14.0, 112), "teapot3": (3.0, 48)}
+
+
 def field_scenes(write, field: Path) -> dict[str, dict]:
     """The teapot with a shadow field (``field``, sampled from ``teapot.obj`` at order 4)
     under Grace: on a 14 x 14 ground and on a 3 x 3 ground under it."""
@@ -106,7 +115,7 @@ blocker = {{ field = "{field}" }}
 """
     fid = _fidelity()
     out = {}
-    for name, size, subdivisions in (("teapot14", 14.0, 112), ("teapot3", 3.0, 48)):
+    for name, (size, subdivisions) in FIELD_SCENES.items():
         out[name] = {"path": write(name, fid._ground(size, subdivisions) + teapot,
                                    DATA / "probes" / "grace.hdr", 1),
                      "frames": range(0, 1)}
@@ -242,7 +251,7 @@ def main(argv=None) -> int:
             "CPU ms/frame", "CPU ratio"]
     print("| " + " | ".join(keys) + " |\n|" + "---|" * len(keys))
     wanted = None if not args.scenes else set(args.scenes.split(","))
-    for name, scene in scenes(args.quick, args.demo, args.field).items():
+    for name, scene in scenes(args.quick, args.demo, args.field, wanted).items():
         if wanted is not None and name not in wanted:
             continue
         baked = {}
