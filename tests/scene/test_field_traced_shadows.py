@@ -23,7 +23,7 @@ TORUS = """
 [[objects]]
 name = "torus"
 mesh = "torus.obj"
-role = "both"
+role = "{role}"
 blocker = {{ field = "torus.field.h5" }}
 [[objects.keyframes]]
 time = 0
@@ -48,9 +48,10 @@ def torus_dir(tmp_path_factory):
     return d
 
 
-def _scene(folder, settings="", y=0.55, size=6.0):
+def _scene(folder, settings="", y=0.55, size=6.0, role="both"):
     (folder / "scene.toml").write_text(
-        ground_scene_head(settings, size=size, subdivisions=SUBDIVISIONS) + TORUS.format(y=y))
+        ground_scene_head(settings, size=size, subdivisions=SUBDIVISIONS)
+        + TORUS.format(y=y, role=role))
     return load_scene(folder / "scene.toml")
 
 
@@ -105,14 +106,16 @@ def test_field_blocker_traces_its_near_shadow_and_hands_over_to_its_field(torus_
     assert all(0.85 <= s <= 1.15 for s in smooth), (smooth, smooth_field)
 
 
-def test_field_skips_the_traced_rows_and_keeps_its_own(torus_dir):
-    """The posed field skips its object's own rows and every ground row the traced
-    shadow covers (weight > 0), not one more: the blend ``w T + (1 - w) F`` holds the
-    field's part, which must not be counted twice; the rows beyond keep the field."""
+@pytest.mark.parametrize("role", ["both", "blocker"])
+def test_field_skips_the_traced_rows_and_keeps_its_own(torus_dir, role):
+    """The posed field skips its object's own rows (if it receives) and every ground row
+    the traced shadow covers (weight > 0), not one more: the blend ``w T + (1 - w) F``
+    holds the field's part, which must not be counted twice; the rows beyond keep the
+    field."""
     from shtools.runtime import FieldBlocker
     from shtools.scene.pose import pose_frame
 
-    scene = _scene(torus_dir, size=12.0)
+    scene = _scene(torus_dir, size=12.0, role=role)
     state = pose_frame(prepare_scene(scene), 0.5)
     (fb,) = [b for b in state.blockers if isinstance(b, FieldBlocker)]
     n = len(state.vertices)
@@ -124,5 +127,8 @@ def test_field_skips_the_traced_rows_and_keeps_its_own(torus_dir):
     np.testing.assert_array_equal(np.sort(fb.skip_rows), expected)
     # the far corners of the 12 x 12 ground (beyond 5 radii) keep the field
     assert len(handed) < GROUND - 100
-    # and the field's own rows are the object's own: it never shades them
-    assert np.all(np.isin(np.arange(GROUND, n), fb.skip_rows))
+    # and every ground row within 2 bounding radii is traced (the field's near field)
+    ((torus_v, _),) = pose_frame(prepare_scene(scene), 0.5, with_meshes=True,
+                                 trace=False).blocker_meshes
+    near = np.flatnonzero(near_blockers(state.vertices[:GROUND], [bounding_sphere(torus_v)]))
+    assert near.size > 20 and np.isin(near, handed).all()
