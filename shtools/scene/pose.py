@@ -67,6 +67,9 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
     rigid = []  # (object, transform, posed vertices, blocker index) of rigid traced objects
     has_ground = any(o.spec.receives and not o.spec.blocks for o in prepared.objects)
+    # a lamp's field leaves out the blockers beyond it by the blocker a traced shadow
+    # names (shtools.scene.field_light), which a field's traced shadow cannot name
+    field_traced = not any(spec.srf is not None for spec in prepared.scene.lights)
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -107,7 +110,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
             if (o.motion is None and trace and st.traced_shadows and has_ground and len(o.faces)
-                    and (isinstance(blockers[-1], FieldBlocker)
+                    and ((field_traced and isinstance(blockers[-1], FieldBlocker))
                          or (isinstance(blockers[-1], SphereBlocker)
                              and not kinds[o.spec.blocker.kind].exact))):
                 # a rigid sphere-set or field blocker: its real mesh shadows the ground
