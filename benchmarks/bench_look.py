@@ -56,8 +56,10 @@ def _fidelity():
     return module
 
 
-def scenes(quick: bool, demo: Path | None) -> dict[str, dict]:
-    """Scene files (written to ``CACHE``) and the frames to measure."""
+def scenes(quick: bool, demo: Path | None, field: Path | None = None,
+           only: set | None = None) -> dict[str, dict]:
+    """Scene files (written to ``CACHE``) and the frames to measure (``only`` of the
+    teapot scenes: the other scenes' assets are not built)."""
     fid = _fidelity()
     fid.DATA = DATA
     fid.CACHE.mkdir(parents=True, exist_ok=True)
@@ -70,6 +72,9 @@ def scenes(quick: bool, demo: Path | None) -> dict[str, dict]:
         path.write_text(f"[settings]\norder = 4\nframes = {frames}\nfps = {fps}\n\n"
                         f'[environment]\nimage = "{env}"\n\n{body}')
         return path
+
+    if field is not None and only and only <= set(FIELD_SCENES):
+        return field_scenes(write, Path(field))
 
     if quick:
         body = fid._ground(3.0, 40) + fid._rigid("spot", "spot.obj", 24, 1.0, 0.0, 0.0, 30.0,
@@ -86,6 +91,34 @@ def scenes(quick: bool, demo: Path | None) -> dict[str, dict]:
                         "frames": range(0, 3)}
     if demo is not None:
         out["demo"] = {"path": Path(demo) / "scene.toml", "frames": range(10, 14)}
+    if field is not None:
+        out.update(field_scenes(write, Path(field)))
+    return out
+
+
+#: The teapot field scenes: ground size and subdivisions.
+FIELD_SCENES = {"teapot14": (14.0, 112), "teapot3": (3.0, 48)}
+
+
+def field_scenes(write, field: Path) -> dict[str, dict]:
+    """The teapot with a shadow field (``field``, sampled from ``teapot.obj`` at order 4)
+    under Grace: on a 14 x 14 ground and on a 3 x 3 ground under it."""
+    teapot = f"""
+[[objects]]
+name = "teapot"
+mesh = "{DATA / 'meshes' / 'teapot.obj'}"
+role = "both"
+scale = 0.25
+translate = [0.0, 0.01, 0.0]
+rotate = [0.0, 30.0, 0.0]
+blocker = {{ field = "{field}" }}
+"""
+    fid = _fidelity()
+    out = {}
+    for name, (size, subdivisions) in FIELD_SCENES.items():
+        out[name] = {"path": write(name, fid._ground(size, subdivisions) + teapot,
+                                   DATA / "probes" / "grace.hdr", 1),
+                     "frames": range(0, 1)}
     return out
 
 
@@ -198,6 +231,8 @@ def main(argv=None) -> int:
     parser.add_argument("--baseline", type=Path, help="code to compare with (a worktree)")
     parser.add_argument("--demo", type=Path, help="make demo's output folder (its scene.toml)")
     parser.add_argument("--scenes", help="comma-separated scene names (default all)")
+    parser.add_argument("--field", type=Path, help="a field asset of teapot.obj (order 4): "
+                        "adds the teapot scenes 'teapot14' and 'teapot3'")
     parser.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
@@ -216,7 +251,7 @@ def main(argv=None) -> int:
             "CPU ms/frame", "CPU ratio"]
     print("| " + " | ".join(keys) + " |\n|" + "---|" * len(keys))
     wanted = None if not args.scenes else set(args.scenes.split(","))
-    for name, scene in scenes(args.quick, args.demo).items():
+    for name, scene in scenes(args.quick, args.demo, args.field, wanted).items():
         if wanted is not None and name not in wanted:
             continue
         baked = {}

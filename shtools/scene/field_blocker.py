@@ -12,7 +12,10 @@ real mesh through the log of the O_v stored in the asset (by default at the
 accumulation order, rotated with the object), or of the ``transfer`` asset the
 scene names with ``self_visibility`` (:func:`shtools.scene.transfer.object_self_log`,
 :func:`shtools.scene.pose.pose_frame`).  So one asset gives a rigid object
-real-mesh shadows both on the other receivers and on itself.
+real-mesh shadows both on the other receivers and on itself.  On the receiver-only
+objects near it (``traced_shadows``) its real mesh is traced instead, handed over
+per vertex to the field (:mod:`shtools.scene.traced_shadows`); the field skips the
+rows traced too.
 """
 
 from __future__ import annotations

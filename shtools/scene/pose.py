@@ -50,7 +50,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     blocker is evaluated there by the same cuts of its tree as on the receivers
     next door.
     """
-    from shtools.runtime import SelfVisibility, SphereBlocker
+    from shtools.runtime import FieldBlocker, SelfVisibility, SphereBlocker
     from shtools.scene.transfer import (
         posed_caster,
         posed_local_log,
@@ -67,6 +67,9 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
     rigid = []  # (object, transform, posed vertices, blocker index) of rigid traced objects
     has_ground = any(o.spec.receives and not o.spec.blocks for o in prepared.objects)
+    # a lamp's field leaves out the blockers beyond it by the blocker a traced shadow
+    # names (shtools.scene.field_light), which a field's traced shadow cannot name
+    field_traced = not any(spec.srf is not None for spec in prepared.scene.lights)
     for o in prepared.objects:
         m = worlds[o.spec.name]
         if o.motion is not None:
@@ -107,9 +110,11 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
             if (o.motion is None and trace and st.traced_shadows and has_ground and len(o.faces)
-                    and isinstance(blockers[-1], SphereBlocker)
-                    and not kinds[o.spec.blocker.kind].exact):
-                # a rigid sphere-set blocker: its real mesh shadows the ground instead
+                    and ((field_traced and isinstance(blockers[-1], FieldBlocker))
+                         or (isinstance(blockers[-1], SphereBlocker)
+                             and not kinds[o.spec.blocker.kind].exact))):
+                # a rigid sphere-set or field blocker: its real mesh shadows the ground
+                # near it instead (a field's innermost shells are coarse next to the object)
                 rigid.append((o, m, world_v, len(blockers) - 1))
             if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
                 _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
@@ -161,13 +166,17 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
 
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
     ``(R,)``, ``(R, 3)``, ``(R, 3)``; returns None when none is within the object's reach."""
-    from shtools.runtime import SelfVisibility, SphereLight
+    from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
     from shtools.scene.traced_shadows import traced_ground
 
     caster, mesh_v, faces, index = caster_of
     rows, points, normals = receivers
     labels = None if clusters is None else clusters.labels[rows]
-    own = [blockers[k] for k in (index if isinstance(index, tuple) else (index,))]
+    indices = index if isinstance(index, tuple) else (index,)
+    # the blocker alone on the hand-over rows: a field's own skipped rows are another
+    # numbering (the frame's), not the hand-over's
+    own = [dataclasses.replace(blockers[k], skip_rows=None)
+           if isinstance(blockers[k], FieldBlocker) else blockers[k] for k in indices]
     handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
                                       st.traced_shadow_directions,
                                       spheres=_bounding_spheres(own),
@@ -187,7 +196,30 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                                    clusters=groups)
         w = weight[part, None]
         g[part] = w * g[part] + (1.0 - w) * np.asarray(s, dtype=np.float64)
-    return SelfVisibility(None, rows[handed], blocker=index, visibility=g.astype(np.float32))
+    return SelfVisibility(None, rows[handed], blocker=_skip_handed(blockers, indices,
+                                                                   rows[handed]),
+                          visibility=g.astype(np.float32))
+
+
+def _skip_handed(blockers: list, indices: tuple, handed: np.ndarray):
+    """The traced object's blockers skipped on the rows ``handed`` (R,): a field skips
+    them itself (its ``skip_rows``, joined to its object's own rows), a sphere set
+    through the self-visibility; returns the latter's indices (int, tuple or None) for
+    :class:`~shtools.runtime.SelfVisibility`."""
+    from shtools.runtime import FieldBlocker
+
+    spheres = []
+    for k in indices:
+        b = blockers[k]
+        if isinstance(b, FieldBlocker):
+            skip = handed if b.skip_rows is None else np.union1d(
+                np.asarray(b.skip_rows, dtype=np.int64), handed)
+            b.skip_rows = np.asarray(skip, dtype=np.int64)
+        else:
+            spheres.append(k)
+    if not spheres:
+        return None
+    return spheres[0] if len(spheres) == 1 else tuple(spheres)
 
 
 def _bounding_spheres(blockers: list):

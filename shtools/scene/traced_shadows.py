@@ -1,9 +1,9 @@
 r"""A traced object's shadow on the receiver-only objects, continuous over the surface.
 
 The ground under a traced object (a skinned character's posed mesh, a rigid
-sphere-set blocker's real mesh; ``traced_shadows``) is shadowed by the object's
-real mesh near it and by its spheres far from it.  Three things keep that
-shadow free of seams, rings and per-vertex noise:
+sphere-set or shadow-field blocker's real mesh; ``traced_shadows``) is shadowed
+by the object's real mesh near it and by its spheres (or its field) far from it.
+Three things keep that shadow free of seams, rings and per-vertex noise:
 
 **One direction set for every receiver.**  A spherical Fibonacci set of
 ``2 n_dirs`` world directions (:func:`world_directions`) is shared by all
