@@ -34,6 +34,12 @@ def relight(baked, light, rotate, scene, compress, output, as_json):
     from shtools.scene.relight import relight as relight_bake
 
     guard_outputs({"-o": output}, [baked, light, scene])
+    if scene is not None:  # nor any file the scene names (a mesh, a light's field)
+        from shtools.scene.prepare import scene_files
+        from shtools.scene.scene import load_scene
+
+        scene = load_scene(scene)
+        guard_outputs({"-o": output}, scene_files(scene))
     summary = relight_bake(baked, light, output, rotate=rotate, scene=scene,
                            compression="gzip" if compress else None, progress=progress)
     lights = f" + {summary['lights']} spherical light(s)" if summary["lights"] else ""
