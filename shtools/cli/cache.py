@@ -27,8 +27,12 @@ class CacheFolder(click.Path):
         value = super().convert(value, param, ctx)
         if self.needs_write:
             folder = Path(value).expanduser().absolute()
-            while not folder.exists() and folder != folder.parent:
-                folder = folder.parent
+            try:
+                while not folder.exists() and folder != folder.parent:
+                    folder = folder.parent
+            except OSError as exc:  # a parent this user may not enter
+                self.fail(f"cannot reach '{folder}' ({exc.strerror}); choose a folder you "
+                          "can write or pass --no-cache", param, ctx)
             if not folder.is_dir():
                 self.fail(f"'{value}' lies under '{folder}', which is not a folder", param, ctx)
             if not os.access(folder, os.W_OK | os.X_OK):

@@ -1,0 +1,168 @@
+"""The bad-input promise for the newer surfaces: relight, the set-up cache, lamps.
+
+Same promises and helpers as ``tests/test_bad_inputs.py`` (one line naming the
+file or option, exit status not 0 or 3, nothing written, no input changed):
+
+* ``cache clear`` removes the cache's own files only, whatever folder
+  ``--cache`` names; an explicit ``--cache`` that cannot be used is refused
+  while the options are parsed;
+* ``bake`` and ``relight --lights`` refuse an output that is ANY file the scene
+  names, a field light's ``srf`` asset included;
+* a lamp's emission table is bounded like a scene light's colour, and the
+  memory a source radiance field plans counts its three channels.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from test_bad_inputs import Kit, _run, check_refused
+
+LAMP_FIELD = """
+[[lights]]
+name = "lamp"
+field = "lamp.srf.h5"
+position = [0, 2, 0]
+"""
+
+SMALL_FIELD = ["--shells", "2", "--resolution", "4", "--min-resolution", "2", "--map", "4",
+               "--order", "2", "--workers", "1"]
+
+
+class LampKit(Kit):
+    """The bad-input kit plus a lamp (bulb mesh, emission table, srf asset) and a scene
+    lit by it."""
+
+    def __init__(self, root: Path):
+        import trimesh
+
+        k = root
+        trimesh.creation.icosphere(subdivisions=1, radius=0.1).export(k / "bulb.obj")
+        (k / "emission.toml").write_text("radiance = [5, 4, 3]\n")
+        (k / "huge_emission.toml").write_text("radiance = [1e308, 1e308, 1]\n")
+        code, _, err = _run("field", "sample", k / "bulb.obj", "--radiance",
+                            k / "emission.toml", *SMALL_FIELD, "-o", k / "lamp.srf.h5")
+        assert code == 0, err
+        from test_bad_inputs import SCENE
+
+        (k / "lamp_scene.toml").write_text(SCENE.format(frames=2, subdivisions=2) + LAMP_FIELD)
+        (k / "user" / "js").mkdir(parents=True)
+        (k / "user" / "js" / "app.js").write_text("console.log(1)\n")
+        (k / "user" / "ab").mkdir()
+        (k / "user" / "ab" / "notes.entry").write_text("mine\n")
+        super().__init__(root)  # hashes every file above too
+
+
+@pytest.fixture(scope="module")
+def kit(tmp_path_factory):
+    return LampKit(tmp_path_factory.mktemp("lampkit"))
+
+
+def test_cache_clear_removes_only_cache_files(kit):
+    """``--cache`` naming a folder with other files: clear must leave them (it removed
+    every file of every two-letter sub-folder)."""
+    user = kit.root / "user"
+    code, out, err = _run("cache", "clear", "--cache", user)
+    assert code == 0, err
+    assert (user / "js" / "app.js").is_file()
+    assert (user / "ab" / "notes.entry").is_file()
+    assert kit.intact() == []
+
+
+@pytest.mark.parametrize("command", [["bake", "{k}/scene.toml", "-o", "{o}/b.h5"],
+                                     ["cache", "clear"], ["cache", "info"]],
+                         ids=["bake", "clear", "info"])
+def test_empty_cache_option_is_refused(kit, tmp_path, command):
+    """``--cache ''`` named the current folder (clear then swept it)."""
+    argv = [a.replace("{k}", str(kit.root)).replace("{o}", str(tmp_path)) for a in command]
+    code, out, err = _run(*argv, "--cache", "")
+    check_refused(code, out, err, want_code=2, named=["--cache", "empty"],
+                  outputs=[tmp_path / "b.h5"], kit=kit)
+
+
+def test_cache_under_a_file_is_refused(kit, tmp_path):
+    """A cache folder that can never be created (under a file) is refused while the options
+    are parsed, not warned about after the set-up."""
+    code, out, err = _run("bake", kit.root / "scene.toml", "-o", tmp_path / "b.h5",
+                          "--cache", kit.root / "mesh.obj" / "cache")
+    check_refused(code, out, err, want_code=2, named=["--cache", "not a folder"],
+                  outputs=[tmp_path / "b.h5"], kit=kit)
+
+
+def test_read_only_cache_is_refused_as_nobody(kit, tmp_path):
+    """As an unprivileged user, an explicit read-only --cache is refused naming it."""
+    import shutil
+    import subprocess
+    import sys
+
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to run as the unprivileged user nobody")
+    import tempfile
+
+    # a folder nobody can enter but not write: pytest's own tmp_path is root's only
+    with tempfile.TemporaryDirectory(dir="/tmp") as top:
+        Path(top).chmod(0o755)
+        cache = Path(top) / "cache"
+        (cache / "ab").mkdir(parents=True)
+        entry = cache / "ab" / ("ab" + "0" * 62 + "-mesh.entry")
+        entry.write_bytes(b"x")
+        for argv in (["cache", "clear"], ["bake", str(kit.root / "scene.toml"), "-o",
+                                          str(cache / "b.h5")]):
+            run = subprocess.run(
+                ["setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups",
+                 sys.executable, "-m", "shtools", *argv, "--cache", str(cache)],
+                capture_output=True, text=True, timeout=60,
+                env={**os.environ, "HOME": "/tmp"})
+            lines = run.stderr.strip().splitlines()
+            assert run.returncode == 2, run.stderr
+            assert len(lines) == 1 and "--cache" in lines[0] and "cannot write" in lines[0]
+        assert entry.is_file()
+
+
+def test_field_light_scene_bakes(kit, tmp_path):
+    """A scene with a field light bakes (it was an internal error: a field light has no
+    occlusion-camera settings to record)."""
+    code, _, err = _run("bake", kit.root / "lamp_scene.toml", "-o", tmp_path / "b.h5",
+                        "--workers", "1", "--processes", "1")
+    assert code == 0, err
+    assert (tmp_path / "b.h5").is_file()
+    assert kit.intact() == []
+
+
+def test_bake_output_is_the_light_field(kit):
+    """``-o`` the srf asset a ``[[lights]] field`` names: refused, the asset kept."""
+    code, out, err = _run("bake", kit.root / "lamp_scene.toml", "-o", kit.root / "lamp.srf.h5",
+                          "--workers", "1", "--processes", "1")
+    check_refused(code, out, err, want_code=1, named=["lamp.srf.h5", "also an input"],
+                  outputs=[], kit=kit)
+
+
+def test_relight_output_is_a_file_the_scene_names(kit):
+    """``relight --lights SCENE -o`` a mesh the scene names: refused before any work."""
+    code, out, err = _run("relight", kit.root / "baked.h5", "--light", kit.root / "light.h5",
+                          "--lights", kit.root / "lamp_scene.toml", "-o", kit.root / "mesh.obj")
+    check_refused(code, out, err, want_code=1, named=["mesh.obj", "also an input"],
+                  outputs=[], kit=kit)
+
+
+def test_lamp_radiance_past_the_limit_is_refused(kit, tmp_path):
+    """radiance = [1e308, ...] overflowed to an all-zero field, written with exit 0."""
+    code, out, err = _run("field", "sample", kit.root / "bulb.obj", "--radiance",
+                          kit.root / "huge_emission.toml", *SMALL_FIELD,
+                          "-o", tmp_path / "l.srf.h5")
+    check_refused(code, out, err, want_code=1, named=["huge_emission.toml", "radiance", "1e+15"],
+                  outputs=[tmp_path / "l.srf.h5"], kit=kit)
+
+
+def test_radiance_field_memory_counts_three_channels(kit, tmp_path):
+    """128 shells x 256^2 samples x 16 coefficients: 2.1 GiB as an occlusion field (under
+    the 4 GiB limit), but three times the coefficients as an RGB radiance field: refused
+    for its memory with its size (the estimate counted one channel)."""
+    args = ["--shells", "128", "--resolution", "256", "--map", "64", "--order", "4"]
+    code, out, err = _run("field", "sample", kit.root / "bulb.obj", "--radiance",
+                          kit.root / "emission.toml", *args, "-o", tmp_path / "l.srf.h5")
+    check_refused(code, out, err, want_code=1,
+                  named=["bulb.obj", "of memory", "48 SH coefficients", "--force"],
+                  outputs=[tmp_path / "l.srf.h5"], kit=kit)
