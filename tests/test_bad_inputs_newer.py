@@ -64,7 +64,7 @@ def test_cache_clear_removes_only_cache_files(kit):
     """``--cache`` naming a folder with other files: clear must leave them (it removed
     every file of every two-letter sub-folder)."""
     user = kit.root / "user"
-    code, out, err = _run("cache", "clear", "--cache", user)
+    code, _, err = _run("cache", "clear", "--cache", user)
     assert code == 0, err
     assert (user / "js" / "app.js").is_file()
     assert (user / "ab" / "notes.entry").is_file()
