@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 
 import pytest
-from test_bad_inputs import Kit, _run, check_refused
+from test_bad_inputs import Kit, _run, _sha, check_refused
 
 LAMP_FIELD = """
 [[lights]]
@@ -53,6 +53,28 @@ class LampKit(Kit):
         (k / "user" / "ab").mkdir()
         (k / "user" / "ab" / "notes.entry").write_text("mine\n")
         super().__init__(root)  # hashes every file above too
+        self.huge_bake()
+        self.hashes = {p: _sha(p) for p in k.iterdir() if p.is_file()}
+
+    def huge_bake(self) -> None:
+        """``huge.h5``: a bake declaring 10^4 frames x 10^7 vertices (2.6 TiB when read)
+        in a few kB of HDF5 metadata (chunks never written)."""
+        import h5py
+
+        k = self.root
+        with h5py.File(k / "baked.h5", "r") as src, h5py.File(k / "huge.h5", "w") as f:
+            for key, value in src.attrs.items():
+                f.attrs[key] = value
+            T, V = 10**4, 10**7
+            for name in src:
+                shape = list(src[name].shape)
+                if name in ("radiance", "visibility"):
+                    shape[:2] = T, V
+                elif name in ("vertices", "normals"):
+                    shape[-2] = V
+                elif name in ("times", "frame_index"):
+                    shape[0] = T
+                f.create_dataset(name, shape=tuple(shape), dtype=src[name].dtype, chunks=True)
 
 
 @pytest.fixture(scope="module")
@@ -166,3 +188,17 @@ def test_radiance_field_memory_counts_three_channels(kit, tmp_path):
     check_refused(code, out, err, want_code=1,
                   named=["bulb.obj", "of memory", "48 SH coefficients", "--force"],
                   outputs=[tmp_path / "l.srf.h5"], kit=kit)
+
+
+@pytest.mark.parametrize("command", [
+    ["relight", "{k}/huge.h5", "--light", "{k}/light.h5", "-o", "{o}/r.h5"],
+    ["export", "{k}/huge.h5", "-o", "{o}/r.glb"],
+    ["view", "{k}/huge.h5", "--no-browser", "--port", "1"]], ids=["relight", "export", "view"])
+def test_huge_bake_is_refused_with_its_size(kit, tmp_path, command):
+    """A bake too big to read is refused from its metadata with its size and --force (it
+    ended in a bare 'out of memory')."""
+    argv = [a.replace("{k}", str(kit.root)).replace("{o}", str(tmp_path)) for a in command]
+    code, out, err = _run(*argv)
+    check_refused(code, out, err, want_code=1,
+                  named=["huge.h5", "GiB of memory", "limit", "--force"],
+                  outputs=[tmp_path / "r.h5", tmp_path / "r.glb"], kit=kit)
