@@ -10,11 +10,12 @@ from shtools.cli._common import json_option, report
 
 class CacheFolder(click.Path):
     """``--cache DIR``: a folder path, not empty (the current folder), not a file; with
-    ``writable`` one this user can write, or create (its nearest existing parent is
-    writable) -- an explicitly named cache that cannot be written is refused while the
-    options are parsed, not warned about after the set-up."""
+    ``writable`` (``cache clear``) one this user can write, or create (its nearest
+    existing parent is writable), refused while the options are parsed.  A bake's cache
+    is not required to be writable: the bake goes on without it, with one warning
+    (docs/cache.md)."""
 
-    def __init__(self, writable: bool = True):
+    def __init__(self, writable: bool = False):
         super().__init__(file_okay=False)
         self.needs_write = writable
 
@@ -90,7 +91,7 @@ def _size(n: int) -> str:
 
 
 @cache.command("info")
-@click.option("--cache", "cache_dir", metavar="DIR", type=CacheFolder(writable=False),
+@click.option("--cache", "cache_dir", metavar="DIR", type=CacheFolder(),
               default=None, help="Cache folder (default: as `shtools bake` uses).")
 @json_option
 def info(cache_dir, as_json):
@@ -105,7 +106,7 @@ def info(cache_dir, as_json):
 
 
 @cache.command("clear")
-@click.option("--cache", "cache_dir", metavar="DIR", type=CacheFolder(),
+@click.option("--cache", "cache_dir", metavar="DIR", type=CacheFolder(writable=True),
               default=None, help="Cache folder (default: as `shtools bake` uses).")
 @json_option
 def clear(cache_dir, as_json):
