@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
 from shtools.cli._limits import force_option
 
 
@@ -24,6 +31,7 @@ from shtools.cli._limits import force_option
 @output_option
 @force_option("4 GiB of memory")
 @json_option
+@errors_name("baked")
 def relight(baked, light, rotate, scene, compress, output, force, as_json):
     """Re-shade every frame of BAKED (made with --store-visibility) under LIGHT.
 
