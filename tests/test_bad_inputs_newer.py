@@ -202,3 +202,13 @@ def test_huge_bake_is_refused_with_its_size(kit, tmp_path, command):
     check_refused(code, out, err, want_code=1,
                   named=["huge.h5", "GiB of memory", "limit", "--force"],
                   outputs=[tmp_path / "r.h5", tmp_path / "r.glb"], kit=kit)
+
+
+def test_relight_with_a_field_light_says_so(kit, tmp_path):
+    """A field light in ``relight --lights`` is named as one (the line spoke of blocker
+    meshes), refused before any work."""
+    code, out, err = _run("relight", kit.root / "baked.h5", "--light", kit.root / "light.h5",
+                          "--lights", kit.root / "lamp_scene.toml", "-o", tmp_path / "r.h5")
+    check_refused(code, out, err, want_code=1,
+                  named=["lamp_scene.toml", "'lamp' is a field light", "lamp.srf.h5"],
+                  outputs=[tmp_path / "r.h5"], kit=kit)
