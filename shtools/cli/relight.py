@@ -43,6 +43,7 @@ def relight(baked, light, rotate, scene, compress, output, force, as_json):
     from shtools.cli._limits import check_asset_memory
     from shtools.cli._outputs import guard_outputs
     from shtools.scene.relight import relight as relight_bake
+    from shtools.scene.relight import scene_lights
 
     guard_outputs({"-o": output}, [baked, light, scene])
     if scene is not None:  # nor any file the scene names (a mesh, a light's field)
@@ -51,6 +52,7 @@ def relight(baked, light, rotate, scene, compress, output, force, as_json):
 
         scene = load_scene(scene)
         guard_outputs({"-o": output}, scene_files(scene))
+        scene = scene_lights(scene)  # lights relighting can add: checked before any work
     # the bake is read whole: its frames, visibility and geometry
     check_asset_memory("relight", baked, "relight a bake of fewer frames (bake --frames)",
                        force=force)
