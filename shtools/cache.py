@@ -305,9 +305,13 @@ class SetupCache:
         if not self.location.is_dir():
             return out
         for sub in self.location.iterdir():
-            if not sub.is_dir() or len(sub.name) != 2:
+            if not sub.is_dir() or not _is_entry_folder(sub.name):
                 continue
             for path in sub.iterdir():
+                # only what the cache writes: --cache may name a folder holding other
+                # files, which clear and eviction must never remove
+                if not _is_cache_file(sub.name, path.name):
+                    continue
                 with contextlib.suppress(OSError):  # removed meanwhile by another process
                     out.append((path, path.stat()))
         return out
@@ -359,7 +363,7 @@ class SetupCache:
                 removed += path.name.endswith(SUFFIX)
         if self.location.is_dir():
             for sub in self.location.iterdir():
-                if sub.is_dir() and len(sub.name) == 2:
+                if sub.is_dir() and _is_entry_folder(sub.name):
                     with contextlib.suppress(OSError):
                         sub.rmdir()
         return removed
@@ -368,6 +372,24 @@ class SetupCache:
         """What a bake reports (``bake --json``): location, enabled, hits, misses."""
         return {"location": os.fspath(self.location), "enabled": self.enabled,
                 "hits": self.hits, "misses": self.misses}
+
+
+_HEX = frozenset("0123456789abcdef")
+
+
+def _is_entry_folder(name: str) -> bool:
+    """A folder of entries: the first two hex digits of their keys."""
+    return len(name) == 2 and set(name) <= _HEX
+
+
+def _is_cache_file(folder: str, name: str) -> bool:
+    """An entry ``KEY-KIND.entry`` (KEY: 64 hex digits starting with ``folder``) or a
+    writer's temporary file ``.tmp-*``."""
+    if name.startswith(".tmp-"):
+        return True
+    key, dash, kind = name.partition("-")
+    return (bool(dash) and name.endswith(SUFFIX) and len(key) == 64 and set(key) <= _HEX
+            and key.startswith(folder) and len(kind) > len(SUFFIX))
 
 
 def _encode(key: str, arrays: dict[str, np.ndarray]) -> bytes:

@@ -91,6 +91,34 @@ def check_rays(what: str, rays: float, formula: str, fix: str, *, force: bool = 
                      f"{limit:.3g}; {fix}, or pass --force to run anyway", path)
 
 
+def asset_bytes(path: str | os.PathLike) -> int:
+    """Bytes an asset's datasets take in memory, uncompressed (what its reader loads), from
+    the HDF5 metadata alone; 0 when it is not readable HDF5 (its reader then says why)."""
+    import h5py
+
+    total = 0
+    try:
+        with h5py.File(path, "r") as f:
+            def add(_, obj):
+                nonlocal total
+                if isinstance(obj, h5py.Dataset):
+                    total += int(obj.size) * obj.dtype.itemsize
+            f.visititems(add)
+    except (OSError, ValueError):
+        return 0
+    return total
+
+
+def check_asset_memory(what: str, path: str | os.PathLike, fix: str, *,
+                       force: bool = False, factor: float = 1.0) -> None:
+    """Refuse a command that loads the asset ``path`` whole (``factor`` times its datasets,
+    :func:`asset_bytes`) past :data:`MEMORY_LIMIT`, unless ``force`` -- before reading a
+    byte of its data."""
+    nbytes = factor * asset_bytes(path)
+    check_memory(what, nbytes, f"{os.path.basename(os.fspath(path))}'s datasets, uncompressed"
+                 + (f", x {factor:g}" if factor != 1 else ""), fix, force=force, path=path)
+
+
 def pixel_problem(width: int, height: int) -> str | None:
     """Why an image of ``width x height`` is refused (past :data:`MAX_PIXELS`), or None."""
     pixels = width * height

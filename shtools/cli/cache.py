@@ -8,12 +8,46 @@ import click
 from shtools.cli._common import json_option, report
 
 
+class CacheFolder(click.Path):
+    """``--cache DIR``: a folder path, not empty (the current folder), not a file; with
+    ``writable`` (``cache clear``) one this user can write, or create (its nearest
+    existing parent is writable), refused while the options are parsed.  A bake's cache
+    is not required to be writable: the bake goes on without it, with one warning
+    (docs/cache.md)."""
+
+    def __init__(self, writable: bool = False):
+        super().__init__(file_okay=False)
+        self.needs_write = writable
+
+    def convert(self, value, param, ctx):
+        import os
+        from pathlib import Path
+
+        if not str(value).strip():
+            self.fail("is empty; give a cache folder", param, ctx)
+        value = super().convert(value, param, ctx)
+        if self.needs_write:
+            folder = Path(value).expanduser().absolute()
+            try:
+                while not folder.exists() and folder != folder.parent:
+                    folder = folder.parent
+            except OSError as exc:  # a parent this user may not enter
+                self.fail(f"cannot reach '{folder}' ({exc.strerror}); choose a folder you "
+                          "can write or pass --no-cache", param, ctx)
+            if not folder.is_dir():
+                self.fail(f"'{value}' lies under '{folder}', which is not a folder", param, ctx)
+            if not os.access(folder, os.W_OK | os.X_OK):
+                self.fail(f"cannot write to '{folder}' (read-only or no permission); choose "
+                          "a writable folder or pass --no-cache", param, ctx)
+        return value
+
+
 def cache_options(f):
     """``--cache DIR`` and ``--no-cache`` (passed as ``cache_dir`` and ``no_cache``)."""
     f = click.option("--no-cache", is_flag=True,
                      help="Compute the set-up (self-visibility, fits, projected images) "
                           "without reading or writing the set-up cache; same bytes.")(f)
-    return click.option("--cache", "cache_dir", metavar="DIR", type=click.Path(file_okay=False),
+    return click.option("--cache", "cache_dir", metavar="DIR", type=CacheFolder(),
                         default=None,
                         help="Set-up cache folder (default: $SHTOOLS_CACHE, else "
                              "$XDG_CACHE_HOME/shtools, else ~/.cache/shtools).")(f)
@@ -57,7 +91,7 @@ def _size(n: int) -> str:
 
 
 @cache.command("info")
-@click.option("--cache", "cache_dir", metavar="DIR", type=click.Path(file_okay=False),
+@click.option("--cache", "cache_dir", metavar="DIR", type=CacheFolder(),
               default=None, help="Cache folder (default: as `shtools bake` uses).")
 @json_option
 def info(cache_dir, as_json):
@@ -72,7 +106,7 @@ def info(cache_dir, as_json):
 
 
 @cache.command("clear")
-@click.option("--cache", "cache_dir", metavar="DIR", type=click.Path(file_okay=False),
+@click.option("--cache", "cache_dir", metavar="DIR", type=CacheFolder(writable=True),
               default=None, help="Cache folder (default: as `shtools bake` uses).")
 @json_option
 def clear(cache_dir, as_json):

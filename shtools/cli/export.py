@@ -15,6 +15,7 @@ from shtools.cli._common import (
     progress,
     report,
 )
+from shtools.cli._limits import force_option
 from shtools.export.tonemap import CURVES
 
 
@@ -60,14 +61,16 @@ from shtools.export.tonemap import CURVES
               help="Contact sheet columns.")
 @click.option("--fps", type=option_type("fps"), default=None,
               help="GIF frame rate (default the bake's).")
+@force_option("4 GiB of memory to read the bake")
 @json_option
 @errors_name("baked")
 def export(baked, output, frame, frames_text, sequence, quantity, target, rig, distance, exposure,
-           fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, as_json):
+           fixed_exposure, curve, size, elevation, azimuth, zoom, columns, fps, force, as_json):
     """Export a bake: a GLB (one named mesh per object; a frame range plays as one
     animated file), PLY frames, a time-sampled USD stage, a vertex animation
     texture (.exr + .glb), PNG previews, a contact sheet or an animated GIF.
     """
+    from shtools.cli._limits import check_asset_memory
     from shtools.cli._outputs import guard_outputs, planned
     from shtools.data_formats.bake import read_bake
     from shtools.errors import InputError
@@ -85,6 +88,9 @@ def export(baked, output, frame, frames_text, sequence, quantity, target, rig, d
     if suffix not in FORMATS:
         raise InputError(f"unsupported output format '{suffix or '(none)'}'; use one of "
                          f"{', '.join(FORMATS)}", output)
+    # the bake is read whole before any frame is chosen
+    check_asset_memory("export", baked, "export a bake of fewer frames (bake --frames)",
+                       force=force)
     bake_asset = read_bake(baked)
     # every file the export writes (a sequence's frames, a VAT's companions), before work
     guard_outputs(planned("-o", output, output_files(

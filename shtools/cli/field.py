@@ -96,7 +96,9 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     from shtools.fields.build import planned_cost
     from shtools.tasks import default_workers
 
-    cost = planned_cost(params, workers or (1 if scheduler == "inline" else default_workers()))
+    # a source radiance field holds RGB: three SH vectors a sample
+    cost = planned_cost(params, workers or (1 if scheduler == "inline" else default_workers()),
+                        channels=1 if emission is None else 3)
     fix = "lower --shells, --resolution, --map or --order"
     check_memory("field sample", cost["bytes"], cost["formula"], fix, force=force,
                  path=mesh_path)

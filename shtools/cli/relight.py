@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, progress, report
+from shtools.cli._common import (
+    errors_name,
+    json_option,
+    option_type,
+    output_option,
+    progress,
+    report,
+)
+from shtools.cli._limits import force_option
 
 
 @click.command("relight")
@@ -21,8 +29,10 @@ from shtools.cli._common import json_option, option_type, output_option, progres
               help="gzip the output's geometry and radiance as a bake does (smaller, slower "
                    "to write); default plain.")
 @output_option
+@force_option("4 GiB of memory")
 @json_option
-def relight(baked, light, rotate, scene, compress, output, as_json):
+@errors_name("baked")
+def relight(baked, light, rotate, scene, compress, output, force, as_json):
     """Re-shade every frame of BAKED (made with --store-visibility) under LIGHT.
 
     The radiance is what a fresh bake of the same scene under that light gives
@@ -30,10 +40,22 @@ def relight(baked, light, rotate, scene, compress, output, as_json):
     product per vertex and frame.  Without --lights the output has the
     environment only.
     """
+    from shtools.cli._limits import check_asset_memory
     from shtools.cli._outputs import guard_outputs
     from shtools.scene.relight import relight as relight_bake
+    from shtools.scene.relight import scene_lights
 
     guard_outputs({"-o": output}, [baked, light, scene])
+    if scene is not None:  # nor any file the scene names (a mesh, a light's field)
+        from shtools.scene.prepare import scene_files
+        from shtools.scene.scene import load_scene
+
+        scene = load_scene(scene)
+        guard_outputs({"-o": output}, scene_files(scene))
+        scene = scene_lights(scene)  # lights relighting can add: checked before any work
+    # the bake is read whole: its frames, visibility and geometry
+    check_asset_memory("relight", baked, "relight a bake of fewer frames (bake --frames)",
+                       force=force)
     summary = relight_bake(baked, light, output, rotate=rotate, scene=scene,
                            compression="gzip" if compress else None, progress=progress)
     lights = f" + {summary['lights']} spherical light(s)" if summary["lights"] else ""

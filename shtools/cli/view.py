@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from shtools.cli._limits import force_option
+
 
 @click.command("view")
 @click.argument("baked", type=click.Path(dir_okay=False))
@@ -12,7 +14,8 @@ import click
 @click.option("--scene", type=click.Path(dir_okay=False), default=None, metavar="SCENE.toml",
               help="The bake's scene: overlay its blocker spheres, posed per frame.")
 @click.option("--no-browser", is_flag=True, help="Print the URL only; open no browser.")
-def view(baked, port, scene, no_browser):
+@force_option("4 GiB of memory")
+def view(baked, port, scene, no_browser, force):
     """Serve a viewer of BAKED on 127.0.0.1 until Ctrl-C: orbit camera, frame slider and
     play at the bake's fps, per-object toggles, radiance / irradiance / visibility and
     exposure (the export's tone mapping), and optionally the blocker spheres.
@@ -27,6 +30,11 @@ def view(baked, port, scene, no_browser):
         raise InputError(f"the viewer cannot start ({exc.name or exc} is missing); install "
                          "the 'view' extra: pip install 'shtools[view]'") from None
 
+    from shtools.cli._limits import check_asset_memory
+
+    # the bake is read whole, then served as float32 arrays
+    check_asset_memory("view", baked, "view a bake of fewer frames (bake --frames)",
+                       force=force)
     data = BakeView(baked)
     if scene is not None:
         try:

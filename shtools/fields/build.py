@@ -104,14 +104,15 @@ class FieldParameters:
 RAY_BYTES = 56
 
 
-def planned_cost(params: FieldParameters, workers: int = 1) -> dict:
+def planned_cost(params: FieldParameters, workers: int = 1, channels: int = 1) -> dict:
     """What sampling ``params`` will cost, from the options alone (before any work).
 
     Peak memory: the initial samples of every shell and their SH logs (float64,
     ``2 x C x R^2 x n^2``), plus per worker one shell's samples and one batch of
     :data:`~shtools.fields.sampling.POINT_CHUNK` points' rays over the
     ``MAP x MAP`` direction map.  Rays: every sample's full map (the cone cull
-    only lowers it).
+    only lowers it).  ``channels``: SH vectors a sample holds (3 for the RGB of
+    a source radiance field, :mod:`shtools.fields.radiance`).
 
     Returns
     -------
@@ -120,7 +121,8 @@ def planned_cost(params: FieldParameters, workers: int = 1) -> dict:
     """
     from shtools.fields.sampling import POINT_CHUNK
 
-    c, r2, n2, q = params.shells, params.resolution ** 2, params.order ** 2, params.map_size ** 2
+    c, r2, q = params.shells, params.resolution ** 2, params.map_size ** 2
+    n2 = channels * params.order ** 2  # SH coefficients of every channel of a sample
     w = max(1, min(int(workers), c))
     shells = 2 * c * r2 * n2 * 8
     worker = r2 * n2 * 8 + POINT_CHUNK * q * RAY_BYTES

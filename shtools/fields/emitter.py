@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from shtools.errors import InputError
+from shtools.runtime.settings import MAX_RADIANCE
 
 #: Keys of an emission table.
 EMISSION_KEYS = ("radiance", "fixture")
@@ -79,8 +80,9 @@ def _radiance_value(value, path) -> np.ndarray:
     if not ok:
         raise InputError("'radiance' must be three numbers [r, g, b]", path)
     rad = np.asarray(value, dtype=np.float64)
-    if not np.isfinite(rad).all() or (rad < 0).any():
-        raise InputError("'radiance' must be finite and >= 0 in every channel", path)
+    if not np.isfinite(rad).all() or (rad < 0).any() or (rad > MAX_RADIANCE).any():
+        raise InputError(f"'radiance' must be finite, >= 0 and <= {MAX_RADIANCE:g} in every "
+                         "channel", path)
     if not rad.max() > 0:
         raise InputError("'radiance' is zero: the lamp emits nothing; give the emitter's "
                          "RGB radiance, e.g. radiance = [10, 9, 8]", path)

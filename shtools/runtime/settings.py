@@ -34,6 +34,9 @@ from shtools.sh.zonal import WindowKind
 MAX_ORDER = 8
 #: Accumulation orders the runtime supports (the exp at n_acc costs ~ n_acc^4).
 MAX_ACC_ORDER = 10
+#: Largest radiance a light may have (a scene light's colour or intensity, a lamp's
+#: emission table): products of it with SH coefficients and exposure stay far inside float32.
+MAX_RADIANCE = 1e15
 
 #: Accumulation order used when ``acc_order`` is None: ``n + 2`` (at most 6).
 #: At shading order 4, 6 is the cheapest order that meets the 3 % radiance target

@@ -166,4 +166,6 @@ def light_parameters(lights) -> list[dict] | None:
     if all(spec.shadows == "shexp" for spec in lights):
         return None
     return [{"name": spec.name, "shadows": spec.shadows, "samples": spec.samples,
-             "ssoc": dataclasses.asdict(spec.ssoc)} for spec in lights]
+             # a field light has no occlusion-camera settings
+             "ssoc": None if spec.ssoc is None else dataclasses.asdict(spec.ssoc)}
+            for spec in lights]

@@ -235,12 +235,18 @@ def scene_files(scene: Scene) -> list[Path]:
 
     Used to refuse an output path that would overwrite one of them.
     """
-    files = [scene.path, scene.settings.tables, scene.environment.path]
+    import dataclasses
+
+    # every path-valued setting, object, blocker, environment and light key: a file
+    # key added to the scene is covered without a list to keep in step
+    files = [scene.path]
+    specs = [scene.settings, scene.environment, *scene.lights]
     for obj in scene.objects:
-        files.append(obj.mesh)
-        if obj.blocker is not None:
-            files.append(obj.blocker.path)
-    return [Path(f) for f in files if f is not None]
+        specs += [obj, obj.blocker]
+    for spec in specs:
+        if dataclasses.is_dataclass(spec):
+            files += [getattr(spec, f.name) for f in dataclasses.fields(spec)]
+    return [f for f in files if isinstance(f, Path)]
 
 
 def prepare_scene(scene: Scene, *, log: Callable[[str], None] | None = None,

@@ -129,6 +129,10 @@ def scene_lights(scene) -> object:
 
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
     for spec in scene.lights:
+        if spec.srf is not None:
+            raise InputError(f"light '{spec.name}' is a field light (field = "
+                             f"\"{spec.srf.name}\"); relighting adds spherical lights "
+                             "(shadows = \"shexp\") only: bake the scene for it", scene.path)
         if spec.shadows != ShexpLight.name:
             raise InputError(f"light '{spec.name}' uses shadows = \"{spec.shadows}\", which "
                              "needs the posed blocker meshes a bake does not keep; relighting "

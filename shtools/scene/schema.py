@@ -35,6 +35,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from shtools.errors import InputError
+from shtools.runtime.settings import MAX_RADIANCE
 
 ROLES = ("receiver", "blocker", "both")
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -122,8 +123,6 @@ def _number(value):
 #: Largest magnitude of a light's position or radius: the runtime works in float32,
 #: whose squares overflow above ~1.8e19 (as posed vertices, shtools.scene.pose).
 MAX_LENGTH = 1e18
-#: Largest light colour or intensity: their product stays far inside float32.
-MAX_RADIANCE = 1e15
 
 
 def vector(n: int, *, positive=False, nonnegative=False, scalar_ok=False, limit=None):
