@@ -1,4 +1,4 @@
-"""What a person sees (issue 25): seams, rings and noise, and the error where the shadows are.
+"""What a person sees: seams, rings and noise, and the error where the shadows are.
 
 Per receiver of each scene, at the default settings, against the project's ray
 tracer of the posed real meshes (:func:`shtools.reference.raytrace_visibility`,
