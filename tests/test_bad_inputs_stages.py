@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.processes import unprivileged_prefix
 from test_bad_inputs import SCENE, Kit, _sha, check_refused
 
 from shtools.cli.main import main
@@ -241,13 +242,6 @@ def test_force_passes_the_limit(kit, tmp_path, monkeypatch):
 
 
 # ------------------------------------------------------------------- companions, as nobody
-def _as_nobody() -> list[str]:
-    if os.geteuid() != 0:
-        return []  # already unprivileged
-    if shutil.which("setpriv") is None:
-        pytest.skip("root without setpriv: cannot run as an unprivileged user, and root "
-                    "may write any read-only file")
-    return ["setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups"]
 
 
 @pytest.fixture
@@ -283,7 +277,7 @@ def open_folder(kit):
 ], ids=["vat-glb", "sequence-glb", "sequence-ply", "vat-pos", "png", "preview", "fit-batch",
         "eval-png"])
 def test_read_only_companions_are_refused(argv, target, open_folder):
-    prefix = _as_nobody()
+    prefix = unprivileged_prefix()
     out = open_folder / "out"
     ro = out / target
     ro.write_bytes(b"keep me")
@@ -433,7 +427,7 @@ def test_out_of_memory_is_one_line(kit, tmp_path, monkeypatch):
 def test_read_only_folder_is_refused_as_nobody(argv, open_folder):
     """A folder this user may not write is refused before any work (root may write any
     folder, so this runs as ``nobody``)."""
-    prefix = _as_nobody()
+    prefix = unprivileged_prefix()
     out = open_folder / "out"
     out.chmod(0o555)
     argv = [a.replace("{k}", str(open_folder / "in")).replace("{o}", str(out)) for a in argv]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 from pathlib import Path
 
 
@@ -34,3 +35,18 @@ def cmdline(pid: int) -> bytes | None:
         return Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return None
+
+
+def unprivileged_prefix() -> list[str]:
+    """The command prefix that runs a child as an unprivileged user: nothing when this
+    process is not root, ``setpriv`` to ``nobody`` when it is.  Root without ``setpriv``
+    skips the calling test: root may write any read-only file, so there is nothing to
+    refuse."""
+    import pytest
+
+    if os.geteuid() != 0:
+        return []  # already unprivileged
+    if shutil.which("setpriv") is None:
+        pytest.skip("root without setpriv: cannot run as an unprivileged user, and root "
+                    "may write any read-only file")
+    return ["setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups"]
