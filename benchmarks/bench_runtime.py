@@ -48,6 +48,10 @@ from shtools.runtime import (
 )
 from shtools.runtime.parallel import available_cores
 
+#: Whether the runtime imported keeps static pairs (a baseline checkout may not):
+#: the battle scene flags its columns and ground static where it can.
+STATIC_FLAGS = "static" in getattr(SphereBlocker, "__dataclass_fields__", {})
+
 #: The runtime's targets: a battle frame, its memory, log space against product space.
 FRAME_TARGET_S = 0.150
 MEMORY_TARGET_BYTES = 1 << 30
@@ -144,8 +148,14 @@ class BattleScene:
         norms.append(np.asarray(cm.vertex_normals))
         groups.append(np.full(len(cm.vertices), 9))
         blockers.append(SphereBlocker(cc, cr, tree=(self.column_tree.parent,
-                                                   self.column_tree.leaf)))
+                                                   self.column_tree.leaf),
+                                      **({"static": True} if STATIC_FLAGS else {})))
         return np.vstack(verts), np.vstack(norms), np.concatenate(groups), blockers
+
+    @staticmethod
+    def static_kwargs(groups) -> dict:
+        """``visibility`` keywords flagging the ground and the columns static."""
+        return {"static_receivers": np.isin(groups, (0, 9))} if STATIC_FLAGS else {}
 
 
 #: untimed frames before timing a configuration (steady state)
@@ -163,18 +173,20 @@ def battle_frames(scene: BattleScene, settings: ShadowSettings, frames: int):
     rt = ShadowRuntime(settings)
     v, n, groups, _ = scene.frame(0.0)
     clusters = rt.clusters(v, groups)
+    static = scene.static_kwargs(groups)
     best: dict[str, float] = {}
     stats = {}
     # steady state, as in a bake of many frames: the first frames of a fresh runtime
     # pay one-time costs (scratch buffers, lazily built operators, cold caches)
     for i in range(WARMUP_FRAMES):
         v, n, _, blockers = scene.frame(0.1 * i)
-        rt.shade(rt.visibility(v, n, blockers, clusters), v, n, scene.env, scene.lights)
+        rt.shade(rt.visibility(v, n, blockers, clusters, **static), v, n, scene.env,
+                 scene.lights)
     for i in range(frames):
         v, n, _, blockers = scene.frame(0.1 * i)
         w0 = time.perf_counter()
         t0 = time.process_time()
-        g = rt.visibility(v, n, blockers, clusters)
+        g = rt.visibility(v, n, blockers, clusters, **static)
         t1 = time.process_time()
         rt.shade(g, v, n, scene.env, scene.lights)
         t2 = time.process_time()
@@ -194,7 +206,7 @@ def peak_memory(scene: BattleScene, settings: ShadowSettings) -> int:
     clusters = rt.clusters(v, groups)
     tracemalloc.start()
     tracemalloc.reset_peak()
-    g = rt.visibility(v, n, blockers, clusters)
+    g = rt.visibility(v, n, blockers, clusters, **scene.static_kwargs(groups))
     rt.shade(g, v, n, scene.env, scene.lights)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
@@ -341,9 +353,9 @@ def frame_child(quick: bool, frames: int, save: str | None) -> int:
     best, _, rt = battle_frames(scene, ShadowSettings(**BATTLE_FRAME),
                                 PROCESS_WARMUP_FRAMES + frames)
     if save:
-        v, n, _, blockers = scene.frame(0.35)
-        g = rt.visibility(v, n, blockers, rt.clusters(scene.frame(0.0)[0],
-                                                      scene.frame(0.0)[2]))
+        v, n, groups, blockers = scene.frame(0.35)
+        g = rt.visibility(v, n, blockers, rt.clusters(scene.frame(0.0)[0], groups),
+                          **scene.static_kwargs(groups))
         np.save(save, g)
     rt.close()
     print(json.dumps({"module": shtools.__file__, **{k: float(x) for k, x in best.items()}}))

@@ -36,11 +36,17 @@ class SphereBlocker:
         sphere-set index of leaf nodes and -1 for inner nodes.  Only the topology
         is used: the inner spheres are refit from the leaves every frame
         (:func:`shtools.runtime.spheres.refit_tree`).
+    static : bool
+        The spheres do not move between frames: with receiver rows flagged
+        static too (``static_receivers`` of
+        :meth:`~shtools.runtime.ShadowRuntime.visibility`), their pairs' log sum
+        is kept between frames (:mod:`shtools.runtime.static_pairs`).
     """
 
     centers: Any
     radii: Any
     tree: Any = None
+    static: bool = False
     parent: np.ndarray | None = field(init=False, default=None, repr=False)
     leaf: np.ndarray | None = field(init=False, default=None, repr=False)
 

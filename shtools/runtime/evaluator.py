@@ -43,6 +43,7 @@ from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import desaturate_negative
 from shtools.runtime.shading import shade as _shade
 from shtools.runtime.shading_cache import ShadingCache
+from shtools.runtime.static_pairs import StaticPairs, static_split
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
 
@@ -104,6 +105,7 @@ class ShadowRuntime:
         self._auto_groups: np.ndarray | None = None
         self._self = SelfTerms(self.order, self.acc_order)  # self-visibility and its caches
         self._shading = ShadingCache(self.order, self.settings)
+        self._static = StaticPairs()  # static spheres x static receivers, kept
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         self._exp_zero: np.ndarray | None = None  # exp(0) at the shading order
         #: processes sharing the per-vertex stages (worker processes start on the
@@ -153,7 +155,8 @@ class ShadowRuntime:
 
     def visibility(self, vertices, normals, blockers: list[SphereBlocker],
                    clusters: ReceiverClusters | None = None, *,
-                   self_visibility: tuple[SelfVisibility, ...] | list = ()) -> np.ndarray:
+                   self_visibility: tuple[SelfVisibility, ...] | list = (),
+                   static_receivers=None) -> np.ndarray:
         """Shadowing visibility per receiver vertex: accumulate logs, exp, truncate.
 
         Parameters
@@ -177,6 +180,12 @@ class ShadowRuntime:
             ``blockers``: a sphere set or a log blocker such as a deformable
             field) on those rows.  Clusters must not mix rows of different
             objects (build them with ``groups``).
+        static_receivers : array_like of bool, shape (V,), optional
+            Rows that do not move between frames.  With sphere blockers flagged
+            ``static``, the log sum of those pairs is computed once and kept while
+            they stay equal (:mod:`~shtools.runtime.static_pairs`); frames with
+            and without the flags agree to float32 rounding.  Ignored in frames
+            with shadow fields.
 
         Returns
         -------
@@ -193,18 +202,30 @@ class ShadowRuntime:
         count, so the result is the same bytes with any number of processes.
         """
         pts, nrm = _check_receivers(vertices, normals)
-        g = self._visibility(pts, nrm, blockers, clusters, self_visibility)
+        g = self._visibility(pts, nrm, blockers, clusters, self_visibility, static_receivers)
         return self._multiply_self(g, self_visibility)
 
-    def _visibility(self, pts, nrm, blockers, clusters, self_visibility) -> np.ndarray:
+    def _visibility(self, pts, nrm, blockers, clusters, self_visibility,
+                    static_receivers=None) -> np.ndarray:
         """:meth:`visibility` before the self-visibilities given as visibility."""
         spheres, others = self._blockers(blockers)
         if any(isinstance(b, FieldBlocker) for b in others):
             return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
         own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
+        kept = None
+        if static_receivers is not None and self.settings.hierarchy and spheres:
+            if clusters is None:  # the clusters a frame without the flags would use
+                clusters = self._clusters_for(pts, None if exclude is None else exclude.labels)
+            split = static_split(pts, nrm, spheres, static_receivers, exclude, clusters)
+            if split is not None:
+                kept = self._static.log_sum(split, lambda skipped: self._accumulate(
+                    self._frame_work(pts, spheres, clusters, skipped).task(pts, nrm),
+                    {"pairs_evaluated": 0}))
+                exclude = split.frame_exclude
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = _add(self._other_logs(pts, nrm, blockers, skip, in_parts=True), own)
+        extra = _add(_add(self._other_logs(pts, nrm, blockers, skip, in_parts=True), own),
+                     kept)
         parts = self._part_blockers(blockers, skip, pts.shape[0])
         cost = 0 if parts is None else DEFORMABLE_RECEIVER_PAIRS * len(parts.deformables)
         if stats["pairs"] + cost * pts.shape[0] >= MIN_PARALLEL_PAIRS:
