@@ -43,7 +43,7 @@ from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import desaturate_negative
 from shtools.runtime.shading import shade as _shade
 from shtools.runtime.shading_cache import ShadingCache
-from shtools.runtime.static_pairs import StaticPairs, static_split
+from shtools.runtime.static_pairs import StaticPairs
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
 
@@ -216,7 +216,7 @@ class ShadowRuntime:
         if static_receivers is not None and self.settings.hierarchy and spheres:
             if clusters is None:  # the clusters a frame without the flags would use
                 clusters = self._clusters_for(pts, None if exclude is None else exclude.labels)
-            split = static_split(pts, nrm, spheres, static_receivers, exclude, clusters)
+            split = self._static.split(pts, nrm, spheres, static_receivers, exclude, clusters)
             if split is not None:
                 kept = self._static.log_sum(split, lambda skipped: self._accumulate(
                     self._frame_work(pts, spheres, clusters, skipped).task(pts, nrm),

@@ -34,15 +34,18 @@ class StaticSplit:
         static ones, on static rows; all of them on the other rows).
     key : tuple
         The static inputs, compared to decide whether a kept sum still holds.
+    exclusions : tuple
+        What :func:`static_split` reuses in the next frame (its ``kept``).
     """
 
     frame_exclude: Skipped
     static_exclude: Skipped
     key: tuple
+    exclusions: tuple
 
 
 def static_split(pts, nrm, spheres: list[SphereBlocker], static_receivers, exclude,
-                 clusters) -> StaticSplit | None:
+                 clusters, kept: tuple | None = None) -> StaticSplit | None:
     """The frame's :class:`StaticSplit`, or None when no static pair exists.
 
     Parameters
@@ -57,6 +60,9 @@ def static_split(pts, nrm, spheres: list[SphereBlocker], static_receivers, exclu
         Blockers the rows skip for their own reasons (self-visibility).
     clusters : ReceiverClusters
         The frame's receiver clusters.
+    kept : tuple, optional
+        ``(inputs, frame_exclude, static_exclude)`` of an earlier frame: its
+        exclusions are reused when the flags and ``exclude`` are equal.
     """
     rows = np.asarray(static_receivers)
     if rows.dtype != np.bool_ or rows.shape != (pts.shape[0],):
@@ -65,17 +71,25 @@ def static_split(pts, nrm, spheres: list[SphereBlocker], static_receivers, exclu
     fixed = np.array([bool(b.static) for b in spheres], dtype=bool)
     if not rows.any() or not fixed.any():
         return None
-    skipped = (np.zeros((pts.shape[0], len(spheres)), dtype=bool) if exclude is None
-               else exclude.masks[exclude.labels])
-    pairs = rows[:, None] & fixed[None, :]
-    key = (rows.copy(), pts[rows].copy(), nrm[rows].copy(), skipped[rows].copy(),
-           clusters.order.copy(), clusters.offsets.copy(),
-           tuple((b.centers.copy(), b.radii.copy(),
-                  None if b.parent is None else b.parent.copy(),
-                  None if b.leaf is None else b.leaf.copy())
+    inputs = (rows, fixed) + ((None, None) if exclude is None else
+                              (exclude.labels, exclude.masks))
+    if kept is not None and same_key(kept[0][:4], inputs):
+        _, frame_exclude, static_exclude = kept
+        skipped_rows = kept[0][4]
+    else:
+        skipped = (np.zeros((pts.shape[0], len(spheres)), dtype=bool) if exclude is None
+                   else exclude.masks[exclude.labels])
+        pairs = rows[:, None] & fixed[None, :]
+        frame_exclude = Skipped.of(skipped | pairs)
+        static_exclude = Skipped.of(skipped | ~pairs)
+        skipped_rows = skipped[rows]
+        kept = (_copied((*inputs, skipped_rows)), frame_exclude, static_exclude)
+    key = (rows.copy(), pts[rows], nrm[rows], skipped_rows,
+           clusters.order, clusters.offsets,
+           tuple((b.centers, b.radii, b.parent, b.leaf)
                  for b, f in zip(spheres, fixed, strict=True) if f))
-    return StaticSplit(frame_exclude=Skipped.of(skipped | pairs),
-                       static_exclude=Skipped.of(skipped | ~pairs), key=key)
+    return StaticSplit(frame_exclude=frame_exclude, static_exclude=static_exclude, key=key,
+                       exclusions=kept)
 
 
 def same_key(a: tuple, b: tuple) -> bool:
@@ -100,11 +114,30 @@ class StaticPairs:
     def __init__(self):
         self._key: tuple | None = None
         self._sum: np.ndarray | None = None
+        self._exclusions: tuple | None = None
+
+    def split(self, pts, nrm, spheres, static_receivers, exclude, clusters
+              ) -> StaticSplit | None:
+        """:func:`static_split` of this frame, reusing the last frame's exclusions."""
+        split = static_split(pts, nrm, spheres, static_receivers, exclude, clusters,
+                             self._exclusions)
+        if split is not None:
+            self._exclusions = split.exclusions
+        return split
 
     def log_sum(self, split: StaticSplit, compute) -> np.ndarray:
         """The static pairs' log sum ``(V, n_acc^2)``: kept, or ``compute(exclude)``."""
         if self._key is None or not same_key(self._key, split.key):
-            self._sum = compute(split.static_exclude)
-            self._sum.setflags(write=False)
-            self._key = split.key
+            total = compute(split.static_exclude)
+            total.setflags(write=False)
+            # the key's arrays are copied: the caller may change its own in place
+            self._key = _copied(split.key)
+            self._sum = total
         return self._sum
+
+
+def _copied(key):
+    """A deep copy of a :attr:`StaticSplit.key` (arrays copied, None kept)."""
+    if isinstance(key, tuple):
+        return tuple(_copied(x) for x in key)
+    return None if key is None else key.copy()
