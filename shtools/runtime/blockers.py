@@ -1,4 +1,4 @@
-"""Inputs of the runtime: blockers and spherical lights.
+"""Inputs of the runtime: blockers, spherical lights, and the checks of a frame's inputs.
 
 Two kinds of blocker reach :meth:`shtools.runtime.ShadowRuntime.visibility`:
 
@@ -219,3 +219,35 @@ def _checked(name: str, value) -> np.ndarray:
     if not np.isfinite(value).all():
         raise InputError(f"self-visibility {name} contains NaN or infinite values")
     return value
+
+
+def check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
+    """Receivers of a frame as float64 ``(V, 3)`` arrays, normals made unit length."""
+    pts = np.asarray(vertices, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or nrm.shape != pts.shape:
+        raise InputError(
+            f"vertices and normals must both have shape (V, 3), got {pts.shape} and {nrm.shape}"
+        )
+    if not (np.isfinite(pts).all() and np.isfinite(nrm).all()):
+        raise InputError("receiver vertices or normals contain NaN or infinite values")
+    # mesh normals are often only nearly unit; a zero normal (unreferenced vertex)
+    # stays zero and shades black
+    length = np.linalg.norm(nrm, axis=1, keepdims=True)
+    if not np.allclose(length, 1.0, atol=1e-6):
+        nrm = nrm / np.where(length > 0, length, 1.0)
+    return pts, nrm
+
+
+def check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
+    """Split blockers into sphere sets and blockers with their own log visibility."""
+    spheres, others = [], []
+    for b in blockers:
+        if isinstance(b, SphereBlocker):
+            spheres.append(b)
+        elif isinstance(b, LogBlocker):
+            others.append(b)
+        else:
+            raise InputError(f"blockers must be SphereBlocker objects or have "
+                             f"log_visibility(points, normals, order), got {type(b).__name__}")
+    return spheres, others

@@ -16,7 +16,13 @@ import numpy as np
 
 from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
-from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
+from shtools.runtime.blockers import (
+    SelfVisibility,
+    SphereBlocker,
+    SphereLight,
+    check_blockers,
+    check_receivers,
+)
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.fields import FieldBlocker
@@ -141,7 +147,7 @@ class ShadowRuntime:
 
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
-        pts, nrm = _check_receivers(vertices, normals)
+        pts, nrm = check_receivers(vertices, normals)
         spheres, _ = self._blockers(blockers)
         own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
@@ -201,7 +207,7 @@ class ShadowRuntime:
         :meth:`close` stops them).  The split does not depend on the process
         count, so the result is the same bytes with any number of processes.
         """
-        pts, nrm = _check_receivers(vertices, normals)
+        pts, nrm = check_receivers(vertices, normals)
         g = self._visibility(pts, nrm, blockers, clusters, self_visibility, static_receivers)
         return self._multiply_self(g, self_visibility)
 
@@ -264,8 +270,8 @@ class ShadowRuntime:
         return self.exponentiate(f), stats["pairs_evaluated"]
 
     def _blockers(self, blockers) -> tuple[list[SphereBlocker], list]:
-        """:func:`_check_blockers`, and shadow fields must have the shading order."""
-        spheres, others = _check_blockers(blockers)
+        """:func:`~shtools.runtime.blockers.check_blockers`; fields must have the shading order."""
+        spheres, others = check_blockers(blockers)
         for b in others:
             if isinstance(b, FieldBlocker) and b.table.order != self.order:
                 raise InputError(f"a shadow field has SH order {b.table.order} but the runtime "
@@ -544,7 +550,7 @@ class ShadowRuntime:
         :func:`~shtools.runtime.shading.desaturate_negative`).
         """
         s = self.settings
-        pts, nrm = _check_receivers(vertices, normals)
+        pts, nrm = check_receivers(vertices, normals)
         transfer, changed = self._shading.cosine_transfer(nrm)
         env_transfer = None
         if (env_sh is not None and local_visibility is None and form == "tabulated"
@@ -567,37 +573,6 @@ class ShadowRuntime:
             self._auto_clusters = self.clusters(pts, groups=groups)
             self._auto_groups = None if groups is None else np.array(groups)
         return self._auto_clusters
-
-
-def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
-    pts = np.asarray(vertices, dtype=np.float64)
-    nrm = np.asarray(normals, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3 or nrm.shape != pts.shape:
-        raise InputError(
-            f"vertices and normals must both have shape (V, 3), got {pts.shape} and {nrm.shape}"
-        )
-    if not (np.isfinite(pts).all() and np.isfinite(nrm).all()):
-        raise InputError("receiver vertices or normals contain NaN or infinite values")
-    # mesh normals are often only nearly unit; a zero normal (unreferenced vertex)
-    # stays zero and shades black
-    length = np.linalg.norm(nrm, axis=1, keepdims=True)
-    if not np.allclose(length, 1.0, atol=1e-6):
-        nrm = nrm / np.where(length > 0, length, 1.0)
-    return pts, nrm
-
-
-def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
-    """Split blockers into sphere sets and blockers with their own log visibility."""
-    spheres, others = [], []
-    for b in blockers:
-        if isinstance(b, SphereBlocker):
-            spheres.append(b)
-        elif isinstance(b, LogBlocker):
-            others.append(b)
-        else:
-            raise InputError(f"blockers must be SphereBlocker objects or have "
-                             f"log_visibility(points, normals, order), got {type(b).__name__}")
-    return spheres, others
 
 
 def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
