@@ -559,7 +559,9 @@ class ShadowRuntime:
         out = _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                      window_kind=s.resolved_window(), window_h=s.window_h,
                      local_visibility=local_visibility, form=form, transfer=transfer,
-                     env_transfer=env_transfer)
+                     env_transfer=env_transfer,
+                     light_terms=self._shading.light_terms(sphere_lights, pts)
+                     if sphere_lights else None)
         if s.deringing == "desaturate":
             out = desaturate_negative(out)
         return out
