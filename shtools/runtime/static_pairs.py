@@ -82,7 +82,9 @@ def static_split(pts, nrm, spheres: list[SphereBlocker], static_receivers, exclu
         pairs = rows[:, None] & fixed[None, :]
         frame_exclude = Skipped.of(skipped | pairs)
         static_exclude = Skipped.of(skipped | ~pairs)
-        skipped_rows = skipped[rows]
+        # the static sum depends on the static blockers' skips on static rows only
+        # (a moving caster's traced shadow changes the others every frame)
+        skipped_rows = skipped[rows][:, fixed]
         kept = (_copied((*inputs, skipped_rows)), frame_exclude, static_exclude)
     key = (rows.copy(), pts[rows], nrm[rows], skipped_rows,
            clusters.order, clusters.offsets,
