@@ -67,7 +67,8 @@ def desaturate_negative(radiance) -> np.ndarray:
         Non-negative linear RGB.
     """
     rgb = np.asarray(radiance, dtype=np.float64)
-    negative = rgb.min(axis=-1) < 0.0
+    # channel by channel: several times faster than a reduction over the short last axis
+    negative = np.minimum(np.minimum(rgb[..., 0], rgb[..., 1]), rgb[..., 2]) < 0.0
     if not negative.any():
         return rgb
     out = rgb.copy()
