@@ -8,7 +8,9 @@ side by side with that checkout and prints the ratio per stage.
 
 Scenes are procedural (capsule-built characters and columns over a ground grid,
 sphere sets bounding the capsules exactly), so the figures do not depend on
-the data directory.  Timings are process CPU time (``time.process_time``),
+the data directory.  The columns' spheres and the ground and column receivers are
+flagged static (their pairs' log sum is kept between frames) where the runtime
+imported has the flags.  Timings are process CPU time (``time.process_time``),
 minima over the frames of one run: the machine is shared by several jobs, and
 CPU time is what a frame costs on one otherwise idle core.  Run with
 ``OPENBLAS_NUM_THREADS=1``: on a loaded 2-core machine OpenBLAS threads spin
