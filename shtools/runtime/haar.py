@@ -113,11 +113,39 @@ class HaarField:
         out[:, 0] = self.offset[c, 0] + q[:, 0] * self.step[c, 0]
         return out
 
+    @classmethod
+    def from_asset(cls, path) -> HaarField:
+        """Read a ``haar`` asset (:mod:`shtools.data_formats.haar`)."""
+        from shtools.data_formats.haar import read_haar_asset
+
+        d = read_haar_asset(path)
+        return cls(d["center"], d["bounding_radius"], d["shell_radii"], d["resolution"],
+                   d["index"], d["q"], d["offset"], d["step"], d["map_size"])
+
+    @property
+    def fade_end(self) -> float:
+        """Distance from the centre beyond which the field is exactly unoccluded."""
+        r = np.asarray(self.shell_radii, dtype=np.float64)
+        return float(r[-1] + (r[1] - r[0] if len(r) > 1 else r[0]))
+
     def visibility_maps(self, points) -> np.ndarray:
         """Visibility maps at object-frame points, shape ``(P, N*N)`` float64, in [0, 1].
 
         Cell ``(s, t)`` of a map is the direction ``theta_s = (s + 1/2) pi / N``
         from ``+z``, ``phi_t = (t + 1/2) 2 pi / N`` (the field's direction map).
+        """
+        N = self.map_size
+        maps = ihaar2(self.coefficients(points).reshape(-1, N, N)).reshape(-1, N * N)
+        # truncation rings slightly outside [0, 1], which a visibility cannot be (and
+        # products must not amplify)
+        return np.clip(maps, 0.0, 1.0)
+
+    def coefficients(self, points) -> np.ndarray:
+        """Haar coefficients of the visibility maps at object-frame points, ``(P, N*N)``.
+
+        The bilinear blend of the kept coefficients of the nearest samples on the two
+        nearest shells, faded to the unoccluded map (scaling coefficient ``N``) beyond
+        the last shell; not clipped (the stored function itself).
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         N = self.map_size
@@ -149,10 +177,9 @@ class HaarField:
                     # one sample's kept indices are distinct: no repeated (row, index)
                     # pair within one corner, so a buffered += is exact
                     coeff[rows[sel][:, None], kidx[idx[:, k]]] += vals[idx[:, k]] * w[:, None]
-        maps = ihaar2(coeff.reshape(-1, N, N)).reshape(p.shape[0], -1)
-        # beyond the fade: unoccluded (1 everywhere); truncation rings slightly outside
-        # [0, 1], which a visibility cannot be (and products must not amplify)
-        return np.clip(maps + fade[:, None], 0.0, 1.0)
+        # beyond the fade: unoccluded, the constant map 1 (whose scaling coefficient is N)
+        coeff[:, 0] += fade * N
+        return coeff
 
 
 def haar_radiance(visibility_maps, env_map, normals, dirs, weights) -> np.ndarray:

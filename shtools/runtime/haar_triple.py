@@ -1,4 +1,4 @@
-r"""Triple and double products in the nonstandard 2-D Haar basis (Ng, Ramamoorthi & Hanrahan 2004).
+r"""Haar triple and double products (Ng, Ramamoorthi & Hanrahan 2004), nonstandard 2-D basis.
 
 Functions on an ``N x N`` map are held as their coefficients in the
 orthonormal nonstandard Haar basis of :func:`shtools.runtime.haar.haar2`
