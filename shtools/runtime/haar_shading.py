@@ -7,15 +7,15 @@ A rotated object's map is resampled cell by cell (each world cell takes the
 object-frame cell its direction falls in: nearest-cell resampling, exact for
 rotations about ``z`` by whole cells).
 
-Several occluders multiply.  :func:`combined_maps` does it in the pixel
-domain (each map clipped to [0, 1] first: truncation rings slightly outside
-it); :func:`combined_coefficients` in the Haar basis with Ng et al.'s double
-product (:func:`shtools.runtime.haar_triple.haar_product`) on the stored,
-unclipped functions.  Both equal the product of reconstructed maps (the
-tests); the pixel domain is the default, as fast and the only one that can
-clip.  SH visibility of the scene's other blockers (sphere sets, SH fields,
-self-visibility) is evaluated on the map's cells and multiplied in the same
-way: the SH factor stays low-frequency, the Haar factor all-frequency.
+Several occluders multiply, as the stored functions (not clipped, so that
+every scheme below computes the same number): :func:`combined_maps` in the
+pixel domain, :func:`combined_coefficients` in the Haar basis with Ng et
+al.'s double product (:func:`shtools.runtime.haar_triple.haar_product`).
+Both equal the product of reconstructed maps (the tests).  SH visibility of
+the scene's other blockers (sphere sets, SH fields, self-visibility) is
+evaluated on the map's cells (clipped to [0, 1]: SH ringing) and multiplied
+in the same way: the SH factor stays low-frequency, the Haar factor
+all-frequency.
 
 Shading with an environment given per cell (``(Q, 3)`` mean radiance):
 
@@ -170,7 +170,7 @@ def sh_on_cells(visibility, size: int) -> np.ndarray:
 
 
 def combined_maps(blockers, points, sh_visibility=None) -> np.ndarray:
-    """Pixel-domain product of every blocker's map (each clipped to [0, 1]), ``(P, M*M)``.
+    """Pixel-domain product of every blocker's map, ``(P, M*M)``.
 
     Parameters
     ----------
@@ -183,7 +183,7 @@ def combined_maps(blockers, points, sh_visibility=None) -> np.ndarray:
     M = blockers[0].map_size
     out = np.ones((len(points), M * M))
     for b in blockers:
-        out *= np.clip(b.maps(points), 0.0, 1.0)
+        out *= b.maps(points)
     if sh_visibility is not None:
         out *= sh_on_cells(sh_visibility, M)
     return out

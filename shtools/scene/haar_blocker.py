@@ -10,7 +10,8 @@ self-visibility).  :func:`shade_all_frequency` then shades the environment in
 the map basis: that SH visibility evaluated on the map's cells, times every
 Haar blocker's world-frame map, against the environment averaged into the
 same cells (an HDR image: its pixels binned; a light asset or inline SH: the
-SH radiance at the cell centres, no window).  Spherical lights shaded with
+SH radiance at the cell centres, no window), by the cell-wise sum or Ng et
+al.'s triple product (:data:`SCHEME`).  Spherical lights shaded with
 the SH visibility see the Haar fields projected to SH at the shading order
 and multiplied in (an SH product).  ``--method raytrace`` traces every
 blocker's mesh, the Haar objects' too, so it shades in SH as usual (the
@@ -26,9 +27,15 @@ import numpy as np
 
 from shtools.errors import InputError
 
-#: Environment shading in the map basis: "cells" (pixel domain) or "triple" (Ng et al.'s
-#: wavelet triple product); the same radiance (benchmarks/bench_haar.py measures both).
-SCHEME = "cells"
+#: Environment shading in the map basis: "cells" (pixel domain), "triple" (Ng et al.'s
+#: wavelet triple product) or "auto": the same radiance to rounding, so the faster one --
+#: the triple product when the receivers have few distinct normals (its lit transfer is
+#: then computed once per normal and kept), the cell-wise sum otherwise
+#: (benchmarks/bench_haar.py --part sun times both).
+SCHEME = "auto"
+
+#: Most distinct receiver normals for which "auto" picks the triple product.
+TRIPLE_MAX_NORMALS = 64
 
 
 def prepare_haar(spec, prep, ctx) -> None:
@@ -121,7 +128,11 @@ def shade_all_frequency(run, state, visibility, haar: list, joined: list) -> np.
     radiance = np.zeros((len(pts), 3))
     env = environment_cells(run, M)
     if env is not None:
-        if SCHEME == "triple":
+        scheme = SCHEME
+        if scheme == "auto":
+            few = len(np.unique(nrm, axis=0)) <= TRIPLE_MAX_NORMALS
+            scheme = "triple" if few else "cells"
+        if scheme == "triple":
             shader = run.cache.setdefault(("haar_triple", M), TripleShader(env))
             radiance += shader.radiance(combined_coefficients(haar, pts, visibility), nrm)
         else:

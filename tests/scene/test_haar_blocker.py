@@ -141,12 +141,13 @@ def test_cell_and_triple_product_schemes_agree(haar_dir, monkeypatch):
     import shtools.scene.haar_blocker as hb
 
     (haar_dir / "scene.toml").write_text(scene_text(sphere=True))
+    monkeypatch.setattr(hb, "SCHEME", "cells")
     cells = _bake(haar_dir / "scene.toml").radiance
     monkeypatch.setattr(hb, "SCHEME", "triple")
     triple = _bake(haar_dir / "scene.toml").radiance
-    # the same integral; the cell scheme clips each factor's ringing to [0, 1], the Haar
-    # products cannot: they differ by that clipping only
-    assert relative_rmse(triple, cells) < 0.01
+    # the same finite sum (pixel domain vs tripling coefficients): rounding only, of the
+    # float32 lit transfer the triple product keeps (measured 7e-7 relative at most)
+    np.testing.assert_allclose(triple, cells, rtol=1e-5, atol=1e-6)
 
 
 def test_raytrace_method_traces_the_haar_object_too(haar_dir):
