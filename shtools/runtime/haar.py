@@ -11,16 +11,12 @@ blend of the reconstructed maps, since the transform is linear.  Inside the
 first shell the first shell is used; beyond the last, the map fades to
 unoccluded over one shell spacing, as for SH fields.
 
-Shading (:func:`haar_radiance`): the triple integral of lighting, visibility
-and the cosine transfer over the map's cells,
-``(1/pi) sum_q w_q L_q V_q max(0, N . s_q)``.  All three are piecewise
-constant on the map's cells (the Haar basis spans exactly those functions),
-so this is the wavelet triple product of Ng et al. (2004) evaluated in the
-pixel domain -- the same number, at ``O(cells)`` per receiver instead of
-their ``O(kept coefficients)`` -- and several occluders combine by the
-cell-wise product of their maps (the product in the Haar basis).  Objects
-are not rotated: a map is in its object's frame, and a rotated object would
-need its map resampled (not done).
+Shading (:func:`haar_radiance`): the integral of lighting, visibility and
+the cosine transfer over the map's cells in the object's frame,
+``(1/pi) sum_q w_q L_q V_q max(0, N . s_q)``.  Posed objects (world-frame
+maps, rotation, several occluders, SH blockers mixed in) and Ng et al.'s
+wavelet triple product are in :mod:`shtools.runtime.haar_shading` and
+:mod:`shtools.runtime.haar_triple`.
 """
 
 from __future__ import annotations

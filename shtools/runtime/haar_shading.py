@@ -125,9 +125,14 @@ class HaarBlocker:
         rows &= np.linalg.norm(p - center, axis=1) < self.table.fade_end * self.scale
         return p, np.flatnonzero(rows)
 
+    @property
+    def unrotated(self) -> bool:
+        """The object's frame is the world's up to translation and scale (maps used as stored)."""
+        return bool(np.allclose(self.rotation, np.eye(3), atol=1e-9))
+
     def _resample(self) -> np.ndarray | None:
         """World cell -> object cell index ``(Q,)``, or None when the object is unrotated."""
-        if np.allclose(self.rotation, np.eye(3), atol=1e-9):
+        if self.unrotated:
             return None
         dirs, _ = map_directions(self.map_size)
         return cell_of(dirs @ self.rotation, self.map_size)  # R^T d per row

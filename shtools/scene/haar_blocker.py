@@ -28,10 +28,8 @@ import numpy as np
 from shtools.errors import InputError
 
 #: Environment shading in the map basis: "cells" (pixel domain), "triple" (Ng et al.'s
-#: wavelet triple product) or "auto": the same radiance to rounding, so the faster one --
-#: the triple product when the receivers have few distinct normals (its lit transfer is
-#: then computed once per normal and kept), the cell-wise sum otherwise
-#: (benchmarks/bench_haar.py --part sun times both).
+#: wavelet triple product) or "auto": the same radiance to rounding, so the faster one
+#: (:func:`_triple_is_faster`; benchmarks/bench_haar.py --part sun times both).
 SCHEME = "auto"
 
 #: Most distinct receiver normals for which "auto" picks the triple product.
@@ -128,15 +126,17 @@ def shade_all_frequency(run, state, visibility, haar: list, joined: list) -> np.
     radiance = np.zeros((len(pts), 3))
     env = environment_cells(run, M)
     if env is not None:
+        others = None if _unoccluded(visibility) else visibility
         scheme = SCHEME
         if scheme == "auto":
-            few = len(np.unique(nrm, axis=0)) <= TRIPLE_MAX_NORMALS
-            scheme = "triple" if few else "cells"
+            scheme = "triple" if _triple_is_faster(haar, others, nrm) else "cells"
         if scheme == "triple":
-            shader = run.cache.setdefault(("haar_triple", M), TripleShader(env))
-            radiance += shader.radiance(combined_coefficients(haar, pts, visibility), nrm)
+            key = ("haar_triple", M)
+            if key not in run.cache:
+                run.cache[key] = TripleShader(env)
+            radiance += run.cache[key].radiance(combined_coefficients(haar, pts, others), nrm)
         else:
-            radiance += shade_cells(combined_maps(haar, pts, visibility), env, nrm)
+            radiance += shade_cells(combined_maps(haar, pts, others), env, nrm)
     if joined:
         from shtools.sh import basis, product
 
@@ -146,3 +146,21 @@ def shade_all_frequency(run, state, visibility, haar: list, joined: list) -> np.
         radiance += run.runtime.shade(product(visibility, haar_sh, order), pts, nrm, None,
                                       sphere_lights=joined)
     return radiance
+
+
+def _unoccluded(visibility) -> bool:
+    """The SH visibility is the constant 1 everywhere (no other blocker reaches a receiver)."""
+    if visibility is None:
+        return True
+    g = np.asarray(visibility, dtype=np.float64)
+    return bool(np.allclose(g[:, 0], math.sqrt(4 * math.pi), atol=1e-6)
+                and np.allclose(g[:, 1:], 0.0, atol=1e-6))
+
+
+def _triple_is_faster(haar: list, others, normals) -> bool:
+    """Whether ``"auto"`` shades by the triple product: one unrotated Haar field and no SH
+    factor (the Haar coefficients are then the looked-up ones, with no Haar-domain
+    product or resampling), on receivers with few distinct normals (their lit transfer is
+    computed once and kept)."""
+    return (len(haar) == 1 and others is None and haar[0].unrotated
+            and len(np.unique(normals, axis=0)) <= TRIPLE_MAX_NORMALS)

@@ -196,3 +196,20 @@ def test_bad_haar_scenes_give_one_line(haar_dir, run_cli):
     code, _, err = run_cli("bake", haar_dir / "mid.toml", "-o", haar_dir / "mid_out.h5")
     assert code not in (0, 3) and len(err.strip().splitlines()) == 1 and "infinity" in err, err
     assert not (haar_dir / "mid_out.h5").exists()
+
+
+def test_auto_takes_the_triple_product_for_one_unrotated_field_on_a_plane(haar_dir,
+                                                                         monkeypatch):
+    import shtools.scene.haar_blocker as hb
+
+    text = scene_text(sphere=False).replace("rotate = [0, 30, 0]\n", "")
+    (haar_dir / "plain.toml").write_text(text)
+    picked = []
+    real = hb._triple_is_faster
+    monkeypatch.setattr(hb, "_triple_is_faster", lambda *a: picked.append(real(*a)) or real(*a))
+    auto = _bake(haar_dir / "plain.toml").radiance
+    assert picked == [True]
+    monkeypatch.setattr(hb, "SCHEME", "cells")
+    cells = _bake(haar_dir / "plain.toml").radiance
+    # float32 lit transfer of the triple product: rounding only
+    np.testing.assert_allclose(auto, cells, rtol=1e-5, atol=1e-6)
