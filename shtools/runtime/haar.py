@@ -140,11 +140,38 @@ class HaarField:
         """Haar coefficients of the visibility maps at object-frame points, ``(P, N*N)``.
 
         The bilinear blend of the kept coefficients of the nearest samples on the two
-        nearest shells, faded to the unoccluded map (scaling coefficient ``N``) beyond
-        the last shell; not clipped (the stored function itself).
+        nearest shells (:meth:`sparse_terms`), faded to the unoccluded map (scaling
+        coefficient ``N``) beyond the last shell; not clipped (the stored function).
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         N = self.map_size
+        terms, fade = self.sparse_terms(p)
+        coeff = np.zeros((p.shape[0], N * N))
+        for rows, w, kidx, vals in terms:
+            # one sample's kept indices are distinct: no repeated (row, index) pair within
+            # one term, so a buffered += is exact
+            coeff[rows[:, None], kidx] += vals * w[:, None]
+        coeff[:, 0] += fade * N
+        return coeff
+
+    def sparse_terms(self, points) -> tuple[list, np.ndarray]:
+        """The weighted sparse samples whose sum is each point's map, and the fade.
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Object frame.
+
+        Returns
+        -------
+        terms : list of (rows (n,), weight (n,), index (n, K), value (n, K))
+            Per shell and bilinear corner: the receiver rows, their weights and the
+            kept coefficients (flat positions, dequantized values) of the sample used.
+        fade : ndarray, shape (P,)
+            Weight of the unoccluded map (beyond the last shell), the terms' weights
+            already scaled by ``1 - fade``.
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         radii = np.asarray(self.shell_radii, dtype=np.float64)
         C = radii.shape[0]
         rel = p - self.center
@@ -157,8 +184,7 @@ class HaarField:
         c1 = np.minimum(np.floor(x).astype(np.int64), max(C - 2, 0))
         w2 = x - c1 if C > 1 else np.zeros_like(d)
         fade = np.clip((d - radii[-1]) / spacing, 0, 1)
-        coeff = np.zeros((p.shape[0], N * N))
-        rows = np.arange(p.shape[0])
+        terms = []
         for off, wshell in ((0, 1 - w2), (1, w2)):
             c = np.minimum(c1 + off, C - 1)
             for shell in np.unique(c):
@@ -170,12 +196,8 @@ class HaarField:
                 kidx = np.asarray(self.index[shell], np.int64).reshape(vals.shape)
                 for k in range(4):
                     w = wb[:, k] * wshell[sel] * (1 - fade[sel])
-                    # one sample's kept indices are distinct: no repeated (row, index)
-                    # pair within one corner, so a buffered += is exact
-                    coeff[rows[sel][:, None], kidx[idx[:, k]]] += vals[idx[:, k]] * w[:, None]
-        # beyond the fade: unoccluded, the constant map 1 (whose scaling coefficient is N)
-        coeff[:, 0] += fade * N
-        return coeff
+                    terms.append((sel, w, kidx[idx[:, k]], vals[idx[:, k]]))
+        return terms, fade
 
 
 def haar_radiance(visibility_maps, env_map, normals, dirs, weights) -> np.ndarray:

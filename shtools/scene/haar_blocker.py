@@ -134,7 +134,11 @@ def shade_all_frequency(run, state, visibility, haar: list, joined: list) -> np.
             key = ("haar_triple", M)
             if key not in run.cache:
                 run.cache[key] = TripleShader(env)
-            radiance += run.cache[key].radiance(combined_coefficients(haar, pts, others), nrm)
+            shader = run.cache[key]
+            if len(haar) == 1 and others is None and haar[0].unrotated:
+                radiance += shader.radiance_sparse(*haar[0].sparse_terms(pts), nrm)
+            else:
+                radiance += shader.radiance(combined_coefficients(haar, pts, others), nrm)
         else:
             radiance += shade_cells(combined_maps(haar, pts, others), env, nrm)
     if joined:

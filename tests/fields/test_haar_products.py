@@ -68,3 +68,26 @@ def test_a_rotation_by_one_cell_about_z_shifts_the_world_map_by_one_column():
     turned = HaarBlocker.from_matrix(a, rot).maps(world[None])[0].reshape(N, N)
     # world column t looks along the object's column t - 1
     np.testing.assert_allclose(turned, np.roll(plain, 1, axis=1), atol=1e-9)
+
+
+def test_sparse_triple_product_equals_the_cell_wise_sum():
+    from shtools.runtime.haar_shading import TripleShader, shade_cells
+
+    a = _field((0.8, 0.5, 0.6))
+    m = np.eye(4)
+    m[:3, 3] = [0.1, -0.2, 0.9]
+    blk = HaarBlocker.from_matrix(a, m)
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(-1.5, 1.5, size=(40, 3))
+    pts[:, 2] = -0.1
+    nrm = np.tile([0.0, 0.0, 1.0], (40, 1))
+    nrm[::3] = [0.3, 0.0, 0.954]
+    env = rng.random((N * N, 3))
+    env[37] = 300.0  # a sun in one cell
+    cells = shade_cells(combined_maps([blk], pts), env, nrm)
+    shader = TripleShader(env)
+    # float32 lit transfer: rounding only
+    np.testing.assert_allclose(shader.radiance_sparse(*blk.sparse_terms(pts), nrm), cells,
+                               rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(shader.radiance(blk.coefficients(pts), nrm), cells,
+                               rtol=1e-5, atol=1e-6)
