@@ -82,13 +82,18 @@ def environment_cells(run, size: int) -> np.ndarray | None:
         from shtools.lighting.images import load_hdr_image
         from shtools.lighting.latlong import latlong_directions, pixel_solid_angles
 
-        image = np.asarray(load_hdr_image(env.path), dtype=np.float64)
+        image = np.asarray(load_hdr_image(env.path), dtype=np.float64)[..., :3]
+        # pixels binned into cells: split coarse pixels (the same piecewise-constant image)
+        # until a cell row spans at least two pixel rows, so that no cell is left empty
+        f = max(1, math.ceil(2 * size / image.shape[0]))
+        if f > 1:
+            image = np.repeat(np.repeat(image, f, axis=0), f, axis=1)
         H, W = image.shape[:2]
         d = latlong_directions(H, W).reshape(-1, 3) @ \
             environment_rotation(math.degrees(env.rotate)).T
         pw = pixel_solid_angles(H, W).reshape(-1)
         acc = np.zeros((size * size, 3))
-        np.add.at(acc, cell_of(d, size), image.reshape(-1, 3)[:, :3] * pw[:, None])
+        np.add.at(acc, cell_of(d, size), image.reshape(-1, 3) * pw[:, None])
         cells = acc / w[:, None] * env.intensity
     else:
         from shtools.sh import basis
