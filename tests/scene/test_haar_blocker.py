@@ -113,10 +113,10 @@ def _traced_reference(frame, sphere: bool, image, second_box: bool = False):
     return (vis * cos * w) @ image.reshape(-1, 3).astype(np.float64) / math.pi
 
 
-@pytest.mark.parametrize("sphere", [False, True])
-def test_haar_blocker_bake_matches_ray_tracing_under_a_sun(haar_dir, sphere):
+@pytest.mark.parametrize("sphere,method", [(False, None), (True, None), (True, "product")])
+def test_haar_blocker_bake_matches_ray_tracing_under_a_sun(haar_dir, sphere, method):
     (haar_dir / "scene.toml").write_text(scene_text(sphere=sphere))
-    frame = _bake(haar_dir / "scene.toml")
+    frame = _bake(haar_dir / "scene.toml", method=method)
     ref = _traced_reference(frame, sphere, sun_image())
     err = relative_rmse(frame.radiance, ref)
     # 32 x 32 maps, 10 % kept, R = 16 on 12 shells, nearest-cell resampling of the rotated
