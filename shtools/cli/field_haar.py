@@ -28,6 +28,9 @@ def sample_haar(mesh_path, output, params, keep: float, emission, force: bool,
                          f"transform halves it; indices are 16-bit), got {M}", mesh_path)
     if not 0 < keep <= 1:
         raise InputError(f"--keep must be a fraction in (0, 1], got {keep!r}", mesh_path)
+    if params.self_order is not None:
+        raise InputError("--self-order sets the O_v of an SH field; a haar asset stores none "
+                         "(drop it, or self-shadow the object with a transfer asset)", mesh_path)
     if params.bits != 8:
         raise InputError(f"--bits must be 8 with --basis haar (values are stored as uint8), "
                          f"got {params.bits}", mesh_path)

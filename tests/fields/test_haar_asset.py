@@ -75,6 +75,7 @@ def test_runtime_reads_the_asset_without_the_geometry_stack(box_dir, run_cli):
     (("--keep", "0"), "--keep"),
     (("--map", "24"), "--map"),
     (("--bits", "6"), "--bits"),
+    (("--self-order", "6"), "--self-order"),
 ])
 def test_bad_haar_options_give_one_line(box_dir, run_cli, extra, needle):
     out = box_dir / "bad.haar.h5"
