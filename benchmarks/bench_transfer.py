@@ -82,12 +82,12 @@ def evaluate(name: str, rays, subset: int) -> list[dict]:
 
 def _hemisphere_rows(mesh, normals, rows, n_rays: int) -> np.ndarray:
     """:func:`hemisphere_transfer`'s visibility at ``rows`` only (same caster and offset)."""
-    from shtools.fields.self_visibility import hemisphere_visibility
+    from shtools.fields.self_visibility import hemisphere_transfer_visibility
     from shtools.geometry.raycast import RayCaster
 
     caster = RayCaster(np.asarray(mesh.vertices), np.asarray(mesh.faces), robust=False)
-    return hemisphere_visibility(np.asarray(mesh.vertices)[rows], normals, caster, ORDER,
-                                 n_dirs=n_rays)
+    return hemisphere_transfer_visibility(np.asarray(mesh.vertices)[rows], normals, caster,
+                                          ORDER, n_dirs=n_rays)
 
 
 def _markdown(rows: list[dict]) -> str:

@@ -55,8 +55,9 @@ def uses_self_visibility(obj, default: bool = True) -> bool:
 
 
 #: Algorithm version of the cached self-visibility log (:mod:`shtools.cache`): raise it
-#: when :func:`object_self_log`'s traced result changes.
-SELF_LOG_VERSION = 2
+#: when :func:`object_self_log`'s traced result changes, even by rounding (a bake is the
+#: same bytes with or without the cache).
+SELF_LOG_VERSION = 3
 
 
 def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None,
