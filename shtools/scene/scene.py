@@ -172,7 +172,8 @@ class SphereLightSpec:
     samples: int = 64
     #: ``SSOCSettings`` of ``shadows = "ssoc"``/``"auto"`` (None: the defaults)
     ssoc: Any = None
-    #: a field light: its ``srf`` asset (``shadows`` is then ``"field"``) ...
+    #: a field light: its ``srf`` asset (``shadows`` is then ``"field"`` or
+    #: ``"field-shexp"``, :mod:`shtools.scene.field_light`) ...
     srf: Path | None = None
     #: ... its keyed lamp poses (translate = position; rotation, uniform scale) ...
     poses: list[Keyframe] = field(default_factory=list)
@@ -409,8 +410,12 @@ def _field_light(t: schema.Light, name: str, settings: Settings, ctx: _Ctx,
         poses = _sorted_keys([Keyframe(_key_time(k, settings.fps), pose_of(k, first))
                               for k in t.keyframes], ctx.sub("keyframes"))
     keys = [LightKey(k.time, k.pose.translate, 0.0, np.zeros(3)) for k in poses]
-    return SphereLightSpec(str(name), keys, t.loop, "field", srf=path, poses=poses,
-                           intensity=float(t.intensity))
+    from shtools.scene.field_light import field_light_way
+
+    way = field_light_way(t.shadows if "shadows" in t.model_fields_set else None,
+                          ctx.sub("shadows"))
+    return SphereLightSpec(str(name), keys, t.loop, way, samples=t.samples, srf=path,
+                           poses=poses, intensity=float(t.intensity))
 
 
 def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx,
