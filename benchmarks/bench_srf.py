@@ -13,11 +13,13 @@ study.
   frames; ground radiance against :func:`shtools.reference.emitter.emitter_radiance`
   (area-sampled emissive triangles, shadow rays through the real meshes), with
   the default traced shadow (``shadows = "raytrace"``) and the SH product
-  (``shadows = "shexp"``), as relative RMSE over the whole ground and over the vertices the ball shadows
-  (ray-traced radiance below half of the unshadowed; also that error relative
-  to the unshadowed radiance there, as the umbra's own radiance is near 0).  Also the same field
-  shaded with RCVs projected at the receivers themselves (the order-4
-  truncation alone).  Targets: <= 5 % whole ground, <= 8 % in the shadow.
+  (``shadows = "shexp"``), as relative RMSE over the whole ground and over the
+  vertices the ball shadows (ray-traced radiance below half of the unshadowed),
+  and that shadow's error relative to the unshadowed radiance there (the
+  umbra's own radiance is near 0, so its relative RMSE is the sampling noise of
+  both tracers).  Also the same field shaded with RCVs projected at the
+  receivers themselves (the order-4 truncation alone).  Targets: <= 5 % whole
+  ground, <= 8 % in the shadow.
 * ``cost`` -- the field light's frame time (both shadow ways) next to a
   spherical light of the bulb's size in the same scene (``shexp``, ``ssoc``,
   ``raytrace``), one process, same run.
