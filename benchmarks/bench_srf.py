@@ -149,13 +149,15 @@ def part_ground(em, fields, tmp: Path, order: int = 4):
           f"unshadowed | unshadowed ground | order-{order} truncation alone (unshadowed) |")
     print("|---|---|---|---|---|---|---|---|")
     n = (GRID + 1) ** 2
-    cases = [(("receiver", 0.01), "raytrace"), (("receiver", 0.01), "shexp"),
+    cases = [(("receiver", 0.01), "raytrace"), (("receiver", 0.01), "raytrace, 64 strata"),
+             (("receiver", 0.01), "raytrace, 1024 strata"), (("receiver", 0.01), "shexp"),
              (("receiver", 0.02), "raytrace"), (("peak", 0.01), "raytrace"),
              (("emitter", 0.01), "raytrace")]
     cache = {}
     for key, way in cases:
         write_radiance_field(tmp / "lamp.srf.h5", fields[key])
-        extra = "" if way == "raytrace" else f'shadows = "{way}"'
+        extra = {"raytrace": "", "shexp": 'shadows = "shexp"'}.get(
+            way, f"samples = {way.split()[1]}")
         text = SCENE.format(grid=GRID, order=order, light_extra=extra)
         scene = parse_scene(text, tmp / "scene.toml")
         free_scene = parse_scene(text[:text.index('[[objects]]\nname = "ball"')],
@@ -223,7 +225,9 @@ def part_cost(fields, tmp: Path, quick: bool):
     print(f"\n## frame cost, one process ({(grid + 1) ** 2} ground vertices + ball)\n")
     print("| light | shadows | s per frame (median of frames 1-2) |")
     print("|---|---|---|")
-    runs = [("field light", field_text, "raytrace (default, 64 strata)", ""),
+    runs = [("field light", field_text, "raytrace (default)", ""),
+            ("field light", field_text, "raytrace, 64 strata", "samples = 64"),
+            ("field light", field_text, "raytrace, 1024 strata", "samples = 1024"),
             ("field light", field_text, "shexp", 'shadows = "shexp"'),
             ("sphere light", sphere_text, "shexp (default)", ""),
             ("sphere light", sphere_text, "ssoc", 'shadows = "ssoc"'),

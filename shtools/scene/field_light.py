@@ -43,6 +43,10 @@ import numpy as np
 from shtools.errors import InputError
 from shtools.scene.shadows import VISIBILITY_METHODS, LightShadow, register_light_shadow
 
+#: Strata per receiver of a field light's traced shadow when ``samples`` is not given.
+#: More than a spherical light's 64: only receivers whose cone toward the lamp meets a
+#: blocker cast them, and ``benchmarks/bench_srf.py`` measures the shadow's noise.
+FIELD_SAMPLES = 256
 #: ``shadows =`` of a field light -> its registered light-shadow way.
 FIELD_SHADOWS = {"raytrace": "field", "shexp": "field-shexp"}
 
@@ -231,14 +235,11 @@ class FieldLightShadow(LightShadow):
     uses_visibility = False
 
     def radiance(self, run, state, visibility, lights):
-        from shtools.geometry.raycast import RayCaster
-        from shtools.scene.lamp_shadow import emission_visible_fraction
+        from shtools.scene.lamp_shadow import Blockers, emission_visible_fraction
 
         out = np.zeros((len(state.vertices), 3))
         method = VISIBILITY_METHODS[run.method]
-        meshes = [(v, f) for v, f in state.blocker_meshes if len(f)]
-        blockers = (RayCaster(np.concatenate([v for v, _ in meshes]),
-                              np.concatenate(_offset_faces(meshes))) if meshes else None)
+        blockers = Blockers(state.blocker_meshes)
         free = None
         for pose in lights:
             index, spec, light = _posed_light(run, state, pose)
@@ -253,14 +254,6 @@ class FieldLightShadow(LightShadow):
                                              state.normals, n_samples=spec.samples)
             out += lit * frac[:, None]
         return out
-
-
-def _offset_faces(meshes) -> list[np.ndarray]:
-    faces, base = [], 0
-    for v, f in meshes:
-        faces.append(np.asarray(f, dtype=np.int64) + base)
-        base += len(v)
-    return faces
 
 
 class FieldProductShadow(LightShadow):

@@ -84,6 +84,53 @@ class LampCaster:
         return lit, t
 
 
+class Blockers:
+    """The posed blocker meshes of a frame: one caster and a bounding sphere per mesh.
+
+    Parameters
+    ----------
+    meshes : list of (vertices (P_i, 3), faces (F_i, 3))
+        World frame; meshes without faces are skipped.
+    """
+
+    def __init__(self, meshes):
+        from shtools.geometry.raycast import RayCaster
+
+        meshes = [(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
+                  for v, f in meshes if len(f)]
+        self.caster = None
+        self.centers = np.zeros((0, 3))
+        self.radii = np.zeros(0)
+        if not meshes:
+            return
+        faces, base = [], 0
+        for v, f in meshes:
+            faces.append(f + base)
+            base += len(v)
+        self.caster = RayCaster(np.concatenate([v for v, _ in meshes]), np.concatenate(faces))
+        used = [v[np.unique(f)] for v, f in meshes]
+        self.centers = np.array([0.5 * (u.min(axis=0) + u.max(axis=0)) for u in used])
+        self.radii = np.array([np.linalg.norm(u - c, axis=1).max() * (1 + CONE_MARGIN)
+                               for u, c in zip(used, self.centers, strict=True)])
+
+    def in_cone(self, points, axis, cos_alpha, length) -> np.ndarray:
+        """``(V,)`` bool: some blocker's bounding sphere meets the cone from each point
+        (unit ``axis``, half-angle ``acos(cos_alpha)``) within ``length`` of it."""
+        hit = np.zeros(len(points), dtype=bool)
+        sin_alpha = np.sqrt(np.maximum(1.0 - cos_alpha ** 2, 0.0))
+        for c, r in zip(self.centers, self.radii, strict=True):
+            rel = c - points
+            d = np.linalg.norm(rel, axis=1)
+            inside = d <= r
+            cos_b = np.einsum("vi,vi->v", rel, axis) / np.maximum(d, 1e-300)
+            # angle to the sphere's centre below alpha + its angular radius
+            sin_r = np.minimum(r / np.maximum(d, 1e-300), 1.0)
+            cos_r = np.sqrt(1.0 - sin_r ** 2)
+            cos_limit = cos_alpha * cos_r - sin_alpha * sin_r
+            hit |= inside | ((cos_b >= cos_limit) & (d - r < length))
+        return hit
+
+
 def emission_visible_fraction(lamp: LampCaster, rotation, translation, scale: float,
                               blockers, points, normals, *, n_samples: int = 64,
                               seed: int = 0) -> np.ndarray:
@@ -97,8 +144,10 @@ def emission_visible_fraction(lamp: LampCaster, rotation, translation, scale: fl
     translation : array_like, shape (3,)
     scale : float
         Uniform lamp scale.
-    blockers : RayCaster or None
-        The posed blocker meshes (world frame); None: nothing blocks.
+    blockers : Blockers or None
+        The posed blocker meshes (world frame); None: nothing blocks.  Only
+        receivers whose cone toward the lamp meets a blocker's bounding sphere
+        cast rays; the others see all of it (``F = 1``).
     points, normals : array_like, shape (V, 3)
         Receivers (world) and their unit normals.
     n_samples : int
@@ -118,20 +167,22 @@ def emission_visible_fraction(lamp: LampCaster, rotation, translation, scale: fl
     x = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     out = np.ones(x.shape[0])
-    if blockers is None:
+    if blockers is None or blockers.caster is None:
         return out
     center = R @ lamp.center * scale + tr
     radius = lamp.radius * scale * (1 + CONE_MARGIN)
-    offset = RAY_OFFSET * blockers.diagonal
-    for s in range(0, x.shape[0], BATCH):
-        xs, ns = x[s:s + BATCH], nrm[s:s + BATCH]
-        rel = center - xs
-        dist = np.linalg.norm(rel, axis=1)
-        inside = dist <= radius
-        axis = np.where(inside[:, None], ns, rel / np.maximum(dist, 1e-300)[:, None])
-        alpha = np.where(inside, np.pi / 2,
-                         np.arcsin(np.minimum(radius / np.maximum(dist, 1e-300), 1.0)))
-        dirs = cap_directions(axis, alpha, n_samples, np.random.default_rng(seed))
+    rel = center - x
+    dist = np.linalg.norm(rel, axis=1)
+    inside = dist <= radius
+    axis = np.where(inside[:, None], nrm, rel / np.maximum(dist, 1e-300)[:, None])
+    alpha = np.where(inside, np.pi / 2,
+                     np.arcsin(np.minimum(radius / np.maximum(dist, 1e-300), 1.0)))
+    rows = np.flatnonzero(blockers.in_cone(x, axis, np.cos(alpha), dist + radius))
+    offset = RAY_OFFSET * blockers.caster.diagonal
+    for s in range(0, rows.size, BATCH):
+        b = rows[s:s + BATCH]
+        xs, ns = x[b], nrm[b]
+        dirs = cap_directions(axis[b], alpha[b], n_samples, np.random.default_rng(seed))
         cos = np.einsum("bki,bi->bk", dirs, ns)
         bi, ki = np.nonzero(cos > 0)
         origin = xs[bi] + offset * ns[bi]
@@ -143,8 +194,9 @@ def emission_visible_fraction(lamp: LampCaster, rotation, translation, scale: fl
         free = np.zeros(cos.shape)
         if lit.any():
             hit_t = t_local[lit] * scale
-            ok = ~blockers.occluded(origin[lit], d[lit], t_far=hit_t * (1 - END_FRACTION))
+            ok = ~blockers.caster.occluded(origin[lit], d[lit],
+                                           t_far=hit_t * (1 - END_FRACTION))
             free[bi[lit][ok], ki[lit][ok]] = cos[bi[lit][ok], ki[lit][ok]]
         den = w.sum(axis=1)
-        out[s:s + BATCH] = np.where(den > 0, free.sum(axis=1) / np.maximum(den, 1e-300), 1.0)
+        out[b] = np.where(den > 0, free.sum(axis=1) / np.maximum(den, 1e-300), 1.0)
     return out

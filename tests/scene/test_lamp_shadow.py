@@ -8,9 +8,8 @@ import trimesh
 
 from shtools.fields.emitter import make_emitter
 from shtools.fields.radiance import emitter_sphere
-from shtools.geometry.raycast import RayCaster
 from shtools.reference.emitter import emitter_radiance, shaded_lamp
-from shtools.scene.lamp_shadow import LampCaster, emission_visible_fraction
+from shtools.scene.lamp_shadow import Blockers, LampCaster, emission_visible_fraction
 
 RADIANCE = (10.0, 9.0, 8.0)
 
@@ -43,7 +42,7 @@ def test_fraction_matches_the_area_sampled_emitter_behind_a_ball(lamp):
     ball = trimesh.creation.icosphere(3, radius=0.18)
     ball.apply_translation([0.15, 0.3, 0.1])
     pts, nrm = _ground(15, 1.4)
-    blockers = RayCaster(ball.vertices, ball.faces)
+    blockers = Blockers([(ball.vertices, ball.faces)])
     frac = emission_visible_fraction(caster, R, t, 1.0, blockers, pts, nrm, n_samples=1024)
     world = em.vertices @ R.T + t
     shadowed = emitter_radiance(pts, nrm, world, em.faces, em.emissive, em.radiance,
@@ -72,12 +71,12 @@ def test_nothing_between_the_receiver_and_the_lamp_leaves_it_whole(lamp):
     # by none that reach it: the lamp's light is untouched (the segment ends at the lamp)
     lid = trimesh.creation.box((3.0, 0.1, 3.0))
     lid.apply_translation([0.0, 2.0, 0.0])
-    frac = emission_visible_fraction(caster, R, t, 1.0, RayCaster(lid.vertices, lid.faces),
+    frac = emission_visible_fraction(caster, R, t, 1.0, Blockers([(lid.vertices, lid.faces)]),
                                      pts, nrm)
     assert np.all(frac == 1.0)
     # the same slab between the lamp and the ground takes all of it
     lid.apply_translation([0.0, -1.4, 0.0])
-    frac = emission_visible_fraction(caster, R, t, 1.0, RayCaster(lid.vertices, lid.faces),
+    frac = emission_visible_fraction(caster, R, t, 1.0, Blockers([(lid.vertices, lid.faces)]),
                                      pts, nrm)
     free = emitter_radiance(pts, nrm, em.vertices @ R.T + t, em.faces, em.emissive,
                             em.radiance, [], n_samples=2048)[:, 0]
@@ -91,7 +90,7 @@ def test_a_scaled_lamp_casts_the_scaled_shadow(lamp):
     ball.apply_translation([0.2, 0.5, 0.0])
     pts, nrm = _ground(11, 3.0)
     s = 2.0  # the lamp twice as large: its triangles scaled about its origin
-    frac = emission_visible_fraction(caster, R, t, s, RayCaster(ball.vertices, ball.faces),
+    frac = emission_visible_fraction(caster, R, t, s, Blockers([(ball.vertices, ball.faces)]),
                                      pts, nrm, n_samples=1024)
     world = (em.vertices * s) @ R.T + t
     shadowed = emitter_radiance(pts, nrm, world, em.faces, em.emissive, em.radiance,
@@ -102,3 +101,28 @@ def test_a_scaled_lamp_casts_the_scaled_shadow(lamp):
     err = frac[lit] - shadowed[lit] / free[lit]
     assert (shadowed[lit] / free[lit] < 0.5).sum() >= 5  # the ball's shadow is on the grid
     assert np.sqrt(np.mean(err ** 2)) < 0.008  # as above: sampling noise (0.23 % measured)
+
+
+def test_the_cone_cull_misses_no_blocker_in_the_way():
+    """Every receiver some of whose cone rays pass through a blocker's bounding sphere
+    before the lamp is kept (checked by brute force on the rays themselves)."""
+    from shtools.reference.light_fraction import cap_directions
+
+    rng = np.random.default_rng(3)
+    ball = trimesh.creation.icosphere(2, radius=0.3)
+    ball.apply_translation([0.2, 1.0, -0.1])
+    blockers = Blockers([(ball.vertices, ball.faces)])
+    c, r = blockers.centers[0], blockers.radii[0]
+    pts = rng.uniform([-2, -0.5, -2], [2, 0.5, 2], (300, 3))
+    lamp = np.array([0.0, 2.0, 0.0])
+    rel = lamp - pts
+    length = np.linalg.norm(rel, axis=1)
+    axis = rel / length[:, None]
+    alpha = np.arcsin(0.25 / length)
+    kept = blockers.in_cone(pts, axis, np.cos(alpha), length)
+    dirs = cap_directions(axis, alpha, 64, rng)  # (V, 64, 3)
+    t = np.linspace(0, 1, 100)[None, None, :, None] * length[:, None, None, None]
+    along = pts[:, None, None, :] + t * dirs[:, :, None, :]
+    crosses = (np.linalg.norm(along - c, axis=-1) < r).any(axis=(1, 2))
+    assert crosses.sum() >= 10 and (~kept).sum() >= 50  # both kinds on the grid
+    assert np.all(kept[crosses])
