@@ -24,7 +24,10 @@ study.
   spherical light of the bulb's size in the same scene (``shexp``, ``ssoc``,
   ``raytrace``), one process, same run.
 
-``python benchmarks/bench_srf.py [--quick] [--part sizes,ground,cost]``
+* ``large`` -- a large diffuse lamp (a bare ball of radius 0.45) over the same
+  ground and ball, both shadow ways.
+
+``python benchmarks/bench_srf.py [--quick] [--part sizes,ground,cost,large]``
 """
 
 from __future__ import annotations
@@ -206,6 +209,48 @@ def _references(prep, frame, em, n, order, scene):
     return ref, free, trunc
 
 
+def part_large(tmp: Path, quick: bool, order: int = 4):
+    """A large diffuse lamp (a bare 0.45-radius ball, 21 degrees from the ground below
+    it) over the same ground and ball: where the SH product has the most to give."""
+    import trimesh
+
+    from shtools.data_formats.srf import write_radiance_field
+    from shtools.fields import FieldParameters
+    from shtools.fields.emitter import make_emitter
+    from shtools.fields.radiance import sample_radiance_field
+    from shtools.reference import relative_rmse
+    from shtools.scene.bake import bake_scene
+    from shtools.scene.prepare import prepare_scene
+    from shtools.scene.scene import parse_scene
+
+    em = make_emitter(trimesh.creation.icosphere(3, radius=0.45), (2.0, 1.8, 1.6))
+    params = FieldParameters(shells=32, resolution=16 if quick else 32, order=order,
+                             map_size=8 if quick else 12, min_resolution=4 if quick else 8)
+    fld, _ = sample_radiance_field(em, params)
+    write_radiance_field(tmp / "lamp.srf.h5", fld)
+    fixed = 32 * params.resolution ** 2 * 3 * order ** 2
+    print(f"\n## a large diffuse lamp (bare ball, radius 0.45; 32 shells, R = "
+          f"{params.resolution}: {compact(fld.resolution)}, "
+          f"{100 * (1 - fld.stored_bytes() / fixed):.1f} % smaller than fixed)\n")
+    print("| shadows | frame | whole ground | ball's shadow (n) | shadow, error / unshadowed |")
+    print("|---|---|---|---|---|")
+    n = (GRID + 1) ** 2
+    refs = {}
+    for way, extra in (("raytrace", ""), ("shexp", 'shadows = "shexp"')):
+        text = SCENE.format(grid=GRID, order=order, light_extra=extra)
+        scene = parse_scene(text, tmp / "scene.toml")
+        prep = prepare_scene(scene)
+        for frame, result in enumerate(bake_scene(scene, scheduler="inline")):
+            if frame not in refs:
+                refs[frame] = _references(prep, frame, em, n, order, scene)[:2]
+            ref, free = refs[frame]
+            got = result.radiance[:n]
+            shadow = (ref[:, 0] < 0.5 * free[:, 0]) & (free[:, 0] > 0.02 * free[:, 0].max())
+            print(f"| {way} | {frame} | {100 * relative_rmse(got, ref):.1f} % | "
+                  f"{100 * relative_rmse(got[shadow], ref[shadow]):.1f} % ({shadow.sum()}) | "
+                  f"{100 * _rel_to(got[shadow], ref[shadow], free[shadow]):.1f} % |")
+
+
 def _rel_to(values, reference, scale) -> float:
     """``|values - reference| / |scale|`` (L2 over vertices and channels)."""
     return float(np.linalg.norm(values - reference) / np.linalg.norm(scale))
@@ -245,7 +290,7 @@ def part_cost(fields, tmp: Path, quick: bool):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--part", default="sizes,ground,cost")
+    ap.add_argument("--part", default="sizes,ground,cost,large")
     ap.add_argument("--order", type=int, default=4,
                     help="SH order of the field and the scene (cost: order 4 only)")
     args = ap.parse_args(argv)
@@ -261,6 +306,8 @@ def main(argv=None):
             part_ground(em, fields, Path(tmp), args.order)
         if "cost" in parts and args.order == 4:
             part_cost(fields, Path(tmp), args.quick)
+        if "large" in parts:
+            part_large(Path(tmp), args.quick, args.order)
 
 
 if __name__ == "__main__":
