@@ -159,8 +159,8 @@ def part_ground(em, fields, tmp: Path, order: int = 4):
     cache = {}
     for key, way in cases:
         write_radiance_field(tmp / "lamp.srf.h5", fields[key])
-        extra = {"raytrace": "", "shexp": 'shadows = "shexp"'}.get(
-            way, f"samples = {way.split()[1]}")
+        extra = ('shadows = "shexp"' if way == "shexp"
+                 else f"samples = {way.split()[1]}" if "strata" in way else "")
         text = SCENE.format(grid=GRID, order=order, light_extra=extra)
         scene = parse_scene(text, tmp / "scene.toml")
         free_scene = parse_scene(text[:text.index('[[objects]]\nname = "ball"')],
