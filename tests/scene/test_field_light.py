@@ -158,6 +158,12 @@ def test_a_blocker_beyond_the_lamp_does_not_shadow_its_light(lamp_dir, way):
 
 def test_field_light_keys_are_checked(lamp_dir):
     d, _ = lamp_dir
+    lamp = _parse(scene_text(), d).lights[0]
+    assert (lamp.shadows, lamp.samples) == ("field", 256)  # traced, the field's default
+    lamp = _parse(scene_text(light_extra='shadows = "raytrace"\nsamples = 16'), d).lights[0]
+    assert (lamp.shadows, lamp.samples) == ("field", 16)
+    assert _parse(scene_text(light_extra='shadows = "shexp"'), d).lights[0].shadows \
+        == "field-shexp"
     with pytest.raises(InputError, match=r"lights\[0\].radius: 'radius' does not apply"):
         _parse(scene_text(light_extra="radius = 0.2"), d)
     bad = scene_text().replace('field = "lamp.srf.h5"', 'field = "nope.srf.h5"')
