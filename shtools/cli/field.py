@@ -57,10 +57,12 @@ def field():
               help="EMISSION table (TOML: radiance = [r, g, b], fixture = [meshes]): sample "
                    "the source radiance field of a lamp whose closed emitter is MESH into an "
                    "srf asset, instead of an occlusion field (docs/formats.md).")
-@click.option("--error-scale", default="peak", show_default=True,
-              type=click.Choice(["peak", "emitter"]),
-              help="With --radiance: eq. (1) relative to each shell's largest radiance "
-                   "(peak) or to the emitter's radiance (emitter: smaller, less exact).")
+@click.option("--error-scale", default="receiver", show_default=True,
+              type=click.Choice(["receiver", "peak", "emitter"]),
+              help="With --radiance: eq. (1) on the Lambertian radiance the lamp casts, "
+                   "relative to the brightest receiver at each shell (receiver), on the "
+                   "radiance relative to each shell's largest (peak) or to the emitter's "
+                   "radiance (emitter: smaller, less exact).")
 @click.option("--basis", default="sh", show_default=True, type=click.Choice(["sh", "haar"]),
               help="haar: an all-frequency field, each sample's MAP x MAP occlusion map in "
                    "the 2-D Haar basis, the largest --keep kept (a haar asset; no O_v).")
