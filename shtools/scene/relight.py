@@ -246,7 +246,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     # under the same lights, several frames go in one batch: their moving rows in one
     # shading call, their still rows in one product with K
     batch = max(1, BATCH_ROWS // bake.n_vertices) if same else 1
-    still = _fixed_rows(bake, batch) if same else np.zeros(bake.n_vertices, bool)
+    still, held = _fixed_rows(bake, batch) if same else (np.zeros(bake.n_vertices, bool), None)
     fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
     batches = [range(a, min(a + batch, bake.n_frames)) for a in range(0, bake.n_frames, batch)]
     shaders = _Shaders(env_sh, settings, midrange)
@@ -262,7 +262,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
                            "visibility", path)
         if moving.size:
             g = vis[:, moving].reshape(-1, vis.shape[2])
-            shaded = shaders.shade(_state(bake, frames, moving, lights[frames.start]), g)
+            state = (_state(bake, frames, moving, lights[frames.start]) if held is None
+                     else _state(held, frames, slice(None), lights[frames.start]))
+            shaded = shaders.shade(state, g)
             out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
         if K is not None:  # every frame of the batch in one float32 product, as the
             # baker dots its float32 lit transfer with the visibility
@@ -295,8 +297,9 @@ BATCH_ROWS = 1 << 16
 
 
 def relight_bytes(n_frames: int, n_vertices: int, size: int, threads: int) -> int:
-    """Peak working memory of :func:`relight_frames`, bytes: the fixed ``K`` and the
-    batches in flight (a frame count of its own does not add to it).
+    """Peak working memory of :func:`relight_frames`, bytes: the fixed ``K``, the
+    geometry held and the batches in flight (a frame count of its own does not add
+    to it).
 
     Parameters
     ----------
@@ -310,7 +313,7 @@ def relight_bytes(n_frames: int, n_vertices: int, size: int, threads: int) -> in
     # (6 copies); float64 radiance, scratch and geometry
     per_row = 4 * size * 6 + 8 * 3 * 3 + 8 * 6
     K = n_vertices * 3 * size * 4  # float32
-    return int(K + 2 * threads * batch * per_row + 2 * batch * (4 * 3 + 4 * 6))
+    return int(K + GEOMETRY_BYTES + 2 * threads * batch * per_row + 2 * batch * (4 * 3 + 4 * 6))
 
 
 def frame_lights(bake, scene=None) -> list:
@@ -390,7 +393,8 @@ class _Frames:
 
 
 def _state(bake, frames: range, rows, lights) -> _Frames:
-    """Rows ``rows`` of asset frames ``frames`` (consecutive), stacked."""
+    """Rows ``rows`` of asset frames ``frames`` (consecutive), stacked; ``bake`` has
+    ``vertices`` and ``normals``, ``(V, 3)`` or ``(T, V, 3)``."""
     from shtools.scene.shadows import ShexpLight
 
     def block(values):
@@ -412,22 +416,40 @@ def _same_lights(lights: list) -> bool:
         for frame in lights)
 
 
-def _fixed_rows(bake, batch: int) -> np.ndarray:
-    """Vertices whose position and normal are the same in every frame, ``(V,)`` bool.
+def _fixed_rows(bake, batch: int):
+    """Vertices whose position and normal are the same in every frame, ``(V,)`` bool, and
+    the others' geometry when it is small.
 
-    Read ``batch`` frames at a time, each checked for NaN/inf."""
+    Read ``batch`` frames at a time, each checked for NaN/inf.  The second
+    value holds ``vertices`` and ``normals`` ``(T, M, 3)`` of the ``M``
+    moving rows when every frame's geometry fits in :data:`GEOMETRY_BYTES`
+    (read once, not again per batch), else None.
+    """
     from shtools.data_formats.bake_stream import check_finite
 
     if bake.vertices.ndim == 2:
-        return np.ones(bake.n_vertices, bool)
-    still = np.ones(bake.n_vertices, bool)
-    first = {name: np.asarray(getattr(bake, name)[0]) for name in ("vertices", "normals")}
-    for a in range(0, bake.n_frames, batch):
+        return np.ones(bake.n_vertices, bool), None
+    T, V = bake.n_frames, bake.n_vertices
+    names = ("vertices", "normals")
+    held = ({name: np.empty((T, V, 3), np.float32) for name in names}
+            if T * V * 3 * 4 * len(names) <= GEOMETRY_BYTES else None)
+    first = {name: np.asarray(getattr(bake, name)[0]) for name in names}
+    still = np.ones(V, bool)
+    for a in range(0, T, batch):
         for name, ref in first.items():
             values = check_finite(np.asarray(getattr(bake, name)[a:a + batch]), name,
                                   bake.path)
             still &= np.all(values == ref, axis=(0, 2))
-    return still
+            if held is not None:
+                held[name][a:a + batch] = values
+    if held is not None:
+        moving = np.flatnonzero(~still)
+        held = SimpleNamespace(**{name: values[:, moving] for name, values in held.items()})
+    return still, held
+
+
+#: Most bytes of per-frame geometry relighting keeps in memory to read it once.
+GEOMETRY_BYTES = 1 << 27
 
 
 def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
