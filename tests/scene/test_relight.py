@@ -1,14 +1,20 @@
-"""Relighting a stored-visibility bake equals a real re-bake under the new light."""
+"""Relighting a stored-visibility bake equals a real re-bake under the new light.
+
+Also streamed in tiny batches, within bounded memory, and on a mid-range bake's
+environment sphere.
+"""
 
 from __future__ import annotations
 
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
 
 from shtools.data_formats.bake import read_bake
 from shtools.data_formats.light import write_light
+from shtools.scene import relight as relight_module
 from shtools.scene.bake import bake_to_file
 from shtools.scene.relight import relight
 from shtools.scene.scene import load_scene
@@ -230,3 +236,119 @@ def test_relit_bytes_do_not_depend_on_the_thread_count(baked_a, tmp_path):
         relight(bake_a, tmp_path / "b.h5", tmp_path / f"t{threads}.h5", rotate=20.0,
                 scene=scene_a, threads=threads)
     assert (tmp_path / "t1.h5").read_bytes() == (tmp_path / "t3.h5").read_bytes()
+
+
+def _bake(scene, path, **kwargs):
+    bake_to_file(load_scene(scene), path, processes=1, workers=1, **kwargs)
+    return path
+
+
+def _assert_fresh(relit_path, fresh_path):
+    fresh = read_bake(fresh_path).radiance
+    # float32 rounding of the same shading (tests/scene/test_relight.py says why)
+    top = float(np.max(np.abs(fresh)))
+    np.testing.assert_allclose(read_bake(relit_path).radiance, fresh, rtol=1e-4,
+                               atol=1e-6 * top)
+
+
+@pytest.mark.parametrize("held", [True, False], ids=["geometry-held", "geometry-reread"])
+def test_streamed_relight_in_tiny_batches_equals_a_fresh_bake(tmp_path, monkeypatch, held):
+    """One frame a batch, the K of the still ground built in parts of 5 rows, the moving
+    ball's geometry kept in memory or read again per batch: the same radiance."""
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    scene_a = _scene(tmp_path, "a.toml", "a.h5", moving="ball")
+    scene_b = _scene(tmp_path, "b.toml", "b.h5", rotate=25.0, moving="ball")
+    _bake(scene_a, tmp_path / "a_baked.h5", store_visibility=True)
+    _bake(scene_b, tmp_path / "b_baked.h5")
+    monkeypatch.setattr(relight_module, "BATCH_ROWS", 5)
+    if not held:
+        monkeypatch.setattr(relight_module, "GEOMETRY_BYTES", 0)
+    relight(tmp_path / "a_baked.h5", tmp_path / "b.h5", tmp_path / "relit.h5", rotate=25.0,
+            scene=scene_a, threads=2)
+    _assert_fresh(tmp_path / "relit.h5", tmp_path / "b_baked.h5")
+
+
+def _frames_scene(tmp_path, name, light, frames):
+    """The ball scene with a finer ground, ``frames`` frames."""
+    path = _scene(tmp_path, name, light, moving="ball")
+    text = path.read_text().replace("frames = 3", f"frames = {frames}")
+    path.write_text(text.replace("subdivisions = 12", "subdivisions = 30"))
+    return path
+
+
+def _peak_relight(bake, light, out, scene) -> int:
+    tracemalloc.start()
+    try:
+        relight(bake, light, out, scene=scene, threads=1)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_relight_memory_does_not_grow_with_the_frame_count(tmp_path, monkeypatch):
+    """6 and 48 frames relit one frame a batch: the peak of traced allocations grows by
+    far less than the extra frames' visibility (the whole bake was read into memory)."""
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    monkeypatch.setattr(relight_module, "BATCH_ROWS", 1)
+    monkeypatch.setattr(relight_module, "GEOMETRY_BYTES", 0)
+    peaks, sizes = [], []
+    for frames in (6, 48):
+        scene = _frames_scene(tmp_path, f"a{frames}.toml", "a.h5", frames)
+        bake = _bake(scene, tmp_path / f"a{frames}.h5", store_visibility=True)
+        sizes.append(read_bake(bake).visibility.nbytes)
+        peaks.append(_peak_relight(bake, tmp_path / "b.h5", tmp_path / f"r{frames}.h5", scene))
+    # 42 more frames of visibility (~2 MB); a streamed relight holds a few frames
+    # whatever their count, so its peak moves by allocation noise only
+    assert peaks[1] - peaks[0] < 0.25 * (sizes[1] - sizes[0]), (peaks, sizes)
+    fresh = _bake(_frames_scene(tmp_path, "b48.toml", "b.h5", 48), tmp_path / "b48.h5")
+    _assert_fresh(tmp_path / "r48.h5", fresh)
+
+
+SPHERE = "radius = 6.0\ncenter = [0.3, 0.5, -0.2]"
+
+
+def _midrange_scene(tmp_path, name, light, extra=SPHERE, rotate=0.0):
+    path = _scene(tmp_path, name, light, rotate=rotate, moving="ball")
+    text = path.read_text()
+    assert f'light = "{light}"' in text
+    path.write_text(text.replace(f'light = "{light}"', f'light = "{light}"\n{extra}', 1))
+    return path
+
+
+def test_midrange_bake_is_relit_on_its_sphere(tmp_path):
+    """A bake under a finite environment sphere records it, and its relight equals a
+    fresh bake of the new light on that sphere (not the light at infinity)."""
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    scene_a = _midrange_scene(tmp_path, "a.toml", "a.h5")
+    bake_a = _bake(scene_a, tmp_path / "a_baked.h5", store_visibility=True)
+    assert read_bake(bake_a).parameters["environment_sphere"] == {
+        "center": [0.3, 0.5, -0.2], "radius": 6.0, "scaling": None}
+    fresh = _bake(_midrange_scene(tmp_path, "b.toml", "b.h5", rotate=40.0),
+                  tmp_path / "b_baked.h5")
+    distant = _bake(_scene(tmp_path, "far.toml", "b.h5", rotate=40.0, moving="ball"),
+                    tmp_path / "far_baked.h5")
+    # the sphere matters here: at infinity the radiance is visibly another
+    far, near = read_bake(distant).radiance, read_bake(fresh).radiance
+    assert np.max(np.abs(far - near)) > 1e-2 * np.max(np.abs(near))
+    relight(bake_a, tmp_path / "b.h5", tmp_path / "relit.h5", rotate=40.0, scene=scene_a)
+    _assert_fresh(tmp_path / "relit.h5", fresh)
+
+
+def test_midrange_bake_with_a_scaling_asset_is_refused(tmp_path, run_cli):
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    code, _, err = run_cli("tables", "scaling", "-n", 3, "--function", "midrange",
+                           "--samples", 16, "-o", tmp_path / "mid.h5")
+    assert code == 0, err
+    scene = _midrange_scene(tmp_path, "a.toml", "a.h5",
+                            extra='radius = 6.0\nscaling = "mid.h5"')
+    bake = _bake(scene, tmp_path / "a_baked.h5", store_visibility=True)
+    before = bake.read_bytes()
+    code, _, err = run_cli("relight", bake, "--light", tmp_path / "b.h5",
+                           "-o", tmp_path / "relit.h5")
+    assert code not in (0, 3) and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "a_baked.h5" in err and "mid.h5" in err and "bake the scene" in err
+    assert not (tmp_path / "relit.h5").exists() and bake.read_bytes() == before
