@@ -26,8 +26,8 @@ from shtools.cli._limits import force_option
               help="Add this scene's [[lights]] (posed at each frame's time), shadowed "
                    "through the stored visibility (SHEXP).")
 @click.option("--compress", is_flag=True,
-              help="gzip the output's geometry and radiance as a bake does (smaller, slower "
-                   "to write); default plain.")
+              help="gzip the output's radiance as a bake does (smaller, slower to write); "
+                   "default plain. Geometry and visibility are copied as the bake stores them.")
 @output_option
 @force_option("4 GiB of working memory")
 @json_option
@@ -37,8 +37,9 @@ def relight(baked, light, rotate, scene, compress, output, force, as_json):
 
     The radiance is what a fresh bake of the same scene under that light gives
     (the same shading code), without posing, blockers or set-up: one triple
-    product per vertex and frame.  Without --lights the output has the
-    environment only.
+    product per vertex and frame, streamed a few frames at a time.  A bake lit
+    from a finite environment sphere is relit on that sphere.  Without --lights
+    the output has the environment only.
     """
     from shtools.cli._outputs import guard_outputs
     from shtools.scene.relight import relight as relight_bake

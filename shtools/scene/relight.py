@@ -15,7 +15,14 @@ rounding.
 Spherical lights (a scene's ``[[lights]]``, posed at each frame's time) are
 shaded through the same stored visibility, the baker's ``shexp`` way; the
 other ways (SSOC, ray tracing) need the posed blocker meshes, which a bake
-does not keep.
+does not keep.  A bake lit from a finite environment sphere (mid-range
+lighting, Wang et al. 2005, Sec. 3.2) records it, and the new light is put on
+that sphere (:func:`relight_midrange`).
+
+Frames stream from the open bake a batch at a time
+(:func:`~shtools.data_formats.bake_stream.open_bake`), so memory is set by the
+vertex count, not the frame count (:func:`relight_bytes`); the geometry and
+visibility are copied into the output as stored.
 
 From Python::
 

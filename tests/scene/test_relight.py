@@ -176,6 +176,17 @@ def test_relight_refuses_bad_input_in_one_line(baked_a, tmp_path, run_cli):
     err = _one_line_error(run_cli, "relight", bake_a, "--light", tmp_path / "b.h5",
                           "--lights", ssoc, "-o", out)
     assert "ssoc" in err
+    # NaN in a later frame's visibility: found as the frames stream, nothing written
+    import shutil
+
+    import h5py
+
+    shutil.copy(bake_a, tmp_path / "nan.h5")
+    with h5py.File(tmp_path / "nan.h5", "r+") as f:
+        f["visibility"][2, 3, 0] = np.nan
+    err = _one_line_error(run_cli, "relight", tmp_path / "nan.h5", "--light",
+                          tmp_path / "b.h5", "-o", out)
+    assert "nan.h5" in err and "'visibility' contains NaN" in err
     assert not out.exists() and bake_a.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
 
@@ -191,7 +202,8 @@ def test_relight_cli_writes_the_asset(baked_a, tmp_path, run_cli):
     relit = read_bake(tmp_path / "relit.h5")
     assert relit.parameters["relight"] == {"light": "b.h5", "rotate_deg": 90.0,
                                            "lights": "a.toml"}
-    # --compress stores geometry and radiance as a bake does, the same values as plain
+    # --compress stores the radiance as a bake does (geometry copied as stored), the same
+    # values as plain
     relight(bake_a, tmp_path / "b.h5", tmp_path / "plain.h5", rotate=90.0, scene=scene_a)
     plain = read_bake(tmp_path / "plain.h5")
     np.testing.assert_array_equal(plain.radiance, relit.radiance)
@@ -291,7 +303,8 @@ def test_relight_memory_does_not_grow_with_the_frame_count(tmp_path, monkeypatch
     far less than the extra frames' visibility (the whole bake was read into memory)."""
     _sky(tmp_path / "a.h5", 1)
     _sky(tmp_path / "b.h5", 2)
-    monkeypatch.setattr(relight_module, "BATCH_ROWS", 1)
+    # 1,123 vertices: one frame a batch, the ground's K in one part
+    monkeypatch.setattr(relight_module, "BATCH_ROWS", 1200)
     monkeypatch.setattr(relight_module, "GEOMETRY_BYTES", 0)
     peaks, sizes = [], []
     for frames in (6, 48):
