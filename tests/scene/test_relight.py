@@ -365,3 +365,29 @@ def test_midrange_bake_with_a_scaling_asset_is_refused(tmp_path, run_cli):
     assert code not in (0, 3) and err.count("\n") == 1 and "Traceback" not in err, err
     assert "a_baked.h5" in err and "mid.h5" in err and "bake the scene" in err
     assert not (tmp_path / "relit.h5").exists() and bake.read_bytes() == before
+
+
+def test_a_long_bake_is_not_refused_for_its_size_but_a_wide_one_is(tmp_path):
+    """Memory is set by the vertex count: 10^5 frames x 10^4 vertices (76 GB to read
+    whole) streams in a few MB; 10^7 vertices needs GiB per frame batch and is refused."""
+    import h5py
+
+    from shtools.cli._limits import MEMORY_LIMIT, asset_bytes
+    from shtools.cli.relight import _check_memory
+    from shtools.errors import InputError
+
+    def declared(name, frames, vertices):  # metadata only: chunks are never written
+        path = tmp_path / name
+        with h5py.File(path, "w") as f:
+            f.attrs["sh_order"] = 4
+            f.create_dataset("radiance", (frames, vertices, 3), "f4", chunks=(1, 64, 3))
+            f.create_dataset("visibility", (frames, vertices, 16), "f4", chunks=(1, 64, 16))
+        return path
+
+    long_bake = declared("long.h5", 10**5, 10**4)
+    assert asset_bytes(long_bake) > 10 * MEMORY_LIMIT  # what reading it whole would take
+    _check_memory(long_bake, force=False)  # streamed: accepted
+    wide = declared("wide.h5", 10, 10**7)
+    with pytest.raises(InputError, match=r"GiB of memory.*10,000,000 vertices.*--force"):
+        _check_memory(wide, force=False)
+    _check_memory(wide, force=True)
