@@ -192,7 +192,7 @@ def scene_lights(scene) -> object:
 
 
 def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None = None,
-                   midrange=None, lights=None):
+                   midrange=None):
     """Radiance of every frame of ``bake`` under ``env_sh`` (and ``scene``'s lights).
 
     Shading is linear in the visibility ``g`` before de-ringing: a vertex whose
@@ -228,8 +228,6 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     midrange : shtools.scene.midrange.MidrangeEnvironment, optional
         ``env_sh`` on the finite sphere the bake recorded
         (:func:`relight_midrange`).
-    lights : list of list, optional
-        The posed lights of every frame (default: ``scene``'s at each time).
 
     Yields
     ------
@@ -247,8 +245,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
                          "--store-visibility' to relight it", bake.path)
     settings = settings or relight_settings(bake)
     threads = max(1, threads or default_workers())
-    if lights is None:
-        lights = frame_lights(bake, scene)
+    lights = frame_lights(bake, scene)
     same = _same_lights(lights)
     # under the same lights, several frames go in one batch: their moving rows in one
     # shading call, their still rows in one product with K
@@ -401,17 +398,24 @@ class _Frames:
 
 def _state(bake, frames: range, rows, lights) -> _Frames:
     """Rows ``rows`` of asset frames ``frames`` (consecutive), stacked; ``bake`` has
-    ``vertices`` and ``normals``, ``(V, 3)`` or ``(T, V, 3)``."""
+    ``vertices`` and ``normals``, ``(V, 3)`` or ``(T, V, 3)``, and a ``path`` when they
+    are read from its file (then checked for NaN/inf)."""
+    from shtools.data_formats.bake_stream import check_finite
     from shtools.scene.shadows import ShexpLight
 
-    def block(values):
+    path = getattr(bake, "path", None)
+
+    def block(name):
+        values = getattr(bake, name)
         if values.ndim == 2:
             return np.tile(values[rows], (len(frames), 1))
-        return np.asarray(values[frames.start:frames.stop])[:, rows].reshape(-1, 3)
+        read = np.asarray(values[frames.start:frames.stop])
+        if path is not None:
+            check_finite(read, name, path)
+        return read[:, rows].reshape(-1, 3)
 
-    return _Frames(block(bake.vertices).astype(np.float64),
-                   block(bake.normals).astype(np.float64), lights,
-                   [ShexpLight.name] * len(lights))
+    return _Frames(block("vertices").astype(np.float64), block("normals").astype(np.float64),
+                   lights, [ShexpLight.name] * len(lights))
 
 
 def _same_lights(lights: list) -> bool:

@@ -391,3 +391,19 @@ def test_a_long_bake_is_not_refused_for_its_size_but_a_wide_one_is(tmp_path):
     with pytest.raises(InputError, match=r"GiB of memory.*10,000,000 vertices.*--force"):
         _check_memory(wide, force=False)
     _check_memory(wide, force=True)
+
+
+@pytest.mark.parametrize("moving", ["all", "ball"])  # lights per frame / the same lights
+def test_nan_geometry_is_found_as_frames_stream(baked_a, tmp_path, run_cli, moving):
+    import shutil
+
+    import h5py
+
+    scene_a, bake_a = baked_a
+    shutil.copy(bake_a, tmp_path / "nan.h5")
+    with h5py.File(tmp_path / "nan.h5", "r+") as f:
+        f["vertices"][2, -1, 1] = np.inf  # a ball vertex (it moves in both bakes)
+    err = _one_line_error(run_cli, "relight", tmp_path / "nan.h5", "--light",
+                          tmp_path / "b.h5", "--lights", scene_a, "-o", tmp_path / "r.h5")
+    assert "nan.h5" in err and "'vertices' contains NaN or inf" in err
+    assert not (tmp_path / "r.h5").exists()
