@@ -385,22 +385,13 @@ class _Shaders:
             runtime.close()
 
 
-@dataclass
-class _Frames:
-    """The posed frame :func:`~shtools.scene.shadows.shade_frame` reads: receivers and
-    spherical lights (a relight has no blockers: the visibility is stored)."""
-
-    vertices: np.ndarray
-    normals: np.ndarray
-    lights: list
-    light_shadows: list
-
-
-def _state(bake, frames: range, rows, lights) -> _Frames:
+def _state(bake, frames: range, rows, lights):
     """Rows ``rows`` of asset frames ``frames`` (consecutive), stacked; ``bake`` has
     ``vertices`` and ``normals``, ``(V, 3)`` or ``(T, V, 3)``, and a ``path`` when they
-    are read from its file (then checked for NaN/inf)."""
+    are read from its file (then checked for NaN/inf).  No blockers: the visibility is
+    stored."""
     from shtools.data_formats.bake_stream import check_finite
+    from shtools.scene.pose import FrameState
     from shtools.scene.shadows import ShexpLight
 
     path = getattr(bake, "path", None)
@@ -414,8 +405,9 @@ def _state(bake, frames: range, rows, lights) -> _Frames:
             check_finite(read, name, path)
         return read[:, rows].reshape(-1, 3)
 
-    return _Frames(block("vertices").astype(np.float64), block("normals").astype(np.float64),
-                   lights, [ShexpLight.name] * len(lights))
+    return FrameState(block("vertices").astype(np.float64),
+                      block("normals").astype(np.float64), [], lights, [],
+                      [ShexpLight.name] * len(lights))
 
 
 def _same_lights(lights: list) -> bool:
