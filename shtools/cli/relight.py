@@ -27,12 +27,17 @@ from shtools.cli._limits import force_option
                    "through the stored visibility (SHEXP).")
 @click.option("--compress", is_flag=True,
               help="gzip the output's radiance as a bake does (smaller, slower to write); "
-                   "default plain. Geometry and visibility are copied as the bake stores them.")
+                   "default plain. Geometry is copied as the bake stores it.")
+@click.option("--keep-visibility", is_flag=True,
+              help="Copy the stored visibility into the output too, to relight it again "
+                   "(the largest part of the file); default leave it out, as a bake "
+                   "without --store-visibility does.")
 @output_option
 @force_option("4 GiB of working memory")
 @json_option
 @errors_name("baked")
-def relight(baked, light, rotate, scene, compress, output, force, as_json):
+def relight(baked, light, rotate, scene, compress, keep_visibility, output, force,
+            as_json):
     """Re-shade every frame of BAKED (made with --store-visibility) under LIGHT.
 
     The radiance is what a fresh bake of the same scene under that light gives
@@ -55,7 +60,8 @@ def relight(baked, light, rotate, scene, compress, output, force, as_json):
         scene = scene_lights(scene)  # lights relighting can add: checked before any work
     _check_memory(baked, force)
     summary = relight_bake(baked, light, output, rotate=rotate, scene=scene,
-                           compression="gzip" if compress else None, progress=progress)
+                           compression="gzip" if compress else None,
+                           keep_visibility=keep_visibility, progress=progress)
     lights = f" + {summary['lights']} spherical light(s)" if summary["lights"] else ""
     report(summary, as_json,
            f"relit {summary['frames']} frame(s) x {summary['vertices']} vertices{lights} "

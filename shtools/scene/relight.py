@@ -21,8 +21,9 @@ that sphere (:func:`relight_midrange`).
 
 Frames stream from the open bake a batch at a time
 (:func:`~shtools.data_formats.bake_stream.open_bake`), so memory is set by the
-vertex count, not the frame count (:func:`relight_bytes`); the geometry and
-visibility are copied into the output as stored.
+vertex count, not the frame count (:func:`relight_bytes`); the per-frame
+geometry is copied into the output as stored, and the visibility too when asked
+(``keep_visibility``: to relight the output again).
 
 From Python::
 
@@ -457,17 +458,19 @@ GEOMETRY_BYTES = 1 << 27
 
 def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
             rotate: float = 0.0, scene=None, compression: str | None = None,
-            threads: int | None = None, progress=None) -> dict:
+            keep_visibility: bool = False, threads: int | None = None,
+            progress=None) -> dict:
     """Re-shade every frame of a bake under another light; write a new bake asset.
 
     One call from Python; ``shtools relight`` runs it.  The output is a bake
-    like the input (geometry, albedo, objects, visibility kept, so it can be
-    relit again) whose radiance is what a fresh bake of the same scene with
+    like the input (geometry, albedo, objects; the visibility only with
+    ``keep_visibility``, as a fresh bake has it only with
+    ``--store-visibility``) whose radiance is what a fresh bake of the same scene with
     ``[environment] light = LIGHT`` (``rotate_deg = rotate``; the bake's
     ``radius`` and ``center`` when it was lit from a finite sphere) and,
     given ``scene``, that scene's spherical lights gives.  Frames stream
-    through a batch at a time (:func:`relight_frames`); the geometry and
-    visibility are copied as stored.  The output appears atomically, and
+    through a batch at a time (:func:`relight_frames`); the per-frame geometry
+    (and kept visibility) is copied as stored.  The output appears atomically, and
     never replaces the bake or the light it reads.
 
     Parameters
@@ -486,6 +489,10 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         h5py filter of the output's radiance: None (the default) stores it
         plain, so writing costs no more than the shading; ``"gzip"`` as a bake
         stores it, for a smaller file.
+    keep_visibility : bool
+        Carry the stored visibility into the output, so that it can be relit
+        again (the largest part of the file); without it the output is the bake
+        a fresh one without ``--store-visibility`` is.
     threads : int, optional
         Threads shading (:func:`relight_frames`; default one per usable core).
     progress : callable, optional
@@ -530,8 +537,8 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
                                  "lights": None if scene is None else Path(scene.path).name}
         static = b.vertices.ndim == 2
-        copy = {name: getattr(b, name) for name in ("vertices", "normals", "visibility")
-                if getattr(b, name).ndim == 3}
+        kept = ("vertices", "normals") + (("visibility",) if keep_visibility else ())
+        copy = {name: getattr(b, name) for name in kept if getattr(b, name).ndim == 3}
         with ThreadPoolExecutor(1, thread_name_prefix="relight-inputs") as hasher:
             # the writer hashes its inputs (the bake is large; hashlib frees the GIL)
             # while the first frames are shaded
@@ -539,7 +546,8 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                 BakeWriter, output, n_frames=b.n_frames, faces=b.faces, sh_order=b.sh_order,
                 static_vertices=b.vertices if static else None,
                 static_normals=b.normals if static else None, n_vertices=b.n_vertices,
-                visibility_size=b.visibility.shape[2], times=b.times,
+                visibility_size=b.visibility.shape[2] if keep_visibility else None,
+                times=b.times,
                 frame_index=b.frame_index, albedo=b.albedo, object_offsets=b.object_offsets,
                 object_names=b.object_names, parameters=parameters, inputs=inputs,
                 fps=b.attrs.get("fps"), compression=compression, copy=copy)

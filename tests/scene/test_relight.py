@@ -128,10 +128,26 @@ def test_relight_equals_a_fresh_bake_under_the_new_light(baked_a, tmp_path, movi
     # the brightest vertex for the deep-shadow vertices near 0
     top = float(np.max(np.abs(fresh.radiance)))
     np.testing.assert_allclose(relit.radiance, fresh.radiance, rtol=1e-4, atol=1e-6 * top)
-    # everything but the radiance is carried over, visibility included (it can be relit again)
-    np.testing.assert_array_equal(relit.visibility, old.visibility)
+    # the geometry is carried over; the visibility is not by default: the output is
+    # the bake a fresh one without --store-visibility is
+    assert relit.visibility is None and fresh.visibility is None
     np.testing.assert_array_equal(relit.vertices, old.vertices)
     assert relit.object_names == old.object_names and relit.attrs["fps"] == old.attrs["fps"]
+
+
+@pytest.mark.parametrize("moving", ["ball"])  # one bake is enough here
+def test_kept_visibility_is_carried_and_relit_again(baked_a, tmp_path):
+    scene_a, bake_a = baked_a
+    relight(bake_a, tmp_path / "b.h5", tmp_path / "kept.h5", rotate=35.0, scene=scene_a,
+            keep_visibility=True)
+    kept, old = read_bake(tmp_path / "kept.h5"), read_bake(bake_a)
+    np.testing.assert_array_equal(kept.visibility, old.visibility)
+    # relit back under light A from the kept visibility: the original bake's radiance
+    # (a fresh bake under A), to the same float32 rounding as a relight of the original
+    relight(tmp_path / "kept.h5", tmp_path / "a.h5", tmp_path / "back.h5", scene=scene_a)
+    top = float(np.max(np.abs(old.radiance)))
+    np.testing.assert_allclose(read_bake(tmp_path / "back.h5").radiance, old.radiance,
+                               rtol=1e-4, atol=1e-6 * top)
 
 
 def test_relight_without_lights_is_the_environment_alone(baked_a, tmp_path, moving):
@@ -212,6 +228,13 @@ def test_relight_cli_writes_the_asset(baked_a, tmp_path, run_cli):
 
     with h5py.File(tmp_path / "relit.h5") as f, h5py.File(tmp_path / "plain.h5") as g:
         assert f["radiance"].compression == "gzip" and g["radiance"].compression is None
+    assert relit.visibility is None
+    # --keep-visibility carries the stored visibility, so the output can be relit again
+    code, _, stderr = run_cli("relight", bake_a, "--light", tmp_path / "b.h5",
+                              "--keep-visibility", "-o", tmp_path / "kept.h5")
+    assert code == 0, stderr
+    np.testing.assert_array_equal(read_bake(tmp_path / "kept.h5").visibility,
+                                  read_bake(bake_a).visibility)
 
 
 @pytest.mark.parametrize("moving", ["ball"])
