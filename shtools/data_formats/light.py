@@ -102,3 +102,32 @@ def read_light(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     """
     asset = read_asset(path, KIND)
     return np.asarray(asset.data["coeffs"], dtype=np.float64), asset.attrs
+
+
+def check_light_window(attrs: Mapping[str, Any], window: str | None, path, what: str) -> None:
+    """Refuse a light projected with a window of its own that shading windows again.
+
+    The runtime windows the light with the shading's ``window`` setting; a
+    light projected with ``--window`` would be windowed twice.
+
+    Parameters
+    ----------
+    attrs : mapping
+        The light's root attributes (:func:`read_light`).
+    window : str or None
+        The shading's window setting.
+    path : path-like
+        The light, named in the error.
+    what : str
+        Where ``window`` is set, e.g. ``"the scene's settings.window"``.
+
+    Raises
+    ------
+    AssetError
+    """
+    own = (attrs.get("parameters") or {}).get("window") or "none"
+    if own != "none" and window is not None:
+        raise AssetError(f"light was projected with --window {own} and {what} is "
+                         f"'{window}', so the bake would window it twice; re-project it "
+                         "without --window (the bake windows lighting and visibility "
+                         "together) or set window = \"none\"", path)

@@ -13,6 +13,14 @@
 See ``docs/scenes.md``.
 """
 
-from shtools.scene.scene import Scene, load_scene, parse_scene
-
 __all__ = ["Scene", "load_scene", "parse_scene"]
+
+
+def __getattr__(name: str):
+    # on first use: the parser imports pydantic and every registered kind, which a
+    # module of this package that reads no scene (``relight`` without lights) needs not
+    if name in __all__:
+        from shtools.scene import scene
+
+        return getattr(scene, name)
+    raise AttributeError(f"module 'shtools.scene' has no attribute {name!r}")

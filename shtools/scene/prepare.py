@@ -162,22 +162,15 @@ def _environment(scene: Scene, inputs: dict, cache=None) -> np.ndarray | None:
     if env.kind == "coeffs":
         coeffs = env.coeffs
     elif env.kind == "light":
-        from shtools.data_formats.light import read_light
+        from shtools.data_formats.light import check_light_window, read_light
 
         coeffs, attrs = read_light(env.path)
         n = math.isqrt(len(coeffs))
         if n != order:
             raise AssetError(f"light is SH order {n} but the scene's settings.order is {order}; "
                              f"re-project it with --order {order} or change the order", env.path)
-        # the runtime windows the light with settings.window; a light projected
-        # with a window of its own would be windowed twice
-        own = (attrs.get("parameters") or {}).get("window") or "none"
-        if own != "none" and scene.settings.window is not None:
-            raise AssetError(f"light was projected with --window {own} and the scene's "
-                             f"settings.window is '{scene.settings.window}', so the bake would "
-                             "window it twice; re-project it without --window (the bake "
-                             "windows lighting and visibility together) or set "
-                             "window = \"none\"", env.path)
+        check_light_window(attrs, scene.settings.window, env.path,
+                           "the scene's settings.window")
         inputs["environment"] = env.path
     else:
         # the same code path as `shtools light project`; the runtime windows later
@@ -187,11 +180,9 @@ def _environment(scene: Scene, inputs: dict, cache=None) -> np.ndarray | None:
         inputs["environment"] = env.path
     coeffs = np.asarray(coeffs, dtype=float) * env.intensity
     if env.rotate and env.kind != "image":
-        from shtools.sh import rotate
+        from shtools.sh.rotation import rotate_about_y
 
-        c, s = np.cos(env.rotate), np.sin(env.rotate)
-        r_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-        coeffs = rotate(coeffs.T, r_y).T
+        coeffs = rotate_about_y(coeffs, env.rotate)
     return coeffs
 
 

@@ -6,11 +6,13 @@ cosine, the light and ``g`` (SHEXP Sec. 7; Sloan et al. 2002, "Precomputed
 Radiance Transfer", Sec. 4 — keeping visibility in SH is what makes a new
 light cheap), so a new environment, optionally turned about +Y by an SH
 rotation, needs no posing, no blockers and no exponential.  Frames are shaded
-by :func:`shtools.scene.shadows.shade_frame`, the very function the baker
-shades with (for vertices that never move, once per unit visibility vector:
-shading is linear in ``g``; :func:`relight_frames`), so the result is the
-radiance a fresh bake of the same scene under that light gives, to float32
-rounding.
+by the runtime's :meth:`~shtools.runtime.ShadowRuntime.shade`, the call the
+baker's :func:`~shtools.scene.shadows.shade_frame` makes for the environment
+and the ``shexp`` lights (for vertices that never move, once per unit
+visibility vector: shading is linear in ``g``; :func:`relight_frames`), so the
+result is the radiance a fresh bake of the same scene under that light gives,
+to float32 rounding.  Without ``[[lights]]`` nothing here reads the scene, so
+the scene parser is not imported.
 
 Spherical lights (a scene's ``[[lights]]``, posed at each frame's time) are
 shaded through the same stored visibility, the baker's ``shexp`` way; the
@@ -37,21 +39,13 @@ import itertools
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
 from shtools.errors import AssetError, InputError
-
-
-@dataclass
-class _RelightSource:
-    """What :func:`~shtools.scene.shadows.shade_frame` reads of a prepared scene."""
-
-    env_sh: np.ndarray | None
-    midrange: object = None  # a MidrangeEnvironment, or None at infinity
 
 
 def relight_settings(bake):
@@ -80,8 +74,10 @@ def relight_environment(light: str | os.PathLike, order: int, window, rotate: fl
                         inputs: dict | None = None) -> np.ndarray:
     """A light asset as a bake would load it as ``[environment] light``, turned ``rotate`` degrees.
 
-    The same loader as the baker's (:mod:`shtools.scene.prepare`): its checks
-    (a light windowed twice) and its SH rotation about +Y.
+    The baker's checks (a light windowed twice,
+    :func:`~shtools.data_formats.light.check_light_window`) and its SH
+    rotation about +Y (:func:`~shtools.sh.rotation.rotate_about_y`), without
+    the scene parser.
 
     Parameters
     ----------
@@ -105,19 +101,22 @@ def relight_environment(light: str | os.PathLike, order: int, window, rotate: fl
     AssetError
         Not a light asset, another SH order, or windowed twice.
     """
-    from shtools.data_formats.light import read_light
-    from shtools.scene.prepare import _environment
-    from shtools.scene.specs import EnvironmentSpec
+    from shtools.data_formats.light import check_light_window, read_light
 
-    coeffs, _ = read_light(light)
+    coeffs, attrs = read_light(light)
     n = math.isqrt(len(coeffs))
     if n != order:
         raise AssetError(f"light is SH order {n} but the bake is order {order}; re-project it "
                          f"with 'shtools light project --order {order}'", light)
-    spec = EnvironmentSpec(kind="light", path=Path(light), rotate=math.radians(float(rotate)))
-    scene = SimpleNamespace(environment=spec, settings=SimpleNamespace(order=order,
-                                                                       window=window))
-    return _environment(scene, {} if inputs is None else inputs)
+    check_light_window(attrs, window, light, "the bake's window")
+    if inputs is not None:
+        inputs["environment"] = light
+    coeffs = np.asarray(coeffs, dtype=float)
+    if rotate:
+        from shtools.sh.rotation import rotate_about_y
+
+        coeffs = rotate_about_y(coeffs, math.radians(float(rotate)))
+    return coeffs
 
 
 def relight_midrange(bake, env_sh: np.ndarray):
@@ -201,15 +200,15 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     ``K g`` with a fixed ``K (3, n*n)`` -- for the environment ``K = M(L) H``,
     the light's product matrix applied to the cosine lobe (Sloan et al. 2002,
     Sec. 4), plus the spherical lights' lobes.  ``K`` is made once by the
-    baker's own :func:`~shtools.scene.shadows.shade_frame` (without
-    de-ringing) of the unit visibility vectors, so these vertices cost one
-    float32 product per batch of frames; the others are shaded with
-    ``shade_frame`` as the baker does (a batch of frames in one call while the
-    lights do not change).  Frames are read from the bake a batch at a time:
-    a batch holds at most :data:`BATCH_ROWS` receiver rows, and at most
-    ``2 * threads`` batches are in flight, so memory does not grow with the
-    frame count (:func:`relight_bytes`).  De-ringing (``settings.deringing``)
-    follows, as in the runtime's ``shade``.
+    runtime shading the baker uses (without de-ringing) of the unit
+    visibility vectors, so these vertices cost one float32 product per batch
+    of frames; the others are shaded as the baker shades them (a batch of
+    frames in one call while the lights do not change).  Frames are read
+    from the bake a batch at a time: a batch holds at most
+    :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads`` batches
+    are in flight, so memory does not grow with the frame count
+    (:func:`relight_bytes`).  De-ringing (``settings.deringing``) follows, as
+    in the runtime's ``shade``.
 
     Parameters
     ----------
@@ -335,7 +334,6 @@ class _Shaders:
 
     def __init__(self, env_sh, settings, midrange=None):
         import threading
-        from dataclasses import replace
 
         self.env_sh, self.midrange = env_sh, midrange
         self.settings = replace(settings, deringing="none")
@@ -343,28 +341,32 @@ class _Shaders:
         self.runtimes: list = []
         self.lock = threading.Lock()
 
-    def _run(self):
-        from dataclasses import replace
+    def _runtime(self):
+        runtime = getattr(self.local, "runtime", None)
+        if runtime is None:
+            from shtools.runtime import ShadowRuntime
 
-        from shtools.runtime import ShadowRuntime
-        from shtools.scene.shadows import BakeRun
-
-        run = getattr(self.local, "run", None)
-        if run is None:
             with self.lock:  # one at a time: the second reuses the first's cached log tables
-                runtime = ShadowRuntime(self.settings)
+                runtime = self.local.runtime = ShadowRuntime(self.settings)
                 self.runtimes.append(runtime)
             # a sphere of its own per thread: it caches the last vertices' radiance SH
-            sphere = None if self.midrange is None else replace(self.midrange, _cache={})
-            run = self.local.run = BakeRun(_RelightSource(self.env_sh, sphere), runtime,
-                                           "relight")
-        return run
+            self.local.sphere = (None if self.midrange is None
+                                 else replace(self.midrange, _cache={}))
+        return runtime
 
     def shade(self, state, visibility) -> np.ndarray:
-        """:func:`~shtools.scene.shadows.shade_frame` of ``state`` (before de-ringing)."""
-        from shtools.scene.shadows import shade_frame
+        """Radiance ``(R, 3)`` of ``state``'s rows (before de-ringing).
 
-        return shade_frame(self._run(), state, visibility)
+        What :func:`~shtools.scene.shadows.shade_frame` computes for a frame
+        without blockers whose lights are all ``shexp``: one runtime
+        :meth:`~shtools.runtime.ShadowRuntime.shade` of the environment (per
+        vertex on a finite sphere) and the lights through the visibility.
+        """
+        runtime = self._runtime()
+        env = (self.env_sh if self.local.sphere is None
+               else self.local.sphere.radiance_sh(state.vertices))
+        return runtime.shade(visibility, state.vertices, state.normals, env,
+                             sphere_lights=state.lights)
 
     def linear(self, state, size: int) -> np.ndarray:
         """``K (R, 3, n*n)`` float32: the radiance of each unit visibility vector, before
@@ -386,14 +388,13 @@ class _Shaders:
             runtime.close()
 
 
-def _state(bake, frames: range, rows, lights):
-    """Rows ``rows`` of asset frames ``frames`` (consecutive), stacked; ``bake`` has
+def _state(bake, frames: range, rows, lights) -> SimpleNamespace:
+    """Rows ``rows`` of asset frames ``frames`` (consecutive), stacked: ``vertices`` and
+    ``normals`` ``(R, 3)`` float64 and the frame's posed ``lights``.  ``bake`` has
     ``vertices`` and ``normals``, ``(V, 3)`` or ``(T, V, 3)``, and a ``path`` when they
     are read from its file (then checked for NaN/inf).  No blockers: the visibility is
     stored."""
     from shtools.data_formats.bake_stream import check_finite
-    from shtools.scene.pose import FrameState
-    from shtools.scene.shadows import ShexpLight
 
     path = getattr(bake, "path", None)
 
@@ -406,9 +407,8 @@ def _state(bake, frames: range, rows, lights):
             check_finite(read, name, path)
         return read[:, rows].reshape(-1, 3)
 
-    return FrameState(block("vertices").astype(np.float64),
-                      block("normals").astype(np.float64), [], lights, [],
-                      [ShexpLight.name] * len(lights))
+    return SimpleNamespace(vertices=block("vertices").astype(np.float64),
+                           normals=block("normals").astype(np.float64), lights=list(lights))
 
 
 def _same_lights(lights: list) -> bool:

@@ -87,3 +87,20 @@ def rotate(f, R) -> np.ndarray:
     if d.ndim == 2:
         return f @ d.T.astype(f.dtype if f.dtype.kind == "f" else np.float64)
     return np.einsum("...ij,...j->...i", d, f)
+
+
+def rotate_about_y(coeffs, angle: float) -> np.ndarray:
+    """RGB SH coefficients turned ``angle`` radians about +Y (an environment's turntable).
+
+    Parameters
+    ----------
+    coeffs : array_like, shape (n*n, 3)
+    angle : float
+
+    Returns
+    -------
+    ndarray, shape (n*n, 3)
+    """
+    c, s = np.cos(angle), np.sin(angle)
+    r_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    return rotate(np.asarray(coeffs, dtype=float).T, r_y).T

@@ -48,23 +48,42 @@ translate = [0.3, 0.6, 0]
 """
 
 
-def test_relight_command_imports_no_geometry_stack(tmp_path):
+#: What relighting under an environment alone does not read: the scene parser
+#: (pydantic, every registered kind), the scene preparation and posing.
+SCENE_STACK = ("pydantic", "shtools.scene.scene", "shtools.scene.schema",
+               "shtools.scene.prepare", "shtools.scene.pose")
+
+
+def _relight_modules(tmp_path, *extra) -> list[str]:
+    """The modules a ``shtools relight`` process has imported when it ends."""
     coeffs = [[3.5, 3.2, 3.0], [0.1, 0.2, 0.3], [0.5, 0.4, 0.3], [0.0, 0.1, 0.0]]
     write_light(tmp_path / "sky.h5", coeffs, source="inline", parameters={"window": "none"})
     (tmp_path / "scene.toml").write_text(SCENE)
     bake_to_file(load_scene(tmp_path / "scene.toml"), tmp_path / "a.h5",
                  store_visibility=True, processes=1, workers=1)
+    args = [str(tmp_path / "a.h5"), "--light", str(tmp_path / "sky.h5"), "--rotate", "30",
+            *extra, "-o", str(tmp_path / "relit.h5")]
     code = (
         "import json, sys\n"
         "from shtools.cli.main import main\n"
-        f"code = main(['relight', {str(tmp_path / 'a.h5')!r}, '--light', "
-        f"{str(tmp_path / 'sky.h5')!r}, '--rotate', '30', '--lights', "
-        f"{str(tmp_path / 'scene.toml')!r}, '-o', {str(tmp_path / 'relit.h5')!r}])\n"
+        f"code = main(['relight', *{args!r}])\n"
         "print(json.dumps([code, sorted(sys.modules)]))\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True, timeout=120)
     status, loaded = json.loads(done.stdout.strip().splitlines()[-1])
     assert status == 0 and (tmp_path / "relit.h5").exists(), done.stderr
+    return loaded
+
+
+def test_relight_command_imports_no_geometry_stack(tmp_path):
+    loaded = _relight_modules(tmp_path, "--lights", str(tmp_path / "scene.toml"))
     bad = sorted({m.split(".")[0] for m in loaded if m.split(".")[0] in FORBIDDEN})
     assert bad == [], f"shtools relight imported {bad}"
+
+
+def test_relight_without_lights_imports_no_scene_parser(tmp_path):
+    loaded = set(_relight_modules(tmp_path))
+    assert "shtools.runtime.shading" in loaded  # the check sees the shading modules
+    bad = sorted(m for m in SCENE_STACK if m in loaded)
+    assert bad == [], f"shtools relight (no --lights) imported {bad}"
