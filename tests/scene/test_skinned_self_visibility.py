@@ -279,6 +279,5 @@ def test_every_traced_skinned_object_traces_the_ground(folded_tube):
     spheres = _ground_rows(scene("traced_shadows = false"))
     err, err_spheres = relative_rmse(both, ref), relative_rmse(spheres, ref)
     # measured 1.3 % (both traced, product; 1.4 % at 64 rays) vs 5.6 % (both by spheres);
-    # before wave 4's rigid shift only the first tube traced the ground (2.7 %)
     assert err < 0.02, err
     assert err < 0.4 * err_spheres, (err, err_spheres)
