@@ -135,7 +135,7 @@ def register(schema: Schema) -> Schema:
 #: Every asset kind (docs/formats.md); each has a module ``shtools.data_formats.<kind>``
 #: that registers its :class:`Schema` on import.
 KINDS = ("spheres", "tree", "bound", "tables", "scaling", "field", "srf", "light", "bake",
-         "transfer")
+         "transfer", "haar")
 
 
 def get_schema(kind: str) -> Schema | None:
