@@ -2,7 +2,7 @@
 
 A rigid object that both receives and casts (``role = "both"``, no skin) is
 shadowed on its own vertices by its **real mesh**: its self-visibility is ray
-traced once in its own frame (:func:`shtools.geometry.visibility.hemisphere_transfer`,
+traced once in its own frame (:func:`shtools.geometry.transfer.hemisphere_transfer`,
 or read from a ``transfer`` asset), and every frame the runtime adds its log,
 rotated with the object, to the log of every *other* blocker
 (:class:`shtools.runtime.SelfVisibility`).  The object's own spheres then shadow
@@ -98,7 +98,8 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         return stored, None
     if cache is None:
         return _traced_self_log(obj, acc_order, log), None
-    from shtools.geometry.visibility import LOG_FLOOR, TRANSFER_DIRECTIONS
+    from shtools.geometry.transfer import TRANSFER_DIRECTIONS
+    from shtools.geometry.visibility import LOG_FLOOR
 
     parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
              "faces": np.asarray(obj.faces), "order": int(acc_order),
@@ -114,14 +115,14 @@ def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
 
     if is_convex(obj.vertices, obj.faces):
         return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
-    from shtools.geometry.visibility import hemisphere_transfer
+    from shtools.geometry.transfer import hemisphere_transfer
 
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if log:
         log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
             "the set-up cache keeps it for the next bake)")
     # rays over each vertex's own hemisphere only: fewer than the product rule of
-    # `shtools transfer` casts, at no larger error (geometry.visibility.TRANSFER_DIRECTIONS)
+    # `shtools transfer` casts, at no larger error (geometry.transfer.TRANSFER_DIRECTIONS)
     _, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
     return f.astype(np.float32)
 
