@@ -24,6 +24,7 @@ from shtools.geometry.visibility import (
     SQRT_4PI,
     direction_quadrature,
     hemisphere_directions,
+    receivers,
     self_visibility,
     self_visibility_log,
     tangent_frames,
@@ -128,10 +129,7 @@ def hemisphere_transfer_visibility(points, normals, caster, order: int, *,
     -------
     ndarray, shape (V, n*n) float64
     """
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    if nrm.shape != p.shape:
-        raise ValueError(f"points {p.shape} and normals {nrm.shape} must have the same shape")
+    p, nrm = receivers(points, normals)
     n = int(n_dirs)
     local64 = hemisphere_directions(n)
     local = local64.astype(np.float32)

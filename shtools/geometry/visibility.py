@@ -56,6 +56,15 @@ LOG_FLOOR = 0.01
 SQRT_4PI = math.sqrt(4.0 * math.pi)
 
 
+def receivers(points, normals) -> tuple[np.ndarray, np.ndarray]:
+    """Receivers and their normals as float64 arrays ``(V, 3)``, checked to agree."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    if nrm.shape != p.shape:
+        raise ValueError(f"points {p.shape} and normals {nrm.shape} must have the same shape")
+    return p, nrm
+
+
 def direction_quadrature(n_dirs: int) -> tuple[np.ndarray, np.ndarray]:
     """Smallest Gauss–Legendre x uniform product rule with at least ``n_dirs`` nodes.
 
@@ -218,10 +227,7 @@ def hemisphere_visibility(points, normals, caster, order: int, *,
     ndarray, shape (V, n*n) float64
         Visibility vectors ``g``.
     """
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    if nrm.shape != p.shape:
-        raise ValueError(f"points {p.shape} and normals {nrm.shape} must have the same shape")
+    p, nrm = receivers(points, normals)
     local = hemisphere_directions(int(n_dirs)).astype(np.float32)
     t1, t2 = tangent_frames(nrm)
     frames = np.stack([t1, t2, nrm], axis=1).astype(np.float32)  # (V, 3, 3): rows t1, t2, N
@@ -358,10 +364,7 @@ def cone_visibility(points, normals, caster, center, radius, order: int, *,
     -------
     ndarray, shape (V, n*n) float64
     """
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    if nrm.shape != p.shape:
-        raise ValueError(f"points {p.shape} and normals {nrm.shape} must have the same shape")
+    p, nrm = receivers(points, normals)
     axis, cos_half = bounding_cones(p, nrm, center, radius)
     solid = 2.0 * math.pi * (1.0 - cos_half)  # (V,)
     counts = np.where(solid > 0, np.maximum(int(min_rays), np.ceil(
@@ -463,5 +466,5 @@ def self_visibility_log_at(g, order: int, *, floor: float = LOG_FLOOR) -> np.nda
 
 __all__ = ["CONE_DIRECTIONS", "CONE_MIN_RAYS", "DEFAULT_DIRECTIONS", "HEMISPHERE_DIRECTIONS",
            "LOG_FLOOR", "bounding_cones", "cone_visibility", "direction_quadrature",
-           "hemisphere_directions", "hemisphere_visibility", "self_visibility",
+           "hemisphere_directions", "hemisphere_visibility", "receivers", "self_visibility",
            "self_visibility_log", "tangent_frames"]
