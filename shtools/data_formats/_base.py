@@ -440,7 +440,8 @@ def _decode(v):
     return v
 
 
-def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool = True) -> Asset:
+def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool = True,
+               lazy: tuple[str, ...] = ()) -> Asset:
     """Open, validate and (by default) load an asset.
 
     Parameters
@@ -453,6 +454,10 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
         the attributes and the datasets' shapes and dtypes are validated, and float
         datasets are checked for NaN/inf block by block (:data:`BLOCK_ELEMENTS`), so
         an asset larger than memory can be checked.
+    lazy : tuple of str
+        Datasets whose shapes and dtypes are checked but whose values are
+        neither read nor checked for NaN/inf (a streaming reader checks them
+        as it reads them).
 
     Returns
     -------
@@ -515,18 +520,19 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
         dims: dict[str, int] = {}
         data: dict[str, np.ndarray] = {}
         for spec in schema.datasets:
-            _check_dataset(f, spec, dims, path, load, data)
+            _check_dataset(f, spec, dims, path, load and spec.name not in lazy, data,
+                           read=spec.name not in lazy)
         if schema.check is not None:
             schema.check(f, {"attrs": attrs, "dims": dims, "path": path})
         if load:
             def visit(name, obj):
-                if isinstance(obj, h5py.Dataset) and name not in data:
+                if isinstance(obj, h5py.Dataset) and name not in data and name not in lazy:
                     data[name] = obj[()]
             f.visititems(visit)
     return Asset(file_kind, int(version), attrs, data, dims, path)
 
 
-def _check_dataset(f, spec: DatasetSpec, dims, path, load, data) -> None:
+def _check_dataset(f, spec: DatasetSpec, dims, path, load, data, read: bool = True) -> None:
     if spec.name not in f:
         if spec.optional:
             return
@@ -561,6 +567,8 @@ def _check_dataset(f, spec: DatasetSpec, dims, path, load, data) -> None:
         want = " or ".join(str(tuple(s)) for s in options)
         raise AssetError(f"dataset '{spec.name}' has shape {ds.shape}, expected {want}", path)
     dims.update(matched)
+    if not read:  # a lazy dataset: its streaming reader checks the values it reads
+        return
     check_finite = spec.finite and ds.dtype.kind == "f"
     if load:
         arr = ds[()]

@@ -111,7 +111,8 @@ class RuntimeVisibility(VisibilityMethod):
             run.cache["setup_seconds"] = time.perf_counter() - start
         return run.runtime.visibility(state.vertices, state.normals, state.blockers,
                                       clusters=clusters,
-                                      self_visibility=state.self_visibility)
+                                      self_visibility=state.self_visibility,
+                                      static_receivers=state.static_rows)
 
 
 class ProductVisibility(VisibilityMethod):
