@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import functools
 import math
+import weakref
 
 import numpy as np
 
@@ -339,6 +340,10 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     """
     from shtools.fields.self_visibility import bounding_cones
 
+    key = (caster, points, normals, vertices, faces, order, n_dirs, spheres, tuple(lights))
+    kept = _kept_ground(key)
+    if kept is not None:  # a static object over static receivers: the last frame's result
+        return kept
     v = np.asarray(vertices, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -352,7 +357,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     rows = np.flatnonzero(weight > 0)
     weight = weight[rows]
     if not rows.size:
-        return rows, weight, np.zeros((0, order * order))
+        return _keep_ground(key, (rows, weight, np.zeros((0, order * order))))
     g = set_visibility(p[rows], nrm[rows], caster, axis[rows], cos_half[rows], order, n_dirs)
     idx, dist = neighbours(p, nrm)
     # neighbours among the traced receivers only (row of each in ``rows``, -1 if none)
@@ -372,4 +377,55 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
         around = local[busy]
         g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
-    return rows, weight, g
+    return _keep_ground(key, (rows, weight, g))
+
+
+#: Per process: the last results of :func:`traced_ground`, by caster (a weak reference
+#: to it and copies of the other inputs kept beside them).  A rigid object's Embree scene is reused while it stays put, so an
+#: object and receivers that do not move are traced once per bake, not once per frame.
+_GROUND: dict = {}
+#: Casters whose last result :data:`_GROUND` keeps (a scene's traced objects).
+GROUND_KEPT = 16
+
+
+def _same(a, b) -> bool:
+    """Equal inputs of :func:`traced_ground` (arrays by value, the caster by identity)."""
+    if a is b:
+        return True
+    if isinstance(a, tuple | list) and isinstance(b, tuple | list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
+    if isinstance(a, int | float | np.number) and isinstance(b, int | float | np.number):
+        return a == b
+    return False
+
+
+def _kept_ground(key: tuple):
+    """Copies of the kept result of the same inputs ``key`` (caster first), or None."""
+    kept = _GROUND.get(id(key[0]))
+    if kept is None or kept[0][0]() is not key[0] or not _same(kept[0][1:], key[1:]):
+        return None
+    return tuple(x.copy() for x in kept[1])
+
+
+def _keep_ground(key: tuple, result: tuple) -> tuple:
+    """Keep copies of ``result`` (the inputs as copies too: a caller may reuse its arrays)."""
+    if len(_GROUND) >= GROUND_KEPT:
+        _GROUND.pop(next(iter(_GROUND)))
+    try:
+        ref = weakref.ref(key[0])  # a skinned mesh's per-frame caster is not kept alive
+    except TypeError:
+        return result
+    _GROUND.pop(id(key[0]), None)
+    _GROUND[id(key[0])] = ((ref,) + tuple(_copied(x) for x in key[1:]),
+                           tuple(x.copy() for x in result))
+    return result
+
+
+def _copied(x):
+    """Nested tuples/lists of arrays, the arrays copied."""
+    if isinstance(x, tuple | list):
+        return tuple(_copied(y) for y in x)
+    return np.array(x, copy=True) if isinstance(x, np.ndarray) else x
