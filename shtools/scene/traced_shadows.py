@@ -381,8 +381,9 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
 
 
 #: Per process: the last results of :func:`traced_ground`, by caster (a weak reference
-#: to it and copies of the other inputs kept beside them).  A rigid object's Embree scene is reused while it stays put, so an
-#: object and receivers that do not move are traced once per bake, not once per frame.
+#: to it and copies of the other inputs kept beside them).  A rigid object's Embree scene
+#: is reused while it stays put, so an object and receivers that do not move are traced
+#: once per bake, not once per frame.
 _GROUND: dict = {}
 #: Casters whose last result :data:`_GROUND` keeps (a scene's traced objects).
 GROUND_KEPT = 16
@@ -419,7 +420,7 @@ def _keep_ground(key: tuple, result: tuple) -> tuple:
     except TypeError:
         return result
     _GROUND.pop(id(key[0]), None)
-    _GROUND[id(key[0])] = ((ref,) + tuple(_copied(x) for x in key[1:]),
+    _GROUND[id(key[0])] = ((ref, *(_copied(x) for x in key[1:])),
                            tuple(x.copy() for x in result))
     return result
 
