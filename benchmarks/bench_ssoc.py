@@ -39,7 +39,10 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "meshes"
+#: the shared meshes next to the repository (or next to the folder of its worktrees)
+DATA = next((d / "shared" / "data" / "meshes" for d in (REPO.parent, REPO.parent.parent)
+             if (d / "shared" / "data" / "meshes").is_dir()),
+            REPO.parent / "shared" / "data" / "meshes")
 RADII = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3)
 #: Mo et al.'s Table 1 (GeForce 8800 GTX, 512^2 screen), quoted as printed (ms).
 SEED_TABLE1 = {
