@@ -89,6 +89,12 @@ def scenes(quick: bool, demo: Path | None, field: Path | None = None,
     body = fid._ground(4.0, 96) + fid._skinned("cesiumman", "CesiumMan.glb", 48, pre)
     out["cesiumman"] = {"path": write("cesiumman", body, DATA / "probes" / "grace.hdr", 3, 4),
                         "frames": range(0, 3)}
+    if only and "dragon" in only:  # opt-in: two large transfers and references
+        body = (fid._ground(4.0, 96)
+                + fid._rigid("dragon", "dragon.obj", 64, 1.1, -0.9, 0.0, 20.0, pre)
+                + fid._rigid("armadillo", "armadillo.obj", 64, 1.4, 0.9, 0.2, -30.0, pre))
+        out["dragon"] = {"path": write("dragon", body, DATA / "probes" / "grace.hdr", 1),
+                         "frames": range(0, 1)}
     if demo is not None:
         out["demo"] = {"path": Path(demo) / "scene.toml", "frames": range(10, 14)}
     if field is not None:

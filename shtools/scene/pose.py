@@ -16,6 +16,7 @@ from shtools.scene.animation import (
     world_matrices,
 )
 from shtools.scene.blockers import blocker_kinds
+from shtools.scene.contact_shadows import ContactPart, contact_casters
 from shtools.scene.prepare import PreparedScene
 
 
@@ -66,6 +67,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     ground = []  # (rows, vertices, normals) of receiver-only objects
     casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
     rigid = []  # (object, transform, posed vertices, blocker index) of rigid traced objects
+    parts = []  # ContactPart of the objects that receive and block (contact shadows)
     has_ground = any(o.spec.receives and not o.spec.blocks for o in prepared.objects)
     # a lamp's field leaves out the blockers beyond it by the blocker a traced shadow
     # names (shtools.scene.field_light), which a field's traced shadow cannot name
@@ -92,6 +94,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             # exact self-shadowing: its own spheres (appended next) are skipped on its rows
             selfs.append(SelfVisibility(o.self_log, own, rotation=rotation,
                                         blocker=len(blockers)))
+        caster = None
         if o.traced and trace:  # its posed real mesh, traced this frame; its own blocker skipped
             caster = posed_caster(world_v, o.faces)
             selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
@@ -109,13 +112,19 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
-            if (o.motion is None and trace and st.traced_shadows and has_ground and len(o.faces)
-                    and ((field_traced and isinstance(blockers[-1], FieldBlocker))
-                         or (isinstance(blockers[-1], SphereBlocker)
-                             and not kinds[o.spec.blocker.kind].exact))):
+            stands_in = (o.motion is None and trace and st.traced_shadows and len(o.faces)
+                         and ((field_traced and isinstance(blockers[-1], FieldBlocker))
+                              or (isinstance(blockers[-1], SphereBlocker)
+                                  and not kinds[o.spec.blocker.kind].exact)))
+            if stands_in and has_ground:
                 # a rigid sphere-set or field blocker: its real mesh shadows the ground
                 # near it instead (a field's innermost shells are coarse next to the object)
                 rigid.append((o, m, world_v, len(blockers) - 1))
+            if o.spec.receives or stands_in or caster is not None:
+                parts.append(ContactPart(o, world_v, m, rows=(
+                    np.arange(n_rows - len(world_v), n_rows) if o.spec.receives else None),
+                    normals=world_n, caster=caster, blocker=(
+                        len(blockers) - 1 if stands_in or caster is not None else None)))
             if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
                 _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
                                 selfs, len(blockers) - 1)
@@ -132,6 +141,12 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
         selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
                                                 lights) for c in casters) if v is not None)
+    if trace and st.traced_shadows and field_traced:
+        # the other objects' real meshes on each object receiver near them (contact)
+        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
+                                                lights)
+                                 for receivers, c in contact_casters(
+                                     parts, st.traced_shadow_directions)) if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
 

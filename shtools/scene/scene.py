@@ -28,7 +28,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from shtools.errors import InputError
-from shtools.fields.self_visibility import CONE_DIRECTIONS, HEMISPHERE_DIRECTIONS
+from shtools.fields.self_visibility import CONE_DIRECTIONS
 from shtools.geometry.fit_methods import FIT_METHODS
 from shtools.geometry.transforms import euler_to_quaternion
 from shtools.runtime.settings import ShadowSettings, Unit, setting
@@ -37,6 +37,7 @@ from shtools.scene import schema
 from shtools.scene.blockers import BlockerSpec, blocker_kinds
 from shtools.scene.schema import GLTF_SUFFIXES, IMAGE_SUFFIXES, MESH_SUFFIXES, ROLES
 from shtools.scene.shadows import bake_method_names
+from shtools.scene.skinned_visibility import SKINNED_DIRECTIONS
 
 BAKE_METHODS = bake_method_names()
 
@@ -66,8 +67,9 @@ class Settings(ShadowSettings):
                                     doc="self-shadowing of role-\"both\" objects by their real "
                                         "mesh (rigid: traced once; skinned: every frame)")
     self_visibility_directions: int = setting(
-        HEMISPHERE_DIRECTIONS, "int", lo=4, hi=4096,
-        doc="rays per vertex and frame tracing skinned objects' posed mesh")
+        SKINNED_DIRECTIONS, "int", lo=4, hi=4096,
+        doc="rays per self-shadowed vertex and frame tracing skinned objects' posed mesh "
+            "(a ninth of them on every vertex finds which are)")
     traced_shadows: bool = setting(True, "bool",
                                    doc="the shadow of skinned objects that trace their posed "
                                        "mesh and of rigid sphere-set blockers is ray traced "
