@@ -19,13 +19,16 @@ who is traced on whom (:func:`contact_casters`):
 * the traceable blockers (sphere sets fitted to a mesh, shadow fields, skinned
   objects that trace their posed mesh) are grouped as the ground's are, by
   bounding spheres that overlap, directly or through others;
-* a receiver is traced against each group **without itself** (its own real mesh
-  already shadows it through its self-visibility), and only against the members
-  whose hand-over reaches it: a receiver farther than the hand-over's outer edge
-  (:data:`~shtools.scene.traced_shadows.HANDOVER_RAYS`) keeps their blockers,
-  exactly what the hand-over would give it;
+* a receiver is traced against each group some member of which its hand-over
+  reaches (beyond the hand-over's outer edge,
+  :data:`~shtools.scene.traced_shadows.HANDOVER_RAYS`, it keeps their blockers,
+  exactly what the hand-over would give it), and the group's blockers other than
+  its own are skipped on the rows traced;
 * the members of a group are traced jointly (one Embree scene, one cone), so the
-  parts around a receiver never multiply visibilities that overlap.
+  parts around a receiver never multiply visibilities that overlap.  The scene is
+  the whole group's, shared by its receivers, unless the receiver is a member that
+  can shadow itself: its own mesh would then shadow it twice (its self-visibility
+  does already), so it is traced against the others alone.
 
 The Embree scene of rigid objects is kept while their transforms hold (a static
 scene builds it once per bake); a lone skinned object's per-frame scene is reused.
@@ -61,6 +64,9 @@ class ContactPart:
         that blocker near it (None: it blocks exactly already, or not at all).
     caster : RayCaster or None
         Its posed mesh's Embree scene when the frame built one (skinned objects).
+    convex : bool
+        Its own mesh cannot block its vertices above their tangent planes (a convex
+        rigid mesh, whose self-visibility is exactly 1).
     """
 
     obj: object
@@ -70,6 +76,7 @@ class ContactPart:
     normals: np.ndarray | None = None
     blocker: int | None = None
     caster: object = None
+    convex: bool = False
 
 
 def reach_factor(n_dirs: int) -> float:
@@ -134,20 +141,34 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
     spheres = [_sphere(p.vertices) for p in traceable]
     groups = groups_of(spheres)
     reach = reach_factor(n_dirs)
+    built: dict = {}  # the frame's Embree scenes, one per set of members
     out = []
     for receiver in parts:
         if receiver.rows is None or not len(receiver.rows):
             continue
         center, radius = _sphere(receiver.vertices)
         for group in groups:
+            members = [traceable[k] for k in group]
+            others = [m for m in members if m is not receiver]
             near = [k for k in group if traceable[k] is not receiver
                     and np.linalg.norm(spheres[k][0] - center) - radius
                     < reach * spheres[k][1]]
             if not near:
                 continue
-            members = [traceable[k] for k in near]
+            if len(others) < len(members) and not receiver.convex:
+                # its own mesh would shadow it twice (its self-visibility does already):
+                # the others alone, which it may sit next to or inside
+                traced = others
+            else:
+                # a convex receiver's own mesh never blocks above its tangent planes: the
+                # whole group's scene, shared with the group's other receivers
+                traced = members
+            key = tuple(id(m) for m in traced)
+            if key not in built:
+                built[key] = _joint_caster(traced)
+            caster, vertices, faces, _ = built[key]
             out.append(((receiver.rows, receiver.vertices, receiver.normals),
-                        _joint_caster(members)))
+                        (caster, vertices, faces, tuple(m.blocker for m in others))))
     return out
 
 
