@@ -513,8 +513,8 @@ def _previous_tracing(active: bool):
         return
     import shtools.scene.bake as bake
     import shtools.scene.transfer as transfer
-    from shtools.fields.self_visibility import hemisphere_visibility
     from shtools.geometry.raycast import RayCaster
+    from shtools.geometry.visibility import hemisphere_visibility
     from shtools.runtime.evaluator import ShadowRuntime
     from shtools.runtime.fast_exp import QuadratureProducts
     from shtools.scene.pose import pose_frame
@@ -558,12 +558,12 @@ def skinned_quadrature(name: str, spec: dict, *, n_ref: int = 3200) -> list[dict
     """
     import trimesh
 
-    from shtools.fields.self_visibility import (
+    from shtools.geometry.raycast import RayCaster
+    from shtools.geometry.visibility import (
         hemisphere_directions,
         hemisphere_visibility,
         tangent_frames,
     )
-    from shtools.geometry.raycast import RayCaster
     from shtools.reference import raytrace_visibility, relative_rmse
     from shtools.runtime import ShadowRuntime, ShadowSettings
     from shtools.scene.bake import pose_frame, prepare_scene

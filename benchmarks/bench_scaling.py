@@ -204,7 +204,7 @@ def _skinned_frame(fr: _Frame, model, joints, bound, local_log, clusters, tables
     difference (mean, max) of the field.
     """
     from shtools.fields.deformable import sample_deformable_field
-    from shtools.fields.self_visibility import (
+    from shtools.geometry.visibility import (
         HEMISPHERE_DIRECTIONS,
         self_visibility,
         self_visibility_log,
@@ -356,7 +356,7 @@ def _frame_time(secs, parts):
 
 def _character_rows(name: str, n_v: str, err: dict, secs: dict) -> list[str]:
     """Table rows of one character: every (ground, self) combination with its frame time."""
-    from shtools.fields.self_visibility import HEMISPHERE_DIRECTIONS
+    from shtools.geometry.visibility import HEMISPHERE_DIRECTIONS
 
     rows = []
     sph = _frame_time(secs, ["spheres"])
@@ -519,9 +519,9 @@ def midrange(quick: bool) -> list[str]:
 
     from shtools.geometry.mesh import load_mesh
     from shtools.geometry.raycast import RayCaster
+    from shtools.geometry.visibility import direction_quadrature
     from shtools.lighting import load_hdr_image, project_latlong
     from shtools.reference.metrics import relative_rmse
-    from shtools.reference.raytrace import quadrature_for
     from shtools.runtime import ShadowRuntime, ShadowSettings
     from shtools.runtime.scaling import ScalingTable, midrange_lighting
     from shtools.sh import basis, project
@@ -541,7 +541,7 @@ def midrange(quick: bool) -> list[str]:
     pot_nrm = np.asarray(teapot.vertex_normals)
     pts = np.concatenate([plane_pts, pot_pts])
     nrm = np.concatenate([np.tile([0.0, 1.0, 0.0], (len(plane_pts), 1)), pot_nrm])
-    dirs, w = quadrature_for(600 if quick else 1200)
+    dirs, w = direction_quadrature(600 if quick else 1200)
     caster = RayCaster.from_meshes([teapot])
     occl = caster.visibility(pts, dirs, normals=nrm, offset=1e-4 * caster.diagonal)
     # the reference sees the probe band-limited to order 12 (a smooth integrand, so

@@ -3,17 +3,17 @@
 On a random subset of each real mesh's vertices (``../shared/data``, never
 committed), at the default accumulation order 6:
 
-* **product rule** -- :func:`shtools.fields.self_visibility.mesh_transfer`'s
-  estimator at :data:`~shtools.fields.self_visibility.DEFAULT_DIRECTIONS`
+* **product rule** -- :func:`shtools.geometry.visibility.mesh_transfer`'s
+  estimator at :data:`~shtools.geometry.visibility.DEFAULT_DIRECTIONS`
   (3,200 Gauss-Legendre x uniform directions over the sphere, about half of them
   above each vertex's tangent plane and cast);
-* **hemisphere** -- :func:`~shtools.fields.self_visibility.hemisphere_transfer`'s,
+* **hemisphere** -- :func:`~shtools.geometry.visibility.hemisphere_transfer`'s,
   N spherical Fibonacci rays over each vertex's own hemisphere, every one cast;
 
 both against the product rule at 51,200 directions.  Errors (relative RMSE over
 the subset): the order-6 visibility coefficients, the cosine-weighted visibility
 (the order-4 Lambertian shading of a white sky, ``g . H(N)``), and the log the
-runtime adds (:func:`~shtools.fields.self_visibility.self_visibility_log`).  CPU
+runtime adds (:func:`~shtools.geometry.visibility.self_visibility_log`).  CPU
 is ``time.process_time`` per vertex (Embree's threads included).
 
 ``python benchmarks/bench_transfer.py [--quick] [--mesh NAME] [--rays 512,1024]``
@@ -41,7 +41,7 @@ SUBSET = 1000
 
 
 def _errors(g, truth, shading) -> tuple[float, float, float]:
-    from shtools.fields.self_visibility import self_visibility_log
+    from shtools.geometry.visibility import self_visibility_log
 
     def rel(a, b):
         return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b ** 2)))
@@ -51,7 +51,7 @@ def _errors(g, truth, shading) -> tuple[float, float, float]:
 
 
 def evaluate(name: str, rays, subset: int) -> list[dict]:
-    from shtools.fields import self_visibility as sv
+    from shtools.geometry import visibility as sv
     from shtools.geometry.mesh import load_mesh
     from shtools.runtime.shading import cosine_transfer
 
@@ -82,8 +82,8 @@ def evaluate(name: str, rays, subset: int) -> list[dict]:
 
 def _hemisphere_rows(mesh, normals, rows, n_rays: int) -> np.ndarray:
     """:func:`hemisphere_transfer`'s visibility at ``rows`` only (same caster and offset)."""
-    from shtools.fields.self_visibility import hemisphere_visibility
     from shtools.geometry.raycast import RayCaster
+    from shtools.geometry.visibility import hemisphere_visibility
 
     caster = RayCaster(np.asarray(mesh.vertices), np.asarray(mesh.faces), robust=False)
     return hemisphere_visibility(np.asarray(mesh.vertices)[rows], normals, caster, ORDER,

@@ -19,7 +19,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from shtools.sh._kernels import register_product_kernel
+from shtools.sh._kernels import PRODUCT_KERNELS
 
 UNROLL_CHUNK = 8192
 """Vectors per chunk of the unrolled kernel (rows of 64 KiB in float64 stay in L2)."""
@@ -67,4 +67,4 @@ def unrolled_kernel(f, g, order, out_order):
     return out.T
 
 
-register_product_kernel("unrolled", unrolled_kernel)
+PRODUCT_KERNELS.register(unrolled_kernel, "unrolled")

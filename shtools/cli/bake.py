@@ -15,7 +15,7 @@ from shtools.cli._common import (
     setting_type,
 )
 from shtools.cli.cache import cache_options, open_cache
-from shtools.scene.shadows import bake_method_names
+from shtools.scene.kinds import bake_method_names
 
 
 @click.command("bake")

@@ -116,8 +116,8 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     sv = None
     if not no_self_visibility:
         try:
-            from shtools.fields.self_visibility import DEFAULT_DIRECTIONS
-            from shtools.fields.self_visibility import self_visibility as sv
+            from shtools.geometry.visibility import DEFAULT_DIRECTIONS
+            from shtools.geometry.visibility import self_visibility as sv
         except ImportError:  # not in this build: the field is stored without O_v
             sv = None
         else:  # O_v: every vertex's rays besides the shells'

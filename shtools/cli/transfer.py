@@ -1,6 +1,6 @@
 """``shtools transfer``: precompute a rigid object's self-visibility (a ``transfer`` asset).
 
-Thin: load the mesh, call :func:`shtools.fields.self_visibility.mesh_transfer`,
+Thin: load the mesh, call :func:`shtools.geometry.visibility.mesh_transfer`,
 write the asset, report.
 """
 
@@ -48,8 +48,8 @@ def transfer(mesh_path, output, order, n_dirs, floor, force, as_json):
     """
     from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.transfer import write_transfer
-    from shtools.fields.self_visibility import mesh_transfer
     from shtools.geometry.mesh import load_mesh
+    from shtools.geometry.visibility import mesh_transfer
 
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
@@ -84,7 +84,7 @@ def _check_cost(n_vertices: int, order: int, n_dirs: int, force: bool, mesh_path
     (V, n*n);
     rays: V x Q.  Q is at least ``--n-dirs``.
     """
-    from shtools.fields.self_visibility import RAYS_PER_STEP
+    from shtools.geometry.visibility import RAYS_PER_STEP
 
     n2 = order * order
     batch = min(n_vertices * n_dirs, max(RAYS_PER_STEP, n_dirs))

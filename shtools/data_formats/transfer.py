@@ -1,7 +1,7 @@
 """The ``transfer`` asset: an object's precomputed self-visibility on its own vertices.
 
 Written by ``shtools transfer MESH -o x.transfer.h5``
-(:func:`shtools.fields.self_visibility.self_visibility`), read by the baker to
+(:func:`shtools.geometry.visibility.self_visibility`), read by the baker to
 shadow a rigid object by its real mesh instead of its own spheres.
 
 Datasets (V vertices, SH order n):

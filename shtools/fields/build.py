@@ -303,7 +303,7 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         ``f(vertices, normals, meshes, order) -> (V, m*m)``: per-vertex
         self-visibility O_v stored with the field at ``m =
         params.resolved_self_order()`` (rigid objects;
-        :func:`shtools.fields.self_visibility.self_visibility`).
+        :func:`shtools.geometry.visibility.self_visibility`).
     progress : callable, optional
         Called with the number of samples done after each shell.
     scheduler, workers : optional

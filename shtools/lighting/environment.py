@@ -6,7 +6,9 @@ with an image environment call.
 
 from __future__ import annotations
 
+import math
 import os
+from pathlib import Path
 
 import numpy as np
 
@@ -140,3 +142,22 @@ def project_environment_to_file(image: str | os.PathLike, order: int,
     write_light(output, coeffs, source="image", inputs={"image": image},
                 parameters={"order": order, **info})
     return coeffs, info
+
+
+#: Algorithm version of a cached environment projection (:mod:`shtools.cache`).
+ENVIRONMENT_VERSION = 1
+
+
+def projected_environment(path, order: int, rotate: float, cache=None) -> np.ndarray:
+    """An environment image's radiance SH ``(order^2, 3)``, rotated by ``rotate`` radians
+    about +y (:func:`project_environment`), read from ``cache`` (a
+    :class:`shtools.cache.SetupCache`) when the same image bytes were projected at this
+    order before: what a bake's image environment (and its mid-range sphere) uses."""
+    def compute():
+        coeffs, _ = project_environment(path, order, rotate_y=math.degrees(rotate))
+        return {"coeffs": np.asarray(coeffs, dtype=float)}
+
+    if cache is None:
+        return compute()["coeffs"]
+    parts = {"image": Path(path), "order": int(order), "rotate": float(rotate)}
+    return cache.fetch("environment", ENVIRONMENT_VERSION, parts, compute)["coeffs"]

@@ -418,10 +418,10 @@ def grid_faces(n: int) -> np.ndarray:
 def _raytrace_binary(vertices, normals, meshes, order, n_dirs):
     """Ray-traced binary visibility ``(V, Q)`` on the reference's rule, and its projection."""
     from shtools.geometry.raycast import RayCaster
-    from shtools.reference.raytrace import RAY_OFFSET, quadrature_for
+    from shtools.geometry.visibility import RAY_OFFSET, direction_quadrature
     from shtools.sh import project
 
-    dirs, w = quadrature_for(n_dirs)
+    dirs, w = direction_quadrature(n_dirs)
     p = np.asarray(vertices, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
     if not meshes:

@@ -21,23 +21,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from shtools.geometry.visibility import RAY_OFFSET, direction_quadrature
 from shtools.runtime.self_shadow import apply_self_shadow_rules
-from shtools.sh import project, sphere_quadrature
+from shtools.sh import project
 
 #: Default number of quadrature directions.
 DEFAULT_DIRECTIONS = 2000
-#: Ray origin offset along the normal, relative to the blockers' bounding-box diagonal.
-RAY_OFFSET = 1e-5
 #: Elements of the (vertices x directions x spheres) block of the sphere tracer.
 _SPHERE_BLOCK = 1 << 22
-
-
-def quadrature_for(n_dirs: int) -> tuple[np.ndarray, np.ndarray]:
-    """Smallest product quadrature with at least ``n_dirs`` directions."""
-    degree = 2
-    while (degree // 2 + 1) * (degree + 1) < n_dirs:
-        degree += 1
-    return sphere_quadrature(degree)
 
 
 def raytrace_visibility(vertices, normals, meshes, order: int, n_dirs: int = DEFAULT_DIRECTIONS,
@@ -66,7 +57,7 @@ def raytrace_visibility(vertices, normals, meshes, order: int, n_dirs: int = DEF
 
     p = np.asarray(vertices, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
-    dirs, w = quadrature_for(n_dirs)
+    dirs, w = direction_quadrature(n_dirs)
     caster = RayCaster.from_meshes(list(meshes))
     if offset is None:
         offset = RAY_OFFSET * caster.diagonal
@@ -99,7 +90,7 @@ def sphere_union_visibility(vertices, normals, centers, radii, order: int,
     nrm = np.asarray(normals, dtype=np.float64)
     cen = np.asarray(centers, dtype=np.float64)
     rad = np.asarray(radii, dtype=np.float64)
-    dirs, w = quadrature_for(n_dirs)
+    dirs, w = direction_quadrature(n_dirs)
     vis = np.ones((p.shape[0], dirs.shape[0]))
     if cen.shape[0] == 0:
         return project(vis, dirs, w, order)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from shtools.geometry.transforms import slerp, trs_matrix
-from shtools.scene.scene import Keyframe, LightKey, ObjectSpec, Pose, SphereLightSpec
+from shtools.scene.specs import Keyframe, LightKey, ObjectSpec, Pose, SphereLightSpec
 
 __all__ = [
     "SkinnedMotion",

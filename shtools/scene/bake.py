@@ -32,17 +32,11 @@ import numpy as np
 
 from shtools.data_formats.bake import parse_frames
 from shtools.errors import AssetError, InputError
+from shtools.scene.kinds import LIGHT_SHADOWS, VISIBILITY_METHODS, bake_method_names
 from shtools.scene.pose import FrameState, pose_frame
 from shtools.scene.prepare import PreparedObject, PreparedScene, prepare_scene, scene_files
 from shtools.scene.scene import Scene
-from shtools.scene.shadows import (
-    LIGHT_SHADOWS,
-    VISIBILITY_METHODS,
-    BakeRun,
-    bake_method_names,
-    shade_frame,
-    visibility_needed,
-)
+from shtools.scene.shadows import BakeRun, shade_frame, visibility_needed
 
 #: the three jobs' public names, importable from here as before the split
 __all__ = ["FrameResult", "FrameState", "PreparedObject", "PreparedScene", "bake_scene",

@@ -19,8 +19,8 @@ The scene schema (:func:`shtools.scene.schema.blocker_model`), the parser and
 the baker read the registry; nothing else lists the kinds.  Built in: sphere
 sets from assets (``spheres``, ``tree``, ``bound``), fitted on the fly
 (``fit``) and the exact sphere of a sphere primitive (``exact``).  Adding a
-kind is one module with a subclass and a :func:`register_blocker_kind` call
-imported from :mod:`shtools.scene.kinds` (see ``docs/architecture.md``).
+kind is one module with a subclass and a :func:`register_blocker_kind` call,
+imported by :mod:`shtools.scene.kinds` (see ``docs/architecture.md``).
 """
 
 from __future__ import annotations
@@ -33,28 +33,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from shtools.errors import AssetError
-
-
-@dataclass
-class BlockerSpec:
-    """How an object blocks light, as parsed from its blocker table.
-
-    Attributes
-    ----------
-    kind : str
-        A registered :class:`BlockerKind` name.
-    path : Path or None
-        The asset of an ``"asset"`` kind (resolved against the scene folder).
-    count : int or None
-        The value of a ``"count"`` kind (spheres to fit).
-    options : dict
-        The kind's other keys (defaults filled in).
-    """
-
-    kind: str
-    path: Path | None = None
-    count: int | None = None
-    options: dict[str, Any] = field(default_factory=dict)
+from shtools.registry import Registry
+from shtools.scene.specs import BlockerSpec
 
 
 @dataclass
@@ -278,27 +258,17 @@ class ExactSphere(SphereSetKind):
         pass  # the primitive's own spheres, set when its mesh was generated
 
 
-#: name -> kind; read by the scene schema, the parser and the baker
-BLOCKER_KINDS: dict[str, BlockerKind] = {}
-
-
-def register_blocker_kind(kind: BlockerKind) -> BlockerKind:
-    """Add a blocker kind (its ``name`` becomes a blocker-table key); returns it."""
+def _check_kind(kind: BlockerKind) -> None:
     if not getattr(kind, "name", None) or kind.value not in ("asset", "count", "flag"):
         raise ValueError(f"blocker kind {kind!r} needs a name and a value of asset, count "
                          "or flag")
-    if kind.name in BLOCKER_KINDS:
-        raise ValueError(f"blocker kind '{kind.name}' is already registered")
-    BLOCKER_KINDS[kind.name] = kind
-    return kind
 
+
+#: name -> kind; read by the scene schema, the parser and the baker, complete once
+#: :mod:`shtools.scene.kinds` (which imports the kinds in modules of their own) is
+BLOCKER_KINDS: Registry[BlockerKind] = Registry("blocker kind", check=_check_kind)
+#: add a blocker kind (its ``name`` becomes a blocker-table key); returns it
+register_blocker_kind = BLOCKER_KINDS.register
 
 for _kind in (SpheresAsset(), TreeAsset(), BoundAsset(), FitSpheres(), ExactSphere()):
     register_blocker_kind(_kind)
-
-
-def blocker_kinds() -> dict[str, BlockerKind]:
-    """The registry with every kind module imported (:mod:`shtools.scene.kinds`)."""
-    import shtools.scene.kinds  # noqa: F401  (registers the kinds that live in their own modules)
-
-    return BLOCKER_KINDS

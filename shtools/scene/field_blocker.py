@@ -65,7 +65,7 @@ class FieldKind(BlockerKind):
             # the stored O_v as a self-visibility log at the accumulation order (truncated
             # before the log, or zero above an O_v of lower order): the object's exact
             # self-shadowing unless the scene names a transfer asset or turns it off
-            from shtools.fields.self_visibility import self_visibility_log_at
+            from shtools.geometry.visibility import self_visibility_log_at
 
             table.self_log = self_visibility_log_at(fld.self_visibility,
                                                     ctx.settings.resolved_acc_order())

@@ -120,7 +120,7 @@ def prepare_midrange(scene, env_sh, inputs: dict, cache=None) -> MidrangeEnviron
         table = _scaling_table(scale_order, cache)
     coeffs = env_sh
     if env.kind == "image" and scale_order > order:
-        from shtools.scene.prepare import projected_environment
+        from shtools.lighting.environment import projected_environment
 
         coeffs = projected_environment(env.path, scale_order, env.rotate, cache) * env.intensity
     return MidrangeEnvironment(np.asarray(env.center, dtype=float), float(env.radius),

@@ -15,8 +15,8 @@ from shtools.scene.animation import (
     vertex_normals,
     world_matrices,
 )
-from shtools.scene.blockers import blocker_kinds
 from shtools.scene.contact_shadows import ContactPart, contact_casters
+from shtools.scene.kinds import BLOCKER_KINDS
 from shtools.scene.prepare import PreparedScene
 
 
@@ -60,7 +60,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     )
 
     st = prepared.scene.settings
-    kinds = blocker_kinds()
+    kinds = BLOCKER_KINDS
     worlds = world_matrices(prepared.scene.objects, t)
     verts, norms, blockers, meshes, selfs = [], [], [], [], []
     n_rows = 0

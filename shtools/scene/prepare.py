@@ -18,8 +18,10 @@ import numpy as np
 
 from shtools.errors import AssetError, InputError
 from shtools.scene.animation import SkinnedMotion, vertex_normals
-from shtools.scene.blockers import PrepareContext, blocker_kinds
-from shtools.scene.scene import ObjectSpec, Scene
+from shtools.scene.blockers import PrepareContext
+from shtools.scene.kinds import BLOCKER_KINDS
+from shtools.scene.scene import Scene
+from shtools.scene.specs import ObjectSpec
 
 
 @dataclass
@@ -148,28 +150,8 @@ def _object_blocker(prep: PreparedObject, model, settings, inputs: dict, progres
     spec = prep.spec.blocker
     if spec is None:
         return
-    blocker_kinds()[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs,
+    BLOCKER_KINDS[spec.kind].prepare(spec, prep, PrepareContext(settings, model, inputs,
                                                                   progress, cache))
-
-
-#: Algorithm version of a cached environment projection (:mod:`shtools.cache`).
-ENVIRONMENT_VERSION = 1
-
-
-def projected_environment(path, order: int, rotate: float, cache=None) -> np.ndarray:
-    """An environment image's radiance SH ``(order^2, 3)``, rotated by ``rotate`` radians
-    about +y (:func:`shtools.lighting.environment.project_environment`), read from
-    ``cache`` when the same image bytes were projected at this order before."""
-    from shtools.lighting.environment import project_environment
-
-    def compute():
-        coeffs, _ = project_environment(path, order, rotate_y=math.degrees(rotate))
-        return {"coeffs": np.asarray(coeffs, dtype=float)}
-
-    if cache is None:
-        return compute()["coeffs"]
-    parts = {"image": Path(path), "order": int(order), "rotate": float(rotate)}
-    return cache.fetch("environment", ENVIRONMENT_VERSION, parts, compute)["coeffs"]
 
 
 def _environment(scene: Scene, inputs: dict, cache=None) -> np.ndarray | None:
@@ -199,6 +181,8 @@ def _environment(scene: Scene, inputs: dict, cache=None) -> np.ndarray | None:
         inputs["environment"] = env.path
     else:
         # the same code path as `shtools light project`; the runtime windows later
+        from shtools.lighting.environment import projected_environment
+
         coeffs = projected_environment(env.path, order, env.rotate, cache)
         inputs["environment"] = env.path
     coeffs = np.asarray(coeffs, dtype=float) * env.intensity

@@ -99,7 +99,7 @@ def relight_environment(light: str | os.PathLike, order: int, window, rotate: fl
     """
     from shtools.data_formats.light import read_light
     from shtools.scene.prepare import _environment
-    from shtools.scene.scene import EnvironmentSpec
+    from shtools.scene.specs import EnvironmentSpec
 
     coeffs, _ = read_light(light)
     n = math.isqrt(len(coeffs))

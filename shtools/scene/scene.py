@@ -20,31 +20,34 @@ import difflib
 import math
 import os
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
 
 from shtools.errors import InputError
-from shtools.fields.self_visibility import CONE_DIRECTIONS
-from shtools.geometry.fit_methods import FIT_METHODS
 from shtools.geometry.transforms import euler_to_quaternion
+from shtools.geometry.visibility import CONE_DIRECTIONS
 from shtools.runtime.settings import ShadowSettings, Unit, setting
 from shtools.runtime.settings import scene_fields as _scene_fields
 from shtools.scene import schema
-from shtools.scene.blockers import BlockerSpec, blocker_kinds
-from shtools.scene.schema import GLTF_SUFFIXES, IMAGE_SUFFIXES, MESH_SUFFIXES, ROLES
-from shtools.scene.shadows import bake_method_names
+from shtools.scene.kinds import BLOCKER_KINDS, bake_method_names
+from shtools.scene.light_shadows import ssoc_settings
+from shtools.scene.schema import GLTF_SUFFIXES, IMAGE_SUFFIXES, MESH_SUFFIXES
 from shtools.scene.skinned_visibility import SKINNED_DIRECTIONS
+from shtools.scene.specs import (
+    BlockerSpec,
+    EnvironmentSpec,
+    Keyframe,
+    LightKey,
+    ObjectSpec,
+    Pose,
+    SkinSpec,
+    SphereLightSpec,
+)
 
-BAKE_METHODS = bake_method_names()
-
-__all__ = [
-    "FIT_METHODS", "GLTF_SUFFIXES", "IMAGE_SUFFIXES", "MESH_SUFFIXES", "ROLES", "BlockerSpec",
-    "Scene", "Settings", "load_scene", "parse_scene",
-]
+__all__ = ["Scene", "Settings", "load_scene", "parse_scene"]
 
 
 # --------------------------------------------------------------------------- dataclasses
@@ -81,105 +84,6 @@ class Settings(ShadowSettings):
     local_visibility: bool = setting(False, "bool",
                                      doc="rest-pose local visibility g_p of skinned "
                                          "role-\"both\" objects that do not trace their mesh")
-
-
-@dataclass
-class Pose:
-    """A rigid transform ``T * R * S``: translation, unit quaternion (x, y, z, w), scale."""
-
-    translate: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    quaternion: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
-    scale: np.ndarray = field(default_factory=lambda: np.ones(3))
-
-
-@dataclass
-class Keyframe:
-    """A pose at a time (seconds)."""
-
-    time: float
-    pose: Pose
-
-
-@dataclass
-class SkinSpec:
-    """Skinned animation of a glTF mesh: clip index or name, speed, time offset."""
-
-    animation: int | str = 0
-    speed: float = 1.0
-    offset: float = 0.0
-
-
-@dataclass
-class ObjectSpec:
-    """One ``[[objects]]`` entry."""
-
-    name: str
-    index: int
-    role: str
-    mesh: Path | None = None
-    primitive: tuple[str, dict] | None = None
-    albedo: np.ndarray = field(default_factory=lambda: np.ones(3))
-    parent: str | None = None
-    pose: Pose = field(default_factory=Pose)
-    keyframes: list[Keyframe] = field(default_factory=list)
-    loop: bool = False
-    blocker: BlockerSpec | None = None
-    skin: SkinSpec | None = None
-    #: exact self-shadowing: None (the settings' default), False, True or a transfer asset
-    self_visibility: bool | Path | None = None
-
-    @property
-    def receives(self) -> bool:
-        return self.role in ("receiver", "both")
-
-    @property
-    def blocks(self) -> bool:
-        return self.role in ("blocker", "both")
-
-
-@dataclass
-class EnvironmentSpec:
-    """``[environment]``: exactly one of a light asset, an HDR image or inline SH."""
-
-    kind: str | None = None  # "light" | "image" | "coeffs" | None (no environment)
-    path: Path | None = None
-    coeffs: np.ndarray | None = None
-    intensity: float = 1.0
-    rotate: float = 0.0  # radians about +Y
-    #: mid-range lighting: the environment lies on a sphere of this radius about
-    #: ``center`` (None: at infinity); ``scaling`` an optional midrange table asset
-    radius: float | None = None
-    center: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    scaling: Path | None = None
-
-
-@dataclass
-class LightKey:
-    time: float
-    position: np.ndarray
-    radius: float
-    color: np.ndarray
-
-
-@dataclass
-class SphereLightSpec:
-    """One ``[[lights]]`` spherical light (RGB radiance ``color * intensity``)."""
-
-    name: str
-    keys: list[LightKey]
-    loop: bool = False
-    #: the registered light-shadow way (:mod:`shtools.scene.shadows`)
-    shadows: str = "shexp"
-    #: strata per receiver of ``shadows = "raytrace"`` (:mod:`shtools.scene.light_shadows`)
-    samples: int = 64
-    #: ``SSOCSettings`` of ``shadows = "ssoc"``/``"auto"`` (None: the defaults)
-    ssoc: Any = None
-    #: a field light: its ``srf`` asset (``shadows`` is then ``"field"``) ...
-    srf: Path | None = None
-    #: ... its keyed lamp poses (translate = position; rotation, uniform scale) ...
-    poses: list[Keyframe] = field(default_factory=list)
-    #: ... and the factor on the asset's radiance
-    intensity: float = 1.0
 
 
 @dataclass
@@ -295,7 +199,7 @@ def _settings(data: dict, ctx: _Ctx, base: Path) -> Settings:
 
 def _blocker(table, obj: ObjectSpec, data: dict, index: int, ctx: _Ctx,
              base: Path) -> BlockerSpec:
-    kinds = blocker_kinds()
+    kinds = BLOCKER_KINDS
     model = _validate(schema.blocker_model(tuple(kinds.values())), table, data, ctx.path,
                       ("objects", index, "blocker"))
     given = model.model_fields_set
@@ -433,8 +337,6 @@ def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx,
     if t.keyframes is not None:
         keys = [key_of(_key_time(k, settings.fps), k, first) for k in t.keyframes]
         keys = _sorted_keys(keys, ctx.sub("keyframes"))
-    from shtools.scene.light_shadows import ssoc_settings
-
     try:
         ssoc = ssoc_settings(None if t.ssoc is None else t.ssoc.settings())
     except InputError as exc:

@@ -16,7 +16,7 @@ ray tracing) returns the light's radiance ``(V, 3)`` itself, which the baker
 adds.
 
 Adding one is a subclass and a ``register_*`` call in its own module, imported
-from :mod:`shtools.scene.kinds` (see ``docs/architecture.md``).
+by :mod:`shtools.scene.kinds` (see ``docs/architecture.md``).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from shtools.registry import Registry
 from shtools.sh.exponential import ExpMethod
 
 
@@ -248,16 +249,11 @@ def receiver_clusters(prepared, vertices: np.ndarray):
     return lloyd_clusters(vertices, prepared.scene.settings.vertices_per_cluster, groups=groups)
 
 
-#: name -> method, in the order ``--help`` lists them
-VISIBILITY_METHODS: dict[str, VisibilityMethod] = {}
-
-
-def register_visibility_method(method: VisibilityMethod) -> VisibilityMethod:
-    """Add a visibility method (a ``bake --method`` / ``settings.method`` value)."""
-    if method.name in VISIBILITY_METHODS:
-        raise ValueError(f"visibility method '{method.name}' is already registered")
-    VISIBILITY_METHODS[method.name] = method
-    return method
+#: name -> method, in the order ``--help`` lists them; complete once
+#: :mod:`shtools.scene.kinds` is imported
+VISIBILITY_METHODS: Registry[VisibilityMethod] = Registry("visibility method")
+#: add a visibility method (a ``bake --method`` / ``settings.method`` value); returns it
+register_visibility_method = VISIBILITY_METHODS.register
 
 
 register_visibility_method(RuntimeVisibility("default"))
@@ -265,14 +261,6 @@ for _exp in ExpMethod:
     register_visibility_method(RuntimeVisibility(_exp.value, _exp.value))
 register_visibility_method(ProductVisibility())
 register_visibility_method(RaytraceVisibility())
-
-
-def bake_method_names() -> tuple[str, ...]:
-    """The registered visibility methods (choices of ``settings.method`` and ``--method``)."""
-    from shtools.scene.blockers import blocker_kinds
-
-    blocker_kinds()  # imports shtools.scene.kinds, where extra methods register
-    return tuple(VISIBILITY_METHODS)
 
 
 # --------------------------------------------------------------------------- lights
@@ -309,16 +297,10 @@ class ShexpLight(LightShadow):
                                  sphere_lights=lights)
 
 
-#: name -> way
-LIGHT_SHADOWS: dict[str, LightShadow] = {}
-
-
-def register_light_shadow(way: LightShadow) -> LightShadow:
-    """Add a light-shadow way (a ``shadows = "<name>"`` value of ``[[lights]]``)."""
-    if way.name in LIGHT_SHADOWS:
-        raise ValueError(f"light-shadow way '{way.name}' is already registered")
-    LIGHT_SHADOWS[way.name] = way
-    return way
+#: name -> way; complete once :mod:`shtools.scene.kinds` is imported
+LIGHT_SHADOWS: Registry[LightShadow] = Registry("light-shadow way")
+#: add a light-shadow way (a ``shadows = "<name>"`` value of ``[[lights]]``); returns it
+register_light_shadow = LIGHT_SHADOWS.register
 
 
 register_light_shadow(ShexpLight())

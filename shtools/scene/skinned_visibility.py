@@ -47,7 +47,7 @@ SQRT_4PI = math.sqrt(4.0 * math.pi)
 def turned_frames(normals) -> np.ndarray:
     """Tangent frames ``(V, 3, 3)`` (rows t1, t2, N), each turned about its normal by
     ``v`` golden angles (vertex ``v``)."""
-    from shtools.fields.self_visibility import tangent_frames
+    from shtools.geometry.visibility import tangent_frames
 
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     t1, t2 = tangent_frames(n)
@@ -102,7 +102,7 @@ def adaptive_self_visibility(points, normals, faces, caster, order: int,
         Ray origin offset along the normal (default ``RAY_OFFSET`` times the caster's
         bounding-box diagonal).
     """
-    from shtools.fields.self_visibility import RAY_OFFSET, _subtract_blocked, hemisphere_directions
+    from shtools.geometry.visibility import RAY_OFFSET, _subtract_blocked, hemisphere_directions
     from shtools.reference.look import mesh_adjacency
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)

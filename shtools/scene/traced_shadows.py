@@ -151,7 +151,7 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
         The object's real mesh.
     axis, cos_half : ndarray, shapes (V, 3) and (V,)
         The cones of its bounding sphere
-        (:func:`~shtools.fields.self_visibility.bounding_cones`).
+        (:func:`~shtools.geometry.visibility.bounding_cones`).
     order : int
         SH order ``n`` of the result.
     n_dirs : int
@@ -342,7 +342,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     visibility : ndarray, shape (T, order^2) float64
         The filtered traced visibility.
     """
-    from shtools.fields.self_visibility import bounding_cones
+    from shtools.geometry.visibility import bounding_cones
 
     v = np.asarray(vertices, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)

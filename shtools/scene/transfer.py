@@ -2,7 +2,7 @@
 
 A rigid object that both receives and casts (``role = "both"``, no skin) is
 shadowed on its own vertices by its **real mesh**: its self-visibility is ray
-traced once in its own frame (:func:`shtools.fields.self_visibility.hemisphere_transfer`,
+traced once in its own frame (:func:`shtools.geometry.visibility.hemisphere_transfer`,
 or read from a ``transfer`` asset), and every frame the runtime adds its log,
 rotated with the object, to the log of every *other* blocker
 (:class:`shtools.runtime.SelfVisibility`).  The object's own spheres then shadow
@@ -97,7 +97,7 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         return stored, None
     if cache is None:
         return _traced_self_log(obj, acc_order, log), None
-    from shtools.fields.self_visibility import LOG_FLOOR, TRANSFER_DIRECTIONS
+    from shtools.geometry.visibility import LOG_FLOOR, TRANSFER_DIRECTIONS
 
     parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
              "faces": np.asarray(obj.faces), "order": int(acc_order),
@@ -113,7 +113,7 @@ def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
 
     if is_convex(obj.vertices, obj.faces):
         return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
-    from shtools.fields.self_visibility import hemisphere_transfer
+    from shtools.geometry.visibility import hemisphere_transfer
 
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if log:
@@ -147,7 +147,7 @@ def is_convex(vertices, faces) -> bool:
 
 def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
     from shtools.data_formats.transfer import read_transfer
-    from shtools.fields.self_visibility import self_visibility_log_at
+    from shtools.geometry.visibility import self_visibility_log_at
 
     t = read_transfer(path)
     name = obj.spec.name
@@ -262,7 +262,7 @@ def object_local_log(obj, acc_order: int, distance: float = LOCAL_DISTANCE, *,
 def _traced_local_log(obj, acc_order: int, distance: float) -> np.ndarray:
     import trimesh
 
-    from shtools.fields.self_visibility import self_visibility, self_visibility_log
+    from shtools.geometry.visibility import self_visibility, self_visibility_log
 
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     diagonal = float(np.linalg.norm(np.ptp(obj.vertices, axis=0)))

@@ -1,8 +1,9 @@
 r"""Batched kernels for the SH product and square (used by :mod:`shtools.sh.triple`).
 
 Exact evaluations of :math:`(\mathbf f * \mathbf g)_i = \sum_{jk}\Gamma_{ijk} f_j g_k`,
-registered by name in :data:`PRODUCT_KERNELS` (a benchmark may register more,
-e.g. the generated unrolled kernel of ``benchmarks/unrolled_kernel.py``):
+registered by name in :data:`PRODUCT_KERNELS` (a :class:`shtools.registry.Registry`; a
+benchmark may register more, e.g. the generated unrolled kernel of
+``benchmarks/unrolled_kernel.py``):
 
 *Quadrature (CP) kernel* (``"cp"``, the default): the exact quadrature of degree
 ``(n_out - 1) + 2(n - 1)`` factors Γ as :math:`\Gamma_{ijk} = \sum_q w_q
@@ -24,6 +25,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from shtools.registry import Registry
 from shtools.sh.basis import basis
 from shtools.sh.gamma import triple_tensor
 from shtools.sh.quadrature import sphere_quadrature
@@ -88,12 +90,9 @@ def _sparse_kernel(f, g, order, out_order):
 
 
 #: name -> kernel; "cp" is the default of every product in shtools
-PRODUCT_KERNELS: dict[str, ProductKernel] = {"cp": _cp_kernel, "sparse": _sparse_kernel}
-
-
-def register_product_kernel(name: str, kernel: ProductKernel) -> None:
-    """Add a product kernel (e.g. a benchmark's alternative evaluation)."""
-    PRODUCT_KERNELS[name] = kernel
+PRODUCT_KERNELS: Registry[ProductKernel] = Registry("product kernel")
+PRODUCT_KERNELS.register(_cp_kernel, "cp")
+PRODUCT_KERNELS.register(_sparse_kernel, "sparse")
 
 
 def run_product(f: np.ndarray, g: np.ndarray | None, order: int, out_order: int,
@@ -114,7 +113,4 @@ def run_product(f: np.ndarray, g: np.ndarray | None, order: int, out_order: int,
     ndarray, shape (B, out_order**2)
         May be a transposed view of a coefficient-major array.
     """
-    if kernel not in PRODUCT_KERNELS:
-        raise ValueError(f"unknown product kernel {kernel!r}; use one of "
-                         f"{tuple(PRODUCT_KERNELS)}")
     return PRODUCT_KERNELS[kernel](f, g, order, out_order)

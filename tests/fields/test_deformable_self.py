@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from shtools.fields.deformable import sample_deformable_field
-from shtools.fields.self_visibility import self_visibility, self_visibility_log
+from shtools.geometry.visibility import self_visibility, self_visibility_log
 from shtools.reference import raytrace_visibility, relative_rmse
 from shtools.reference.scenes import ground_grid, sky_light
 from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings

@@ -9,8 +9,8 @@ import math
 import numpy as np
 from helpers.scenes import ground, write_scene
 
+from shtools.geometry.visibility import direction_quadrature
 from shtools.reference.evaluation import _exact_environment, error_split
-from shtools.reference.raytrace import quadrature_for
 from shtools.runtime import ShadowSettings
 
 
@@ -36,7 +36,7 @@ def test_exact_integral_of_an_unshadowed_receiver_under_a_constant_sky():
     """A white Lambertian receiver that sees everything under a constant sky c reflects c
     (docs/conventions.md), whatever the normal; the quadrature integrates max(0, N.s)
     to ~1e-3 with 3000 nodes (a kink along a great circle)."""
-    dirs, w = quadrature_for(3000)
+    dirs, w = direction_quadrature(3000)
     normals = np.array([[0.0, 1.0, 0.0], [0.6, 0.0, 0.8]])
     c = np.array([1.0, 2.0, 0.5])
     env = np.zeros((16, 3))

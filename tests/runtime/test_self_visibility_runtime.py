@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from shtools.errors import InputError
-from shtools.fields.self_visibility import self_visibility, self_visibility_log
+from shtools.geometry.visibility import self_visibility, self_visibility_log
 from shtools.reference import raytrace_visibility, relative_rmse
 from shtools.reference.scenes import sky_light
 from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker

@@ -172,8 +172,8 @@ def torus_dir(tmp_path_factory):
 
 def test_field_asset_stores_o_v_at_the_accumulation_order(torus_dir):
     from shtools.data_formats.field import read_field
-    from shtools.fields.self_visibility import self_visibility
     from shtools.geometry.mesh import load_mesh
+    from shtools.geometry.visibility import self_visibility
 
     fld = read_field(torus_dir / "t.field.h5")
     mesh = load_mesh(torus_dir / "torus.obj")
@@ -191,7 +191,7 @@ def test_one_field_asset_shadows_the_object_and_the_ground_like_ray_tracing(
     """``blocker = { field = ... }`` alone: the field shadows the ground, its stored O_v
     the torus itself (no ray tracing at bake time), both close to ray tracing of the
     real mesh; without the O_v the torus is not self-shadowed."""
-    import shtools.fields.self_visibility as sv
+    import shtools.geometry.visibility as sv
 
     def no_tracing(*args, **kwargs):
         raise AssertionError("the bake ray-traced the self-visibility the field holds")
@@ -232,7 +232,7 @@ def test_an_o_v_below_the_accumulation_order_is_traced_at_bake_time(torus_dir, m
 
     assert main(["field", "sample", str(torus_dir / "torus.obj"), "-o",
                  str(torus_dir / "t4.field.h5"), "--self-order", "4", *map(str, FIELD_ARGS)]) == 0
-    import shtools.fields.self_visibility as sv
+    import shtools.geometry.visibility as sv
 
     calls = []
     real = sv.hemisphere_transfer

@@ -236,7 +236,7 @@ def test_traced_shadow_on_the_ground_matches_ray_tracing(folded_tube):
 def _whole_weight_rows(scene) -> np.ndarray:
     """Bool ``(frames x ground vertices,)``: the ground rows where the tube's traced mesh
     has the whole hand-over weight, frame by frame (as :func:`_ground_rows` stacks)."""
-    from shtools.fields.self_visibility import bounding_cones
+    from shtools.geometry.visibility import bounding_cones
     from shtools.scene.pose import pose_frame
     from shtools.scene.traced_shadows import cone_rays, handover_weights
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from shtools.fields.self_visibility import hemisphere_visibility
+from shtools.geometry.visibility import hemisphere_visibility
 from shtools.reference import raytrace_visibility
 from shtools.scene.skinned_visibility import (
     SKINNED_DIRECTIONS,

@@ -41,7 +41,7 @@ def test_set_visibility_of_a_sphere_is_its_cap_in_closed_form():
     the direction to it: g_00 = (4 pi - 2 pi (1 - cos a)) / sqrt(4 pi) and, along the
     axis, the band-1 coefficient -sqrt(3 / 4 pi) * pi sin^2 a (the integral of
     cos over the cap)."""
-    from shtools.fields.self_visibility import bounding_cones
+    from shtools.geometry.visibility import bounding_cones
 
     _, _, caster = _unit_sphere()
     dist = np.array([1.5, 2.5, 4.0])

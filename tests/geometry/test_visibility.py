@@ -1,4 +1,4 @@
-"""Self-visibility of a mesh (shtools.fields.self_visibility) against closed forms and
+"""Self-visibility of a mesh (shtools.geometry.visibility) against closed forms and
 the independent ray-traced reference."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from shtools.fields.self_visibility import (
+from shtools.geometry.visibility import (
     direction_quadrature,
     self_visibility,
     self_visibility_log,
@@ -103,7 +103,7 @@ def test_agrees_with_the_reference_ray_tracer_on_a_procedural_mesh():
 
 
 def test_progress_reports_every_vertex_and_chunks(monkeypatch):
-    import shtools.fields.self_visibility as sv
+    import shtools.geometry.visibility as sv
 
     monkeypatch.setattr(sv, "RAYS_PER_STEP", 50 * 100)  # 100 directions -> 50 per chunk
     mesh = trimesh.creation.icosphere(subdivisions=2)
@@ -162,7 +162,7 @@ def test_does_not_import_the_reference():
     import subprocess
     import sys
 
-    code = ("import sys, shtools.fields.self_visibility; "
+    code = ("import sys, shtools.geometry.visibility; "
             "print(any(m.startswith('shtools.reference') for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)

@@ -16,7 +16,7 @@ with at least ``n_dirs`` nodes and projected to order ``n`` with its weights,
 ``d`` (``(d/2 + 1)(d + 1) >= n_dirs``), not for the discontinuous visibility,
 so ``n_dirs`` sets the accuracy: shadow boundaries cut the rule's cells.
 On a closed form (a cone of half-angle 45° about +y plus a half space,
-``tests/fields``): single coefficients within 4.6e-2 at 2,000 nodes,
+``tests/geometry``): single coefficients within 4.6e-2 at 2,000 nodes,
 2e-2 at 8,000 and 3.7e-3 at 20,000 (``g_0 = 3.54`` for reference).  The
 ray-traced reference uses the same family of rules, so at equal ``n_dirs``
 both carry the same quadrature error.

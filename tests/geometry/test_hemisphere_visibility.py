@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from shtools.fields.self_visibility import (
+from shtools.geometry.raycast import RayCaster
+from shtools.geometry.visibility import (
     hemisphere_directions,
     hemisphere_visibility,
     tangent_frames,
 )
-from shtools.geometry.raycast import RayCaster
 from shtools.reference import raytrace_visibility
 
 
@@ -96,7 +96,7 @@ def test_matches_the_reference_ray_tracer_on_a_torus():
 def _square_cone(normal, n_dirs):
     """g of a point at the origin under a square of half-size 0.5 at height 2, traced in
     the cone of the square's bounding sphere (centre (0, 0, 2), radius sqrt(0.5))."""
-    from shtools.fields.self_visibility import cone_visibility
+    from shtools.geometry.visibility import cone_visibility
 
     caster = RayCaster.from_meshes(_square_above(2.0, 0.5))
     return cone_visibility([[0.0, 0.0, 0.0]], [normal], caster, [0.0, 0.0, 2.0],
@@ -124,7 +124,7 @@ def test_cone_constant_term_matches_the_solid_angle_of_a_square():
 
 
 def test_cone_outside_the_sphere_or_below_the_plane_is_exactly_unblocked():
-    from shtools.fields.self_visibility import bounding_cones, cone_visibility
+    from shtools.geometry.visibility import bounding_cones, cone_visibility
 
     square = _square_above(2.0, 0.5)
     caster = RayCaster.from_meshes(square)
@@ -148,7 +148,7 @@ def test_cone_visibility_matches_the_reference_ray_tracer_under_a_torus():
     """A ground grid under a tilted torus: every coefficient against the reference ray
     tracer over the whole sphere (12,000 directions), so the directions left out of the
     cones are indeed unblocked."""
-    from shtools.fields.self_visibility import cone_visibility
+    from shtools.geometry.visibility import cone_visibility
 
     torus = trimesh.creation.torus(major_radius=0.6, minor_radius=0.25, major_sections=24,
                                    minor_sections=12)

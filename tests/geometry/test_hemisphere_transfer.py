@@ -1,5 +1,5 @@
 """The bake's exact self-transfer from hemisphere rays
-(:func:`shtools.fields.self_visibility.hemisphere_transfer`) against the independent
+(:func:`shtools.geometry.visibility.hemisphere_transfer`) against the independent
 reference ray tracer, at the accuracy of the product-rule transfer it replaces."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import trimesh
 
-from shtools.fields.self_visibility import (
+from shtools.geometry.visibility import (
     DEFAULT_DIRECTIONS,
     TRANSFER_DIRECTIONS,
     hemisphere_transfer,
