@@ -14,7 +14,10 @@ tracer of the posed real meshes (:func:`shtools.reference.raytrace_visibility`,
 Scenes from ``../shared/data`` (never committed; the assets are built with
 ``benchmarks/bench_fidelity.py``'s helpers and cached there): the bunny under the
 Uffizi probe and CesiumMan walking under Grace, each on a 4 x 4 ground of 96
-subdivisions; ``--demo DIR`` adds frames 10-13 of ``make demo``'s scene in DIR.
+subdivisions; ``--demo DIR`` adds frames 10-13 of ``make demo``'s scene in DIR;
+``--scenes dragon`` (only when named: two large transfers and references) the dragon
+and the armadillo side by side under Grace on the same ground, each shadowing the
+other (objects that both receive and block).
 ``--quick``: spot on a 3 x 3 ground of 40 subdivisions, one frame.
 
 ``--baseline DIR`` bakes the same scenes with the code in DIR (e.g. the worktree of
@@ -44,6 +47,8 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = next((d / "shared" / "data" for d in (REPO.parent, REPO.parent.parent)
              if (d / "shared" / "data").is_dir()), REPO.parent / "shared" / "data")
 CACHE = REPO / "build" / "bench_look"
+#: Receivers per block of the reference ray tracer.
+REF_BLOCK = 8192
 #: Alternating repeats of each code's bake (the fastest CPU kept: the machine is shared).
 REPEATS = 2
 
@@ -185,8 +190,12 @@ def references(scene: dict, n_dirs: int) -> dict:
         state = pose_frame(prepared, k / sc.settings.fps, with_meshes=True, trace=False)
         if f"g{k}" not in stored:
             meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
-            stored[f"g{k}"] = raytrace_visibility(state.vertices, state.normals, meshes, order,
-                                                  n_dirs)
+            # in blocks of receivers: a (V, n_dirs) visibility of a large scene (the
+            # dragon's and armadillo's 93k vertices) would not fit in memory at once
+            stored[f"g{k}"] = np.concatenate([
+                raytrace_visibility(state.vertices[i:i + REF_BLOCK],
+                                    state.normals[i:i + REF_BLOCK], meshes, order, n_dirs)
+                for i in range(0, len(state.vertices), REF_BLOCK)])
             np.savez(cache, **stored)
         one = np.zeros((len(state.vertices), order * order))
         one[:, 0] = math.sqrt(4 * math.pi)

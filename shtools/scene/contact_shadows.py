@@ -10,25 +10,24 @@ fill, and come out far too dark.  Contact surfaces are exactly where spheres fai
 
 So an object receiver gets the same treatment as the ground
 (:mod:`shtools.scene.traced_shadows`): the **real posed meshes of the other
-objects near it** are traced on its vertices over the shared world direction
+objects touching it** are traced on its vertices over the shared world direction
 set, filtered over its surface by the distance to them, and handed over per
 vertex, smoothly, to their blockers far from them.  The caller
 (:func:`shtools.scene.pose.pose_frame`) runs that hand-over; this module says
 who is traced on whom (:func:`contact_casters`):
 
-* the traceable blockers (sphere sets fitted to a mesh, shadow fields, skinned
-  objects that trace their posed mesh) are grouped as the ground's are, by
-  bounding spheres that overlap, directly or through others;
-* a receiver is traced against each group some member of which its hand-over
-  reaches (beyond the hand-over's outer edge,
-  :data:`~shtools.scene.traced_shadows.HANDOVER_RAYS`, it keeps their blockers,
-  exactly what the hand-over would give it), and the group's blockers other than
-  its own are skipped on the rows traced;
-* the members of a group are traced jointly (one Embree scene, one cone), so the
-  parts around a receiver never multiply visibilities that overlap.  The scene is
-  the whole group's, shared by its receivers, unless the receiver is a member that
-  can shadow itself: its own mesh would then shadow it twice (its self-visibility
-  does already), so it is traced against the others alone.
+* the traceable blockers are sphere sets fitted to a mesh, sphere primitives (exact
+  outside, but not for a receiver buried in them where objects interpenetrate),
+  shadow fields and skinned objects that trace their posed mesh;
+* a receiver is traced against the traceable objects whose bounding spheres overlap
+  its own (the objects it may touch), jointly (one Embree scene, one cone, so the
+  parts around a receiver never multiply visibilities that overlap), and their
+  blockers are skipped on the rows traced; farther objects keep their blockers,
+  which shade well away from contact;
+* a convex receiver (its own mesh never blocks above its tangent planes) is traced
+  with itself among them (one scene serves the receivers that touch the same objects); a receiver
+  that can shadow itself is traced against the others alone (its self-visibility
+  shadows it already).
 
 The Embree scene of rigid objects is kept while their transforms hold (a static
 scene builds it once per bake); a lone skinned object's per-frame scene is reused.
@@ -36,7 +35,6 @@ scene builds it once per bake); a lone skinned object's per-frame scene is reuse
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
@@ -79,42 +77,23 @@ class ContactPart:
     convex: bool = False
 
 
-def reach_factor(n_dirs: int) -> float:
-    """Distance from a sphere's centre, in its radii, where the hand-over to its blocker
-    ends: the cone of half-angle ``θ`` with ``n_dirs (1 - cos θ)`` at the lower end of
-    :data:`~shtools.scene.traced_shadows.HANDOVER_RAYS` (beyond it the weight is 0)."""
-    from shtools.scene.traced_shadows import HANDOVER_RAYS
+#: Rays of an object receiver's cone that fills its hemisphere, as a share of the
+#: ground's ``traced_shadow_directions``: an object's receivers are few and close to
+#: what they trace, where the surface filter is narrow; half the ground's rays kept the
+#: demo walker's parts within 1-5 % of the ray tracer (a quarter: 2-8 %, for a tenth
+#: less frame time; ``benchmarks/bench_look.py --demo``).
+CONTACT_SCALE = 0.5
 
-    cos_t = max(-1.0, 1.0 - HANDOVER_RAYS[0] / int(n_dirs))
-    sin_t = math.sqrt(max(1e-12, 1.0 - cos_t * cos_t))
-    return 1.0 / sin_t
+
+def contact_directions(ground_directions: int) -> int:
+    """Rays of an object receiver whose cone fills its hemisphere (at least 8)."""
+    return max(8, round(CONTACT_SCALE * int(ground_directions)))
 
 
 def _sphere(v: np.ndarray) -> tuple[np.ndarray, float]:
     """Bounding sphere of posed vertices: the box centre and the farthest vertex."""
     center = 0.5 * (v.min(axis=0) + v.max(axis=0))
     return center, float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
-
-
-def groups_of(spheres: list) -> list[list[int]]:
-    """Indices of ``spheres`` (centre, radius) grouped by overlap, directly or through
-    others, each group in the given order."""
-    group = list(range(len(spheres)))
-
-    def root(i):
-        while group[i] != i:
-            i = group[i]
-        return i
-
-    for i in range(len(spheres)):
-        for j in range(i):
-            (ci, ri), (cj, rj) = spheres[i], spheres[j]
-            if np.linalg.norm(ci - cj) < ri + rj:
-                group[max(root(i), root(j))] = min(root(i), root(j))
-    out: dict = {}
-    for i in range(len(spheres)):
-        out.setdefault(root(i), []).append(i)
-    return list(out.values())
 
 
 def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, tuple]]:
@@ -131,45 +110,43 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
     Returns
     -------
     list of (receivers, caster_of)
-        ``receivers`` is ``(rows (R,), points (R, 3), normals (R, 3))`` of one object
-        receiver; ``caster_of`` is ``(caster, vertices (Vc, 3), faces (Fc, 3),
-        blocker indices tuple)`` of the other objects traced on it jointly.
+        ``receivers`` is ``(rows (R,), points (R, 3), normals (R, 3))`` of the object
+        receivers traced against one scene that skip the same blockers; ``caster_of``
+        is ``(caster, vertices (Vc, 3), faces (Fc, 3), blocker indices tuple)`` of that
+        scene and those blockers.
     """
     traceable = [p for p in parts if p.blocker is not None and len(p.obj.faces)]
     if not traceable:
         return []
     spheres = [_sphere(p.vertices) for p in traceable]
-    groups = groups_of(spheres)
-    reach = reach_factor(n_dirs)
     built: dict = {}  # the frame's Embree scenes, one per set of members
-    out = []
+    out: dict = {}  # (scene, blockers skipped) -> its receivers
     for receiver in parts:
         if receiver.rows is None or not len(receiver.rows):
             continue
         center, radius = _sphere(receiver.vertices)
-        for group in groups:
-            members = [traceable[k] for k in group]
-            others = [m for m in members if m is not receiver]
-            near = [k for k in group if traceable[k] is not receiver
-                    and np.linalg.norm(spheres[k][0] - center) - radius
-                    < reach * spheres[k][1]]
-            if not near:
-                continue
-            if len(others) < len(members) and not receiver.convex:
-                # its own mesh would shadow it twice (its self-visibility does already):
-                # the others alone, which it may sit next to or inside
-                traced = others
-            else:
-                # a convex receiver's own mesh never blocks above its tangent planes: the
-                # whole group's scene, shared with the group's other receivers
-                traced = members
-            key = tuple(id(m) for m in traced)
-            if key not in built:
-                built[key] = _joint_caster(traced)
-            caster, vertices, faces, _ = built[key]
-            out.append(((receiver.rows, receiver.vertices, receiver.normals),
-                        (caster, vertices, faces, tuple(m.blocker for m in others))))
-    return out
+        near = [p for p, (c, r) in zip(traceable, spheres, strict=True)
+                if p is not receiver and np.linalg.norm(c - center) < r + radius]
+        if not near:
+            continue
+        if receiver.convex and any(p is receiver for p in traceable):
+            # a convex receiver's own mesh never blocks above its tangent planes: traced
+            # with the others, the scene is the one its neighbours share; its own
+            # blocker, which its self-visibility skips on its rows already, is skipped
+            # too (it lies inside the members' bounding sphere, where the traced mesh
+            # takes the whole weight, no hand-over)
+            near = [p for p in traceable if p is receiver or any(p is q for q in near)]
+        key = tuple(id(m) for m in near)
+        if key not in built:
+            built[key] = _joint_caster(near)
+        out.setdefault((key, tuple(m.blocker for m in near)), []).append(receiver)
+    calls = []
+    for (key, skipped), receivers in out.items():
+        caster, vertices, faces, _ = built[key]
+        joint = tuple(np.concatenate(a) for a in zip(
+            *((r.rows, r.vertices, r.normals) for r in receivers), strict=True))
+        calls.append((joint, (caster, vertices, faces, skipped)))
+    return calls
 
 
 #: Embree scenes of rigid objects' meshes in world space, per process: ids of the

@@ -15,7 +15,7 @@ from shtools.scene.animation import (
     vertex_normals,
     world_matrices,
 )
-from shtools.scene.contact_shadows import ContactPart, contact_casters
+from shtools.scene.contact_shadows import ContactPart, contact_casters, contact_directions
 from shtools.scene.kinds import BLOCKER_KINDS
 from shtools.scene.prepare import PreparedScene
 
@@ -120,11 +120,16 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                 # a rigid sphere-set or field blocker: its real mesh shadows the ground
                 # near it instead (a field's innermost shells are coarse next to the object)
                 rigid.append((o, m, world_v, len(blockers) - 1))
-            if o.spec.receives or stands_in or caster is not None:
+            # an exact sphere shades the receivers outside it exactly, but not those
+            # buried in it where objects interpenetrate: its mesh is traced there too
+            touches = stands_in or caster is not None or (
+                o.motion is None and trace and st.traced_shadows and len(o.faces)
+                and isinstance(blockers[-1], SphereBlocker))
+            if o.spec.receives or touches:
                 parts.append(ContactPart(o, world_v, m, rows=(
                     np.arange(n_rows - len(world_v), n_rows) if o.spec.receives else None),
-                    normals=world_n, caster=caster, blocker=(
-                        len(blockers) - 1 if stands_in or caster is not None else None),
+                    normals=world_n, caster=caster,
+                    blocker=len(blockers) - 1 if touches else None,
                     # a convex mesh's traced self-visibility is zero: it cannot shadow itself
                     convex=o.motion is None and o.self_log is not None and not o.self_log.any()))
             if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
@@ -145,10 +150,11 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                                                 lights) for c in casters) if v is not None)
     if trace and st.traced_shadows and field_traced:
         # the other objects' real meshes on each object receiver near them (contact)
+        n_contact = contact_directions(st.traced_shadow_directions)
         selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
-                                                lights)
-                                 for receivers, c in contact_casters(
-                                     parts, st.traced_shadow_directions)) if v is not None)
+                                                lights, n_dirs=n_contact)
+                                 for receivers, c in contact_casters(parts, n_contact))
+                     if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs)
 
@@ -173,7 +179,7 @@ def pose_lights(scene, t: float) -> list:
 
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
-                   lights=()):
+                   lights=(), n_dirs: int | None = None):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -182,7 +188,9 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     ``bench_fidelity``'s rigid scenes).
 
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
-    ``(R,)``, ``(R, 3)``, ``(R, 3)``; returns None when none is within the object's reach."""
+    ``(R,)``, ``(R, 3)``, ``(R, 3)`` (or of one object receiver, for contact shadows);
+    ``n_dirs`` the rays of a cone filling the hemisphere (default
+    ``traced_shadow_directions``); returns None when none is within the object's reach."""
     from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
     from shtools.scene.traced_shadows import traced_ground
 
@@ -195,7 +203,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     own = [dataclasses.replace(blockers[k], skip_rows=None)
            if isinstance(blockers[k], FieldBlocker) else blockers[k] for k in indices]
     handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
-                                      st.traced_shadow_directions,
+                                      n_dirs or st.traced_shadow_directions,
                                       spheres=_bounding_spheres(own),
                                       lights=[(x.position, x.radius) for x in lights
                                               if isinstance(x, SphereLight)])

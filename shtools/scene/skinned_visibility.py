@@ -63,6 +63,23 @@ def split_directions(n_dirs: int) -> tuple[int, int]:
     return first, n - first
 
 
+#: The last meshes' vertex adjacency, per process: (faces array, vertex count, CSR).
+_ADJACENCY: list = []
+
+
+def _adjacency(faces, n_vertices: int):
+    """Vertex adjacency ``(V, V)`` CSR of a mesh, kept while the same faces array comes
+    back (a skinned mesh's topology never changes)."""
+    from shtools.reference.look import mesh_adjacency
+
+    for f, n, adj in _ADJACENCY:
+        if f is faces and n == n_vertices:
+            return adj
+    adj = mesh_adjacency(faces, n_vertices)
+    _ADJACENCY[:] = [(faces, n_vertices, adj), *_ADJACENCY[:3]]
+    return adj
+
+
 def _blocked(caster, origins, frames, local) -> tuple[np.ndarray, np.ndarray]:
     """World directions ``(V, Q, 3)`` of the set ``local`` in each frame, and whether
     each is blocked ``(V, Q)``."""
@@ -103,7 +120,6 @@ def adaptive_self_visibility(points, normals, faces, caster, order: int,
         bounding-box diagonal).
     """
     from shtools.geometry.visibility import RAY_OFFSET, _subtract_blocked, hemisphere_directions
-    from shtools.reference.look import mesh_adjacency
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -120,7 +136,7 @@ def adaptive_self_visibility(points, normals, faces, caster, order: int,
     if not busy.any():
         return g
     if n_rest:
-        adj = mesh_adjacency(faces, len(p))
+        adj = _adjacency(faces, len(p))
         for _ in range(DILATE_RINGS):
             busy = busy | (adj @ busy.astype(np.float64) > 0)
     rows = np.flatnonzero(busy)

@@ -80,9 +80,41 @@ def test_linked_objects_shadow_each_other_by_their_real_meshes(tmp_path):
     assert err < 0.6 * err_spheres, (err, err_spheres)
 
 
+BALL = """
+[[objects]]
+name = "ball"
+primitive = { type = "sphere", radius = 0.3, subdivisions = 3 }
+role = "both"
+translate = [0.3, 1.0, 0.0]
+"""
+
+
+def test_a_ball_through_a_link_shadows_the_vertices_buried_in_it(tmp_path):
+    """A sphere primitive through the link's tube (interpenetrating): its exact sphere
+    shades the receivers outside it exactly but leaves those buried in it lit; its
+    mesh is traced on the link instead."""
+    _write_torus(tmp_path)
+
+    def scene(settings=""):
+        text = (ground_scene_head(settings, size=4, subdivisions=24)
+                + LINK.format(name="a", x=-0.3, x2=-0.3, rx=90, rx2=90) + BALL)
+        (tmp_path / "scene.toml").write_text(text)
+        return load_scene(tmp_path / "scene.toml")
+
+    ref = _bake(scene(), method="raytrace", raytrace_dirs=3200)
+    link = slice(GROUND, GROUND + TORUS)
+    err = relative_rmse(_bake(scene())[:, link], ref[:, link])
+    err_sphere = relative_rmse(_bake(scene("traced_shadows = false"))[:, link], ref[:, link])
+    # the ball's mesh (642 vertices) at 48 rays per hemisphere, filtered, against 3,200
+    # directions over the sphere: measured 1.7 %; the exact sphere leaves the buried
+    # vertices lit: 30 %
+    assert err < 0.04, err
+    assert err < 0.2 * err_sphere, (err, err_sphere)
+
+
 def test_a_receiver_is_traced_against_the_others_near_it_not_itself(tmp_path):
     """Each link is traced against the other (never itself: its transfer shadows it);
-    moved 6 bounding radii apart, beyond the hand-over, each keeps the other's spheres."""
+    moved apart (bounding spheres 4 radii apart), each keeps the other's spheres."""
     from shtools.scene.pose import pose_frame
 
     _write_torus(tmp_path)
@@ -95,3 +127,33 @@ def test_a_receiver_is_traced_against_the_others_near_it_not_itself(tmp_path):
             rows = np.arange(len(state.vertices))[sv.rows]
             own = 0 if rows[0] < GROUND + TORUS else 1
             assert sv.skipped == (1 - own,)  # the other link's spheres, never its own
+
+
+def _part(vertices, rows=None, blocker=None, convex=False):
+    from types import SimpleNamespace
+
+    from shtools.scene.contact_shadows import ContactPart
+
+    v = np.asarray(vertices, dtype=float)
+    obj = SimpleNamespace(faces=np.array([[0, 1, 2]]), motion=None)
+    return ContactPart(obj, v, np.eye(4), rows=rows, normals=None if rows is None else
+                       np.tile([0.0, 1.0, 0.0], (len(v), 1)), blocker=blocker, convex=convex)
+
+
+def test_who_is_traced_on_whom():
+    """Overlapping bounding spheres decide; a convex receiver is traced with itself in
+    the scene (shared with its neighbours), a concave one against the others alone; an
+    object beyond touching keeps its blocker; receivers of one scene and skip share a
+    call."""
+    from shtools.scene.contact_shadows import contact_casters
+
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    a = _part(tri, rows=np.arange(0, 3), blocker=0, convex=True)
+    b = _part(tri + np.array([0.5, 0.0, 0.0]), rows=np.arange(3, 6), blocker=1, convex=True)
+    c = _part(tri + np.array([0.2, 0.3, 0.0]), rows=np.arange(6, 9), blocker=2)  # concave
+    far = _part(tri + np.array([9.0, 0.0, 0.0]), rows=np.arange(9, 12), blocker=3, convex=True)
+    calls = contact_casters([a, b, c, far], 96)
+    by_rows = {tuple(receivers[0]): caster_of[3] for receivers, caster_of in calls}
+    assert by_rows[(0, 1, 2, 3, 4, 5)] == (0, 1, 2)  # a and b: one scene with themselves
+    assert by_rows[(6, 7, 8)] == (0, 1)  # c: the others alone
+    assert not any(9 in rows for rows in by_rows)  # nothing touches the far one
