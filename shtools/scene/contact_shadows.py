@@ -16,9 +16,10 @@ vertex, smoothly, to their blockers far from them.  The caller
 (:func:`shtools.scene.pose.pose_frame`) runs that hand-over; this module says
 who is traced on whom (:func:`contact_casters`):
 
-* the traceable blockers are sphere sets fitted to a mesh, sphere primitives (exact
-  outside, but not for a receiver buried in them where objects interpenetrate),
-  shadow fields and skinned objects that trace their posed mesh;
+* the traceable blockers are sphere sets fitted to a mesh, shadow fields, skinned
+  objects that trace their posed mesh, and sphere primitives for the receivers with
+  vertices buried in them (exact outside, they leave the buried vertices lit where
+  objects interpenetrate);
 * a receiver is traced against the traceable objects whose bounding spheres overlap
   its own (the objects it may touch), jointly (one Embree scene, one cone, so the
   parts around a receiver never multiply visibilities that overlap), and their
@@ -65,6 +66,9 @@ class ContactPart:
     convex : bool
         Its own mesh cannot block its vertices above their tangent planes (a convex
         rigid mesh, whose self-visibility is exactly 1).
+    exact : bool
+        Its blocker is its exact shape (a sphere primitive): traced only on the
+        receivers with vertices buried in it, which the exact sphere leaves lit.
     """
 
     obj: object
@@ -75,13 +79,13 @@ class ContactPart:
     blocker: int | None = None
     caster: object = None
     convex: bool = False
+    exact: bool = False
 
 
 #: Rays of an object receiver's cone that fills its hemisphere, as a share of the
 #: ground's ``traced_shadow_directions``: an object's receivers are few and close to
-#: what they trace, where the surface filter is narrow; half the ground's rays kept the
-#: demo walker's parts within 1-5 % of the ray tracer (a quarter: 2-8 %, for a tenth
-#: less frame time; ``benchmarks/bench_look.py --demo``).
+#: what they trace, where the surface filter is narrow (what each share costs and buys:
+#: ``benchmarks/bench_look.py --demo``, docs/scenes.md).
 CONTACT_SCALE = 0.5
 
 
@@ -94,6 +98,12 @@ def _sphere(v: np.ndarray) -> tuple[np.ndarray, float]:
     """Bounding sphere of posed vertices: the box centre and the farthest vertex."""
     center = 0.5 * (v.min(axis=0) + v.max(axis=0))
     return center, float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
+
+
+def _buried(points, center, radius) -> bool:
+    """Whether any point lies inside the sphere."""
+    d = np.asarray(points, dtype=np.float64) - center
+    return bool((np.einsum("vk,vk->v", d, d) < radius * radius).any())
 
 
 def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, tuple]]:
@@ -126,7 +136,8 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
             continue
         center, radius = _sphere(receiver.vertices)
         near = [p for p, (c, r) in zip(traceable, spheres, strict=True)
-                if p is not receiver and np.linalg.norm(c - center) < r + radius]
+                if p is not receiver and np.linalg.norm(c - center) < r + radius
+                and (not p.exact or _buried(receiver.vertices, c, r))]
         if not near:
             continue
         if receiver.convex and any(p is receiver for p in traceable):

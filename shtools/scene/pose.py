@@ -131,7 +131,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                     normals=world_n, caster=caster,
                     blocker=len(blockers) - 1 if touches else None,
                     # a convex mesh's traced self-visibility is zero: it cannot shadow itself
-                    convex=o.motion is None and o.self_log is not None and not o.self_log.any()))
+                    convex=o.motion is None and o.self_log is not None and not o.self_log.any(),
+                    exact=touches and not (stands_in or caster is not None)))
             if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
                 _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
                                 selfs, len(blockers) - 1)

@@ -272,6 +272,11 @@ def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
     k = min(FILTER_NEIGHBOURS, len(p))
     dist, idx = cKDTree(p).query(p, k=k)
     dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
+    # self first even where a coincident vertex (a mesh's split normals) came first
+    r = np.arange(len(p))
+    at = np.argmax(idx == r[:, None], axis=1)  # 0 where self is first or missing
+    idx[r, at], dist[r, at] = idx[:, 0], dist[:, 0]
+    idx[:, 0], dist[:, 0] = r, 0.0
     idx = np.where(np.einsum("vk,vnk->vn", nrm, nrm[idx]) >= FILTER_MIN_COS, idx, -1)
     _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist), *_NEIGHBOURS[:NEIGHBOUR_ENTRIES - 1]]
     return idx, dist
