@@ -21,8 +21,9 @@ who is traced on whom (:func:`contact_casters`):
   vertices buried in them (exact outside, they leave the buried vertices lit where
   objects interpenetrate);
 * a receiver is traced against the traceable objects whose bounding spheres overlap
-  its own (the objects it may touch), jointly (one Embree scene, one cone, so the
-  parts around a receiver never multiply visibilities that overlap), and their
+  its own, or nearly (:data:`NEAR_MARGIN`: the objects it may touch), jointly (one
+  Embree scene, one cone, so the parts around a receiver never multiply
+  visibilities that overlap), and their
   blockers are skipped on the rows traced; farther objects keep their blockers,
   which shade well away from contact;
 * a convex receiver (its own mesh never blocks above its tangent planes) is traced
@@ -94,6 +95,11 @@ def contact_directions(ground_directions: int) -> int:
     return max(8, round(CONTACT_SCALE * int(ground_directions)))
 
 
+#: Objects whose bounding spheres come within this factor of the sum of their radii
+#: may touch (bounding spheres are loose about long or flat meshes).
+NEAR_MARGIN = 1.25
+
+
 def _sphere(v: np.ndarray) -> tuple[np.ndarray, float]:
     """Bounding sphere of posed vertices: the box centre and the farthest vertex."""
     center = 0.5 * (v.min(axis=0) + v.max(axis=0))
@@ -136,7 +142,7 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
             continue
         center, radius = _sphere(receiver.vertices)
         near = [p for p, (c, r) in zip(traceable, spheres, strict=True)
-                if p is not receiver and np.linalg.norm(c - center) < r + radius
+                if p is not receiver and np.linalg.norm(c - center) < NEAR_MARGIN * (r + radius)
                 and (not p.exact or _buried(receiver.vertices, c, r))]
         if not near:
             continue
