@@ -83,11 +83,11 @@ def evaluate(name: str, rays, subset: int) -> list[dict]:
 def _hemisphere_rows(mesh, normals, rows, n_rays: int) -> np.ndarray:
     """:func:`hemisphere_transfer`'s visibility at ``rows`` only (same caster and offset)."""
     from shtools.geometry.raycast import RayCaster
-    from shtools.geometry.visibility import hemisphere_visibility
+    from shtools.geometry.visibility import hemisphere_transfer_visibility
 
     caster = RayCaster(np.asarray(mesh.vertices), np.asarray(mesh.faces), robust=False)
-    return hemisphere_visibility(np.asarray(mesh.vertices)[rows], normals, caster, ORDER,
-                                 n_dirs=n_rays)
+    return hemisphere_transfer_visibility(np.asarray(mesh.vertices)[rows], normals, caster,
+                                          ORDER, n_dirs=n_rays)
 
 
 def _markdown(rows: list[dict]) -> str:

@@ -55,8 +55,9 @@ def uses_self_visibility(obj, default: bool = True) -> bool:
 
 
 #: Algorithm version of the cached self-visibility log (:mod:`shtools.cache`): raise it
-#: when :func:`object_self_log`'s traced result changes.
-SELF_LOG_VERSION = 2
+#: when :func:`object_self_log`'s traced result changes, even by rounding (a bake is the
+#: same bytes with or without the cache).
+SELF_LOG_VERSION = 3
 
 
 def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None,
@@ -120,7 +121,7 @@ def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
         log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
             "the set-up cache keeps it for the next bake)")
     # rays over each vertex's own hemisphere only: fewer than the product rule of
-    # `shtools transfer` casts, at no larger error (fields.self_visibility.TRANSFER_DIRECTIONS)
+    # `shtools transfer` casts, at no larger error (geometry.visibility.TRANSFER_DIRECTIONS)
     _, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
     return f.astype(np.float32)
 

@@ -56,3 +56,39 @@ def test_degenerate_normals_are_unblocked_and_progress_reaches_every_vertex():
     np.testing.assert_array_equal(g[:5], np.broadcast_to(want, (5, 9)))
     assert np.abs(g[5:] - want).max(axis=1).max() > 0.1  # the inner ring is shadowed
     assert seen[-1] == (len(n), len(n))
+
+
+def test_tangent_frame_projection_matches_per_ray_basis_sums():
+    # two independent projections of the same rays: one basis evaluation per blocked
+    # ray summed per vertex (hemisphere_visibility) against one matrix product in the
+    # tangent frame rotated by an exact product rule; they differ by rounding only
+    # (the per-ray path sums float32 basis values: ~1e-7 of g_0 = 3.54)
+    from shtools.geometry.raycast import RayCaster
+    from shtools.geometry.visibility import (
+        hemisphere_transfer_visibility,
+        hemisphere_visibility,
+    )
+
+    torus = _torus()
+    v, n = np.asarray(torus.vertices), np.asarray(torus.vertex_normals)
+    caster = RayCaster(v, np.asarray(torus.faces), robust=False)
+    for order in (3, 6):
+        per_ray = hemisphere_visibility(v, n, caster, order, n_dirs=200)
+        local = hemisphere_transfer_visibility(v, n, caster, order, n_dirs=200)
+        np.testing.assert_allclose(local, per_ray, rtol=0, atol=2e-5)
+        assert np.abs(per_ray[:, 1:]).max() > 0.1  # the comparison sees shadows
+
+
+def test_spatial_order_is_a_deterministic_permutation_along_the_box():
+    from shtools.geometry.visibility import spatial_order
+
+    rng = np.random.default_rng(3)
+    p = rng.uniform(-5.0, 5.0, size=(2000, 3))
+    order = spatial_order(p)
+    np.testing.assert_array_equal(np.sort(order), np.arange(len(p)))
+    np.testing.assert_array_equal(order, spatial_order(p.copy()))
+    # consecutive points are near each other: their mean step is far below that of
+    # the input order (a random walk over the box has steps ~ its size / 2)
+    step = np.linalg.norm(np.diff(p[order], axis=0), axis=1).mean()
+    assert step < 0.25 * np.linalg.norm(np.diff(p, axis=0), axis=1).mean()
+    assert spatial_order(np.zeros((0, 3))).size == 0
