@@ -16,6 +16,12 @@ shells, both against ray tracing of the real mesh at 128 x 128 directions per
 vertex under the same light; and the per-frame cost of both (lookup + shading
 of the ground, one process, same run).  Target: the Haar field clearly better.
 
+The sun part also times, on the same ground, the map-basis shading schemes
+(cell-wise, the default, and Ng et al.'s wavelet triple product with the lit
+transfer kept or recomputed) next to the SH field, and the product of two
+occluders' maps in the Haar domain (Ng's double product) and in the pixel domain.
+Sizes are printed as Table 2 does (10^6-byte MB, fixed -> adaptive).
+
 ``python benchmarks/bench_haar.py [--quick] [--part sizes,sun]``
 """
 
@@ -141,6 +147,73 @@ def part_sun(quick: bool):
     ref_free = (np.maximum(nrm @ fine.T, 0) * fw) @ env_fine / math.pi
     print(f"| (unshadowed ground, SH order 4) | {100 * relative_rmse(unocc, ref_free):.1f} % "
           "| | |")
+    part_cost(haar, pts, nrm, env64, ref, f_haar, f_sh)
+
+
+def part_cost(haar, pts, nrm, env64, ref, f_cells_old, f_sh):
+    """Per-frame cost of the map-basis shading schemes and of the two products, one process."""
+    from shtools.reference import relative_rmse
+    from shtools.runtime.haar import haar2, ihaar2
+    from shtools.runtime.haar_shading import (
+        HaarBlocker,
+        TripleShader,
+        combined_coefficients,
+        combined_maps,
+        shade_cells,
+    )
+    from shtools.runtime.haar_triple import haar_product
+
+    blk = HaarBlocker(haar, np.eye(3), np.zeros(3))
+    t0 = time.perf_counter()
+    cells = shade_cells(combined_maps([blk], pts), env64, nrm)
+    f_cells = time.perf_counter() - t0
+    shader = TripleShader(env64)
+    t0 = time.perf_counter()
+    triple = shader.radiance(combined_coefficients([blk], pts), nrm)
+    f_first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    shader.radiance(combined_coefficients([blk], pts), nrm)
+    f_triple = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sparse = shader.radiance_sparse(*blk.sparse_terms(pts), nrm)
+    f_sparse = time.perf_counter() - t0
+    # a receiver with a different normal at every vertex: the lit transfer every frame
+    tilt = nrm + 1e-3 * np.arange(len(nrm))[:, None] * np.array([1.0, 0.0, 0.0])
+    tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
+    t0 = time.perf_counter()
+    TripleShader(env64).radiance(combined_coefficients([blk], pts), tilt)
+    f_distinct = time.perf_counter() - t0
+    c = blk.coefficients(pts)
+    t0 = time.perf_counter()
+    haar_product(c, c)
+    f_hprod = time.perf_counter() - t0
+    M = c.shape[-1]
+    t0 = time.perf_counter()
+    haar2(ihaar2(c) * ihaar2(c))
+    f_pprod = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ihaar2(c).reshape(-1, M * M) * ihaar2(c).reshape(-1, M * M)
+    f_pmaps = time.perf_counter() - t0
+    print(f"\n### Per-frame cost, {len(pts)} vertices, one process (same run)\n")
+    print("| scheme | radiance error vs ray tracing | frame s |")
+    print("|---|---|---|")
+    print(f"| cell-wise: lookup + maps + cells | {100 * relative_rmse(cells, ref):.1f} % "
+          f"| {f_cells:.3f} |")
+    print(f"| Ng triple product, dense coefficients, lit transfer kept | "
+          f"{100 * relative_rmse(triple, ref):.1f} % | {f_triple:.3f} |")
+    print(f"| Ng triple product on the kept coefficients, lit transfer kept | "
+          f"{100 * relative_rmse(sparse, ref):.1f} % | {f_sparse:.3f} |")
+    print(f"| Ng triple product, first frame (lit transfer of 1 normal) | | {f_first:.3f} |")
+    print(f"| Ng triple product, a distinct normal per vertex | | {f_distinct:.3f} |")
+    print(f"| SH order-4 field (lookup + shade) | | {f_sh:.3f} |")
+    print(f"| (earlier cell-wise path: visibility_maps + haar_radiance) | | {f_cells_old:.3f} |")
+    print(f"\ntriple vs cell-wise radiance: {100 * relative_rmse(triple, cells):.2e} % "
+          "(the same sum in another order)\n")
+    print("| product of two occluders' maps | s |")
+    print("|---|---|")
+    print(f"| Ng Haar-domain double product (haar_product) | {f_hprod:.3f} |")
+    print(f"| pixel domain, back to Haar (haar2(ihaar2 a * ihaar2 b)) | {f_pprod:.3f} |")
+    print(f"| pixel domain, maps only (as the cell-wise scheme) | {f_pmaps:.3f} |")
 
 
 def main(argv=None):
@@ -165,12 +238,13 @@ def main(argv=None):
     else:
         objects["long box 4:1:1"] = trimesh.creation.box((4.0, 1.0, 1.0))
     kw = dict(shells=8, resolution=16, map_size=16) if args.quick else {}
-    print("| object | R_c per shell | bytes | fixed | reduction | s |")
-    print("|---|---|---|---|---|---|")
+    print("| object | R_c per shell | bytes | fixed | fixed MB | adaptive MB | reduction | s |")
+    print("|---|---|---|---|---|---|---|---|")
     for name, mesh in objects.items():
         t0 = time.perf_counter()
         out = haar_shell_sizes(mesh, **kw)
         print(f"| {name} | {out['resolution']} | {out['bytes']} | {out['fixed_bytes']} | "
+              f"{out['fixed_bytes'] / 1e6:.1f} | {out['bytes'] / 1e6:.1f} | "
               f"{100 * (1 - out['bytes'] / out['fixed_bytes']):.1f} % | "
               f"{time.perf_counter() - t0:.0f} |")
 

@@ -8,7 +8,9 @@ side by side with that checkout and prints the ratio per stage.
 
 Scenes are procedural (capsule-built characters and columns over a ground grid,
 sphere sets bounding the capsules exactly), so the figures do not depend on
-the data directory.  Timings are process CPU time (``time.process_time``),
+the data directory.  The columns' spheres and the ground and column receivers are
+flagged static (their pairs' log sum is kept between frames) where the runtime
+imported has the flags.  Timings are process CPU time (``time.process_time``),
 minima over the frames of one run: the machine is shared by several jobs, and
 CPU time is what a frame costs on one otherwise idle core.  Run with
 ``OPENBLAS_NUM_THREADS=1``: on a loaded 2-core machine OpenBLAS threads spin
@@ -31,7 +33,6 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # runnable as a script too
-import unrolled_kernel  # noqa: F401  (registers the "unrolled" product kernel)
 
 from shtools.geometry.sphere_tree import build_tree
 from shtools.reference import (
@@ -47,6 +48,10 @@ from shtools.runtime import (
     SphereLight,
 )
 from shtools.runtime.parallel import available_cores
+
+#: Whether the runtime imported keeps static pairs (a baseline checkout may not):
+#: the battle scene flags its columns and ground static where it can.
+STATIC_FLAGS = "static" in getattr(SphereBlocker, "__dataclass_fields__", {})
 
 #: The runtime's targets: a battle frame, its memory, log space against product space.
 FRAME_TARGET_S = 0.150
@@ -144,8 +149,14 @@ class BattleScene:
         norms.append(np.asarray(cm.vertex_normals))
         groups.append(np.full(len(cm.vertices), 9))
         blockers.append(SphereBlocker(cc, cr, tree=(self.column_tree.parent,
-                                                   self.column_tree.leaf)))
+                                                   self.column_tree.leaf),
+                                      **({"static": True} if STATIC_FLAGS else {})))
         return np.vstack(verts), np.vstack(norms), np.concatenate(groups), blockers
+
+    @staticmethod
+    def static_kwargs(groups) -> dict:
+        """``visibility`` keywords flagging the ground and the columns static."""
+        return {"static_receivers": np.isin(groups, (0, 9))} if STATIC_FLAGS else {}
 
 
 #: untimed frames before timing a configuration (steady state)
@@ -158,29 +169,60 @@ WARMUP_FRAMES = 2
 PROCESS_WARMUP_FRAMES = 6
 
 
+class StageClock:
+    """CPU seconds of a runtime's accumulation and exp calls in this process, per frame.
+
+    Wraps the runtime's own ``_accumulate`` and ``exponentiate`` (a baseline checkout
+    has both), so frames cut into parts report these stages too.
+    """
+
+    def __init__(self, rt):
+        self.seconds = {"accumulate": 0.0, "exp": 0.0}
+        for name, stage in (("_accumulate", "accumulate"), ("exponentiate", "exp")):
+            setattr(rt, name, self._timed(getattr(rt, name), stage))
+
+    def _timed(self, fn, stage):
+        def timed(*args, **kwargs):
+            t0 = time.process_time()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.seconds[stage] += time.process_time() - t0
+        return timed
+
+    def take(self) -> dict:
+        out, self.seconds = self.seconds, {"accumulate": 0.0, "exp": 0.0}
+        return out
+
+
 def battle_frames(scene: BattleScene, settings: ShadowSettings, frames: int):
     """Warm up, then run ``frames`` frames; returns (per-stage minima, stats of the last frame)."""
     rt = ShadowRuntime(settings)
+    clock = StageClock(rt)
     v, n, groups, _ = scene.frame(0.0)
     clusters = rt.clusters(v, groups)
+    static = scene.static_kwargs(groups)
     best: dict[str, float] = {}
     stats = {}
     # steady state, as in a bake of many frames: the first frames of a fresh runtime
     # pay one-time costs (scratch buffers, lazily built operators, cold caches)
     for i in range(WARMUP_FRAMES):
         v, n, _, blockers = scene.frame(0.1 * i)
-        rt.shade(rt.visibility(v, n, blockers, clusters), v, n, scene.env, scene.lights)
+        rt.shade(rt.visibility(v, n, blockers, clusters, **static), v, n, scene.env,
+                 scene.lights)
+        clock.take()
     for i in range(frames):
         v, n, _, blockers = scene.frame(0.1 * i)
         w0 = time.perf_counter()
         t0 = time.process_time()
-        g = rt.visibility(v, n, blockers, clusters)
+        g = rt.visibility(v, n, blockers, clusters, **static)
         t1 = time.process_time()
         rt.shade(g, v, n, scene.env, scene.lights)
         t2 = time.process_time()
         wall = time.perf_counter() - w0
         st = rt.last_stats
-        sec = dict(st["seconds"], shade=t2 - t1, frame=t2 - t0, wall=wall)
+        # with worker processes, the accumulation and exp of this process only
+        sec = dict(st["seconds"], **clock.take(), shade=t2 - t1, frame=t2 - t0, wall=wall)
         for k, val in sec.items():
             best[k] = min(best.get(k, math.inf), val)
         stats = st
@@ -194,7 +236,7 @@ def peak_memory(scene: BattleScene, settings: ShadowSettings) -> int:
     clusters = rt.clusters(v, groups)
     tracemalloc.start()
     tracemalloc.reset_peak()
-    g = rt.visibility(v, n, blockers, clusters)
+    g = rt.visibility(v, n, blockers, clusters, **scene.static_kwargs(groups))
     rt.shade(g, v, n, scene.env, scene.lights)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
@@ -228,11 +270,9 @@ def table_battle(quick: bool) -> list[dict]:
             "vertices": len(v), "leaf spheres": scene.n_spheres,
             "clusters": st["clusters"], "spheres/vertex": st["spheres_per_vertex"],
             "cuts ms": 1e3 * best["cuts"],
-            # per-stage times exist when the frame is not cut into parts (frames of
-            # >= MIN_PARALLEL_PAIRS pairs always are, so their bytes do not depend
-            # on the process count)
-            "accumulate ms": 1e3 * best["accumulate"] if "accumulate" in best else "-",
-            "exp ms": 1e3 * best["exp"] if "exp" in best else "-",
+            # this process's share (StageClock) where worker processes take parts
+            "accumulate ms": 1e3 * best["accumulate"],
+            "exp ms": 1e3 * best["exp"],
             "shade ms": 1e3 * best["shade"],
             "frame CPU ms": 1e3 * best["frame"],
             "frame wall ms": 1e3 * best["wall"],
@@ -276,6 +316,9 @@ def table_accuracy(quick: bool) -> list[dict]:
 
 def table_log_vs_product(quick: bool) -> list[dict]:
     """60 spheres, no hierarchy: log-space runtime vs product-space accumulation."""
+    # registers the "unrolled" product kernel; imported here, not at the top, so the
+    # side-by-side frame child also runs against a baseline checkout's registry
+    import unrolled_kernel  # noqa: F401
     rng = np.random.default_rng(0)
     n_spheres = 60
     centers = np.column_stack([rng.uniform(-2, 2, n_spheres), rng.uniform(0.3, 2.0, n_spheres),
@@ -341,9 +384,9 @@ def frame_child(quick: bool, frames: int, save: str | None) -> int:
     best, _, rt = battle_frames(scene, ShadowSettings(**BATTLE_FRAME),
                                 PROCESS_WARMUP_FRAMES + frames)
     if save:
-        v, n, _, blockers = scene.frame(0.35)
-        g = rt.visibility(v, n, blockers, rt.clusters(scene.frame(0.0)[0],
-                                                      scene.frame(0.0)[2]))
+        v, n, groups, blockers = scene.frame(0.35)
+        g = rt.visibility(v, n, blockers, rt.clusters(scene.frame(0.0)[0], groups),
+                          **scene.static_kwargs(groups))
         np.save(save, g)
     rt.close()
     print(json.dumps({"module": shtools.__file__, **{k: float(x) for k, x in best.items()}}))

@@ -215,3 +215,59 @@ def test_relight_with_a_field_light_says_so(kit, tmp_path):
     check_refused(code, out, err, want_code=1,
                   named=["lamp_scene.toml", "'lamp' is a field light", "lamp.srf.h5"],
                   outputs=[tmp_path / "r.h5"], kit=kit)
+
+
+ROOM = """
+[settings]
+order = 2
+
+[[objects]]
+name = "room"
+primitive = {{ type = "box", extents = [6.0, 6.0, 6.0], subdivisions = 1 }}
+role = "receiver"
+
+[[lights]]
+name = "lamp"
+field = "{srf}"
+position = [0, 1, 0]
+"""
+
+
+def test_a_lamp_inside_a_closed_receiver_is_refused(kit, tmp_path):
+    """A lamp in a closed room that receives: one line naming the scene and the room."""
+    scene = tmp_path / "room.toml"
+    scene.write_text(ROOM.format(srf=kit.root / "lamp.srf.h5"))
+    code, out, err = _run("bake", scene, "-o", tmp_path / "b.h5", "--workers", "1",
+                          "--processes", "1")
+    check_refused(code, out, err, want_code=1,
+                  named=["room.toml", "lights[0] ('lamp')", "inside the receiver 'room'"],
+                  outputs=[tmp_path / "b.h5"], kit=kit)
+
+
+def test_a_version_1_lamp_asset_is_refused_by_the_traced_shadow(kit, tmp_path):
+    """An srf file of the format's first version has no lamp mesh to trace to: one line
+    naming it and the way out; the product path still bakes it."""
+    import h5py
+
+    old = tmp_path / "old.srf.h5"
+    old.write_bytes((kit.root / "lamp.srf.h5").read_bytes())
+    with h5py.File(old, "r+") as f:
+        for name in ("lamp_vertices", "lamp_faces", "lamp_emissive"):
+            del f[name]
+        f.attrs["format_version"] = 1
+    text = (kit.root / "lamp_scene.toml").read_text().replace('field = "lamp.srf.h5"',
+                                                               f'field = "{old}"')
+    text = text.replace('"light.h5"', f'"{kit.root / "light.h5"}"')
+    text = text.replace('"mesh.obj"', f'"{kit.root / "mesh.obj"}"')
+    text = text.replace('"spheres.h5"', f'"{kit.root / "spheres.h5"}"')
+    scene = tmp_path / "old.toml"
+    scene.write_text(text)
+    code, out, err = _run("bake", scene, "-o", tmp_path / "b.h5", "--workers", "1",
+                          "--processes", "1")
+    check_refused(code, out, err, want_code=1,
+                  named=["old.srf.h5", "no lamp mesh", 'shadows = "shexp"'],
+                  outputs=[tmp_path / "b.h5"], kit=kit)
+    scene.write_text(text.replace(f'field = "{old}"', f'field = "{old}"\nshadows = "shexp"'))
+    code, _, err = _run("bake", scene, "-o", tmp_path / "b.h5", "--workers", "1",
+                        "--processes", "1")
+    assert code == 0, err

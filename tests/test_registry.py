@@ -71,7 +71,7 @@ def test_the_scene_registries_are_complete_from_kinds():
 
     assert BLOCKER_KINDS.names() == ("spheres", "tree", "bound", "fit", "exact",
                                      "deformable", "field")
-    assert set(LIGHT_SHADOWS) == {"shexp", "field", "ssoc", "raytrace", "auto"}
+    assert set(LIGHT_SHADOWS) == {"shexp", "field", "field-shexp", "ssoc", "raytrace", "auto"}
     assert bake_method_names()[0] == "default"
     assert {"product", "raytrace", "exact", "hyb"} <= set(bake_method_names())
 

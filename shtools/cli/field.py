@@ -57,17 +57,24 @@ def field():
               help="EMISSION table (TOML: radiance = [r, g, b], fixture = [meshes]): sample "
                    "the source radiance field of a lamp whose closed emitter is MESH into an "
                    "srf asset, instead of an occlusion field (docs/formats.md).")
-@click.option("--error-scale", default="peak", show_default=True,
-              type=click.Choice(["peak", "emitter"]),
-              help="With --radiance: eq. (1) relative to each shell's largest radiance "
-                   "(peak) or to the emitter's radiance (emitter: smaller, less exact).")
+@click.option("--error-scale", default="receiver", show_default=True,
+              type=click.Choice(["receiver", "peak", "emitter"]),
+              help="With --radiance: eq. (1) on the Lambertian radiance the lamp casts, "
+                   "relative to the brightest receiver at each shell (receiver), on the "
+                   "radiance relative to each shell's largest (peak) or to the emitter's "
+                   "radiance (emitter: smaller, less exact).")
+@click.option("--basis", default="sh", show_default=True, type=click.Choice(["sh", "haar"]),
+              help="haar: an all-frequency field, each sample's MAP x MAP occlusion map in "
+                   "the 2-D Haar basis, the largest --keep kept (a haar asset; no O_v).")
+@click.option("--keep", default=0.05, show_default=True, type=float,
+              help="With --basis haar: fraction of the Haar coefficients kept per sample.")
 @scheduler_options("shells")
 @force_option("4 GiB of memory, 2e10 rays")
 @json_option
 @errors_name("mesh_path")
 def sample(mesh_path, output, shells, resolution, map_size, order, threshold, min_resolution,
            bits, cumulative, no_self_visibility, self_order, seed, emission, error_scale,
-           scheduler, workers, force, as_json):
+           basis, keep, scheduler, workers, force, as_json):
     """Sample the shadow field of MESH into a field asset.
 
     Per shell, the object's binary visibility over the direction map at R x R
@@ -93,6 +100,12 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         raise InputError(exc.message, mesh_path) from None
     from shtools.cli._limits import check_memory, check_rays
     from shtools.cli._outputs import guard_outputs
+
+    if basis == "haar":
+        from shtools.cli.field_haar import sample_haar
+
+        sample_haar(mesh_path, output, params, keep, emission, force, as_json)
+        return
     from shtools.fields.build import planned_cost
     from shtools.tasks import default_workers
 

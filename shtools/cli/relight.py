@@ -26,10 +26,10 @@ from shtools.cli._limits import force_option
               help="Add this scene's [[lights]] (posed at each frame's time), shadowed "
                    "through the stored visibility (SHEXP).")
 @click.option("--compress", is_flag=True,
-              help="gzip the output's geometry and radiance as a bake does (smaller, slower "
-                   "to write); default plain.")
+              help="gzip the output's radiance as a bake does (smaller, slower to write); "
+                   "default plain. Geometry and visibility are copied as the bake stores them.")
 @output_option
-@force_option("4 GiB of memory")
+@force_option("4 GiB of working memory")
 @json_option
 @errors_name("baked")
 def relight(baked, light, rotate, scene, compress, output, force, as_json):
@@ -37,10 +37,10 @@ def relight(baked, light, rotate, scene, compress, output, force, as_json):
 
     The radiance is what a fresh bake of the same scene under that light gives
     (the same shading code), without posing, blockers or set-up: one triple
-    product per vertex and frame.  Without --lights the output has the
-    environment only.
+    product per vertex and frame, streamed a few frames at a time.  A bake lit
+    from a finite environment sphere is relit on that sphere.  Without --lights
+    the output has the environment only.
     """
-    from shtools.cli._limits import check_asset_memory
     from shtools.cli._outputs import guard_outputs
     from shtools.scene.relight import relight as relight_bake
     from shtools.scene.relight import scene_lights
@@ -53,12 +53,33 @@ def relight(baked, light, rotate, scene, compress, output, force, as_json):
         scene = load_scene(scene)
         guard_outputs({"-o": output}, scene_files(scene))
         scene = scene_lights(scene)  # lights relighting can add: checked before any work
-    # the bake is read whole: its frames, visibility and geometry
-    check_asset_memory("relight", baked, "relight a bake of fewer frames (bake --frames)",
-                       force=force)
+    _check_memory(baked, force)
     summary = relight_bake(baked, light, output, rotate=rotate, scene=scene,
                            compression="gzip" if compress else None, progress=progress)
     lights = f" + {summary['lights']} spherical light(s)" if summary["lights"] else ""
     report(summary, as_json,
            f"relit {summary['frames']} frame(s) x {summary['vertices']} vertices{lights} "
            f"in {summary['seconds']:.2f} s -> {output}")
+
+
+def _check_memory(baked, force: bool) -> None:
+    """Refuse a relight whose working memory passes the limit, from the bake's metadata.
+
+    Frames stream through a few at a time, so the vertex count sets it, not the
+    frame count (:func:`shtools.scene.relight.relight_bytes`)."""
+    import h5py
+
+    from shtools.cli._limits import check_memory
+    from shtools.scene.relight import relight_bytes
+    from shtools.tasks import default_workers
+
+    try:
+        with h5py.File(baked, "r") as f:
+            T, V = f["radiance"].shape[:2]
+            size = int(f.attrs["sh_order"]) ** 2
+    except (OSError, KeyError, ValueError, TypeError):  # not a bake: relight says so
+        return
+    threads = default_workers()
+    check_memory("relight", relight_bytes(T, V, size, threads),
+                 f"{V:,} vertices x {size} SH coefficients, {threads} thread(s)",
+                 "relight a bake of fewer receiver vertices", force=force, path=baked)

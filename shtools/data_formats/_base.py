@@ -131,7 +131,7 @@ def register(schema: Schema) -> Schema:
 #: Every asset kind (docs/formats.md); each has a module ``shtools.data_formats.<kind>``
 #: that registers its :class:`Schema` on import.
 KINDS = ("spheres", "tree", "bound", "tables", "scaling", "field", "srf", "light", "bake",
-         "transfer")
+         "transfer", "haar")
 
 
 def get_schema(kind: str) -> Schema | None:
@@ -436,7 +436,8 @@ def _decode(v):
     return v
 
 
-def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool = True) -> Asset:
+def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool = True,
+               lazy: tuple[str, ...] = ()) -> Asset:
     """Open, validate and (by default) load an asset.
 
     Parameters
@@ -447,6 +448,10 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
     load : bool
         Read every dataset into memory (default).  With ``False`` only the
         attributes are read and validated.
+    lazy : tuple of str
+        Datasets whose shapes and dtypes are checked but whose values are
+        neither read nor checked for NaN/inf (a streaming reader checks them
+        as it reads them).
 
     Returns
     -------
@@ -509,18 +514,19 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
         dims: dict[str, int] = {}
         data: dict[str, np.ndarray] = {}
         for spec in schema.datasets:
-            _check_dataset(f, spec, dims, path, load, data)
+            _check_dataset(f, spec, dims, path, load and spec.name not in lazy, data,
+                           read=spec.name not in lazy)
         if schema.check is not None:
             schema.check(f, {"attrs": attrs, "dims": dims, "path": path})
         if load:
             def visit(name, obj):
-                if isinstance(obj, h5py.Dataset) and name not in data:
+                if isinstance(obj, h5py.Dataset) and name not in data and name not in lazy:
                     data[name] = obj[()]
             f.visititems(visit)
     return Asset(file_kind, int(version), attrs, data, dims, path)
 
 
-def _check_dataset(f, spec: DatasetSpec, dims, path, load, data) -> None:
+def _check_dataset(f, spec: DatasetSpec, dims, path, load, data, read: bool = True) -> None:
     if spec.name not in f:
         if spec.optional:
             return
@@ -555,7 +561,7 @@ def _check_dataset(f, spec: DatasetSpec, dims, path, load, data) -> None:
         want = " or ".join(str(tuple(s)) for s in options)
         raise AssetError(f"dataset '{spec.name}' has shape {ds.shape}, expected {want}", path)
     dims.update(matched)
-    if (spec.finite and ds.dtype.kind == "f") or load:
+    if read and ((spec.finite and ds.dtype.kind == "f") or load):
         arr = ds[()]
         if spec.finite and ds.dtype.kind == "f" and not np.all(np.isfinite(arr)):
             raise AssetError(f"dataset '{spec.name}' contains NaN or inf; rebuild it", path)

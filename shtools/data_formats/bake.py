@@ -207,7 +207,12 @@ def read_bake(path: str | os.PathLike) -> Bake:
         Missing file, wrong kind, unknown version, bad shapes, NaN/inf.
     """
     asset = read_asset(path, "bake")
-    d = asset.data
+    return bake_from_data(asset, asset.data, path)
+
+
+def bake_from_data(asset, d: dict, path) -> Bake:
+    """The :class:`Bake` of a checked ``asset`` whose datasets are ``d`` (arrays, or h5py
+    datasets of a still open file)."""
     T = d["radiance"].shape[0]
     V = d["radiance"].shape[1]
     names = asset.attrs.get("object_names")
@@ -275,6 +280,11 @@ class BakeWriter:
     compression : str or None
         h5py filter for the per-frame geometry and radiance (deterministic);
         the visibility is stored without one.
+    copy : mapping of str to h5py.Dataset, optional
+        Per-frame ``vertices``, ``normals`` or ``visibility`` ``(T, V, k)``
+        taken whole from another bake's open file by HDF5's object copy (its
+        stored chunks and filters as they are, nothing decompressed): the
+        frame writes then leave them out.
     """
 
     def __init__(
@@ -297,8 +307,10 @@ class BakeWriter:
         inputs=None,
         fps: float | None = None,
         compression: str | None = "gzip",
+        copy=None,
     ):
         self.path = Path(path)
+        self.copy = dict(copy or {})
         self.n_frames = int(n_frames)
         self.faces = np.asarray(faces, dtype=np.int32).reshape(-1, 3)
         self.sh_order = int(sh_order)
@@ -382,14 +394,21 @@ class BakeWriter:
         if self.albedo is not None:
             f.create_dataset("albedo", data=self.albedo, **plain)
         frame = dict(plain, compression=self.compression, shuffle=bool(self.compression))
+        for name, source in sorted(self.copy.items()):
+            width = (self.visibility_size if name == "visibility" else 3)
+            if source.shape != (T, V, width):
+                raise ValueError(f"{name} to copy has shape {source.shape}, expected "
+                                 f"({T}, {V}, {width})")
+            f.copy(source, name)
         if self.static:
             f.create_dataset("vertices", data=self.static_vertices, **plain)
             f.create_dataset("normals", data=self.static_normals, **plain)
         else:
             for name in ("vertices", "normals"):
-                f.create_dataset(name, (T, V, 3), "f4", chunks=(1, V, 3), **frame)
+                if name not in self.copy:
+                    f.create_dataset(name, (T, V, 3), "f4", chunks=(1, V, 3), **frame)
         f.create_dataset("radiance", (T, V, 3), "f4", chunks=(1, V, 3), **frame)
-        if self.visibility_size:
+        if self.visibility_size and "visibility" not in self.copy:
             k = int(self.visibility_size)
             # stored plain: SH coefficients gain ~20 % from gzip, and decompressing them
             # would be most of the cost of relighting (shtools.scene.relight), which
@@ -397,7 +416,7 @@ class BakeWriter:
             f.create_dataset("visibility", (T, V, k), "f4", chunks=(1, V, k), **plain)
         self._datasets = {name: f[name] for name in ("radiance", "vertices", "normals",
                                                      "visibility")
-                          if name in f and f[name].ndim == 3}
+                          if name in f and f[name].ndim == 3 and name not in self.copy}
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
@@ -418,9 +437,9 @@ class BakeWriter:
         t : int
         radiance : ndarray, shape (V, 3)
         vertices, normals : ndarray, shape (V, 3)
-            Required when the receivers move.
+            Required when the receivers move (and not copied).
         visibility : ndarray, shape (V, n*n), optional
-            Required when the writer stores visibility.
+            Required when the writer stores visibility (and does not copy it).
 
         ``vertices``, ``normals`` and ``visibility`` may also be another bake's
         per-frame dataset ``(T, V, k)`` (h5py): its frame ``t`` is copied.
@@ -441,6 +460,8 @@ class BakeWriter:
         if self.visibility_size:
             per_frame["visibility"] = visibility
         for name, values in per_frame.items():
+            if name in self.copy:
+                continue
             if isinstance(values, h5py.Dataset):
                 self._copy_chunk(values, ds[name], t)
             else:
@@ -459,9 +480,9 @@ class BakeWriter:
         start : int
         radiance : ndarray, shape (K, V, 3)
         vertices, normals : ndarray, shape (K, V, 3)
-            Required when the receivers move.
+            Required when the receivers move (and not copied).
         visibility : ndarray, shape (K, V, n*n), optional
-            Required when the writer stores visibility.
+            Required when the writer stores visibility (and does not copy it).
         """
         f = self._file
         if f is None or self._stack is None:
@@ -482,7 +503,8 @@ class BakeWriter:
         if self.visibility_size:
             per_frame["visibility"] = visibility
         for name, values in per_frame.items():
-            ds[name][frames] = np.asarray(values, dtype=np.float32)
+            if name not in self.copy:
+                ds[name][frames] = np.asarray(values, dtype=np.float32)
         self._written[frames] = True
 
     def _copy_chunk(self, source: h5py.Dataset, target: h5py.Dataset, t: int) -> None:

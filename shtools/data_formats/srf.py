@@ -10,7 +10,13 @@ step``).  Also ``radiance (3,)`` (the emitter's RGB radiance),
 ``emitter_center (3,)`` and the ``emitter_radius``/``emitter_area`` attributes
 (the sphere bounding the emissive faces and their area), and the per-shell
 reduction statistics ``reduction_error``/``level_error (C,)`` of eq. (1) on
-the RCVs divided by the emitter's largest channel.
+the RCVs divided by the scale named by the ``error_scale`` attribute.
+
+Version 2 adds the lamp's triangles in its own frame -- ``lamp_vertices (P,
+3)``, ``lamp_faces (F, 3)``, ``lamp_emissive (F,)`` -- which the traced shadow
+of a field light casts its rays to (the emitter faces, through the fixture).
+Version-1 files (no lamp mesh) still read; only the product-space shadow
+(``shadows = "shexp"``) can shade them.
 """
 
 from __future__ import annotations
@@ -49,6 +55,11 @@ class RadianceField:
     emitter_center : ndarray, shape (3,)
     emitter_radius, emitter_area : float
     reduction_error, level_error : ndarray, shape (C,), optional
+    lamp_vertices : ndarray, shape (P, 3), optional
+        The lamp's triangles in its own frame (emitter and fixture); None in a
+        version-1 file.
+    lamp_faces : ndarray of int, shape (F, 3), optional
+    lamp_emissive : ndarray of bool, shape (F,), optional
     attrs : dict
     """
 
@@ -66,6 +77,9 @@ class RadianceField:
     emitter_area: float
     reduction_error: np.ndarray | None = None
     level_error: np.ndarray | None = None
+    lamp_vertices: np.ndarray | None = None
+    lamp_faces: np.ndarray | None = None
+    lamp_emissive: np.ndarray | None = None
     attrs: dict = field(default_factory=dict)
 
     #: SH vectors per sample (what :class:`shtools.runtime.FieldTable` lays out)
@@ -118,13 +132,28 @@ def _check(f, ctx) -> None:
             arr = f[key][()]
             if not np.all(np.isfinite(arr)) or (name == "step" and np.any(arr < 0)):
                 raise AssetError(f"dataset '{key}' holds NaN/inf or a negative step", path)
+    lamp = [k in f for k in LAMP_DATASETS]
+    if any(lamp) and not all(lamp):
+        raise AssetError(f"the lamp mesh needs all of {', '.join(LAMP_DATASETS)}; the file "
+                         "is incomplete, resample it", path)
+    if all(lamp):
+        faces = f["lamp_faces"][()]
+        n_v = f["lamp_vertices"].shape[0]
+        if faces.size and (faces.min() < 0 or faces.max() >= n_v):
+            raise AssetError("lamp_faces index outside lamp_vertices; resample the field", path)
+        if not f["lamp_emissive"][()].any():
+            raise AssetError("lamp_emissive marks no face; resample the field", path)
+
+
+#: The lamp mesh of a version-2 file (all or none).
+LAMP_DATASETS = ("lamp_vertices", "lamp_faces", "lamp_emissive")
 
 
 SCHEMA = register(
     Schema(
         kind="srf",
-        version=1,
-        known_versions=(1,),
+        version=2,
+        known_versions=(1, 2),
         datasets=(
             DatasetSpec("center", (3,), "f"),
             DatasetSpec("shell_radii", ("C",), "f"),
@@ -133,6 +162,9 @@ SCHEMA = register(
             DatasetSpec("emitter_center", (3,), "f"),
             DatasetSpec("reduction_error", ("C",), "f", optional=True),
             DatasetSpec("level_error", ("C",), "f", optional=True),
+            DatasetSpec("lamp_vertices", ("P", 3), "f", optional=True),
+            DatasetSpec("lamp_faces", ("F", 3), "iu", optional=True),
+            DatasetSpec("lamp_emissive", ("F",), "iub", optional=True),
         ),
         required_attrs=("bounding_radius", "emitter_radius", "emitter_area"),
         has_sh=True,
@@ -161,6 +193,10 @@ def write_radiance_field(path: str | os.PathLike, fld: RadianceField, *, inputs=
         data["reduction_error"] = np.asarray(fld.reduction_error, np.float64)
     if fld.level_error is not None:
         data["level_error"] = np.asarray(fld.level_error, np.float64)
+    if fld.lamp_vertices is not None:
+        data["lamp_vertices"] = np.asarray(fld.lamp_vertices, np.float64)
+        data["lamp_faces"] = np.asarray(fld.lamp_faces, np.int32)
+        data["lamp_emissive"] = np.asarray(fld.lamp_emissive, np.uint8)
     for c in range(fld.n_shells):
         q = np.asarray(fld.rcv[c], np.uint8)
         data[f"shells/{c}/rcv"] = q.reshape(q.shape[0], q.shape[1], CHANNELS, n2)
@@ -209,5 +245,10 @@ def read_radiance_field(path: str | os.PathLike) -> RadianceField:
         emitter_area=float(asset.attrs["emitter_area"]),
         reduction_error=asset.data.get("reduction_error"),
         level_error=asset.data.get("level_error"),
+        lamp_vertices=asset.data.get("lamp_vertices"),
+        lamp_faces=(None if "lamp_faces" not in asset.data
+                    else np.asarray(asset["lamp_faces"], np.int64)),
+        lamp_emissive=(None if "lamp_emissive" not in asset.data
+                       else np.asarray(asset["lamp_emissive"]).astype(bool)),
         attrs={k: v for k, v in asset.attrs.items() if k not in skip},
     )

@@ -21,9 +21,11 @@ From a point inside it the whole-sphere map of
 Reduction and quantization are the occlusion field's
 (:func:`~shtools.fields.reduction.reduce_shell` with ``channels=3``, RCV in
 place of OCV; :func:`~shtools.fields.quantize.quantize`).  Eq. (1) is taken on
-the RCVs divided by a scale (:data:`ERROR_SCALES`), by default each shell's
-largest reconstructed radiance, so the functions compared peak at 1 as a
-visibility does.
+what :data:`ERROR_SCALES` names, by default the Lambertian radiance the RCVs
+cast relative to the brightest receiver at the shell, so that the threshold
+means for a lamp what it means for an occlusion field under a unit
+environment; the RCVs themselves are stored, reduced by the halvings that
+criterion accepts.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from shtools.errors import InputError
 from shtools.fields.build import FieldParameters, FieldReport, SampledShells
 from shtools.fields.emitter import Emitter, emitted_radiance
 from shtools.fields.quantize import quantize
-from shtools.fields.reduction import ERROR_QUAD_DEGREE, reduce_shell
+from shtools.fields.reduction import ERROR_QUAD_DEGREE, box2, reduce_shell
 from shtools.fields.sampling import (
     CONE_MARGIN,
     bounding_sphere,
@@ -55,16 +57,46 @@ from shtools.sh import basis, sphere_quadrature
 RADIANCE_CHUNK = 64
 #: Colour channels of an RCV.
 CHANNELS = 3
-#: What the RCVs are divided by before eq. (1), so that one threshold means what it
-#: means for visibility: ``"peak"`` (default) -- each shell's largest reconstructed
-#: radiance, so the shell's functions peak at 1 as a visibility does and the
-#: threshold is relative to the light that reaches that shell; ``"emitter"`` -- the
-#: emitter's largest channel radiance (a unit-radiance lamp), which lets the far
-#: shells, where the lamp covers a small solid angle, halve far more.
+#: What eq. (1) compares, so that one threshold means what it means for an
+#: occlusion field.  An OOF's tau is an error in visibility, whose unoccluded value is
+#: 1: under a unit environment, the radiance of an unshadowed white Lambertian receiver.
+#: ``"receiver"`` (default) gives the SRF the same unit: the RCVs are turned into the
+#: Lambertian radiance they cast as a function of the receiver's normal (band ``l``
+#: times ``A_l / pi``, Ramamoorthi and Hanrahan's clamped-cosine factors; an odd band
+#: ``l >= 3``, which the clamped cosine lacks but a shadowed receiver's transfer
+#: carries, weighted as band ``l - 1``) and divided by the shell's largest such
+#: radiance, the brightest receiver at that distance: tau is then the mean error of a
+#: receiver's radiance relative to the lamp's full light there, as it is relative to
+#: the full environment for an OOF.  ``"peak"``: the raw RCVs divided by each shell's
+#: largest reconstructed radiance (relative to the lobe's own peak; the band-3 ringing
+#: of a compact lamp, which no Lambertian receiver sees, keeps far shells fine).
+#: ``"emitter"``: divided by the emitter's radiance -- the lamp's coverage in [0, 1],
+#: an OOF's scale literally -- which lets the far shells, where the lamp covers a small
+#: solid angle, halve until the lamp's light there is off by far more than tau.
 ERROR_SCALES = {
+    "receiver": "eq. (1) on the Lambertian radiance the RCVs cast (band l times A_l/pi, "
+                "odd l >= 3 as l-1) divided by each shell's largest",
     "peak": "eq. (1) on RCVs divided by each shell's largest reconstructed radiance",
     "emitter": "eq. (1) on RCVs divided by the emitter's largest channel radiance",
 }
+#: The default of ``--error-scale``.
+DEFAULT_ERROR_SCALE = "receiver"
+
+
+def receiver_weights(order: int) -> np.ndarray:
+    """Per-coefficient factors of the ``"receiver"`` error scale, shape ``(n*n,)``.
+
+    Band ``l``: ``A_l / pi`` (the clamped cosine's convolution factor: 1, 2/3,
+    1/4, 0, -1/24, ...) in absolute value; an odd band ``l >= 3`` (where it is
+    0) takes band ``l - 1``'s.
+    """
+    from shtools.sh.zonal import clamped_cosine_zh
+
+    z = clamped_cosine_zh(order)
+    a = np.abs(np.sqrt(4 * math.pi / (2 * np.arange(order) + 1)) * z)
+    for band in range(3, order, 2):
+        a[band] = a[band - 1]
+    return np.repeat(a, 2 * np.arange(order) + 1)
 
 
 def cone_directions(axis, cos_alpha, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -253,7 +285,8 @@ def shell_peak(grid, order: int) -> float:
 
 
 def build_radiance_field(sampled: SampledShells, emitter: Emitter,
-                         params: FieldParameters | None = None, *, error_scale: str = "peak"
+                         params: FieldParameters | None = None, *,
+                         error_scale: str = DEFAULT_ERROR_SCALE
                          ) -> tuple[RadianceField, FieldReport]:
     """Reduce and quantize sampled RCV shells into a :class:`RadianceField`.
 
@@ -262,8 +295,8 @@ def build_radiance_field(sampled: SampledShells, emitter: Emitter,
     sampled : SampledShells
     emitter : Emitter
     params : FieldParameters, optional
-    error_scale : {"peak", "emitter"}
-        What eq. (1) is relative to (:data:`ERROR_SCALES`).
+    error_scale : {"receiver", "peak", "emitter"}
+        What eq. (1) compares (:data:`ERROR_SCALES`).
     """
     params = params or FieldParameters()
     params.validate()
@@ -271,14 +304,19 @@ def build_radiance_field(sampled: SampledShells, emitter: Emitter,
         raise InputError(f"--error-scale must be one of {', '.join(ERROR_SCALES)}, got "
                          f"{error_scale!r}")
     rcv, offs, steps, res, level_err, cum_err = [], [], [], [], [], []
+    weights = np.tile(receiver_weights(params.order), CHANNELS)
     for grid in sampled.grids:
+        compared = grid * weights if error_scale == "receiver" else grid
         if error_scale == "emitter":
             scale = float(emitter.radiance.max())
         else:
-            scale = shell_peak(grid, params.order)
-        red = reduce_shell(grid / scale, params.threshold, params.min_resolution,
+            scale = shell_peak(compared, params.order)
+        red = reduce_shell(compared / scale, params.threshold, params.min_resolution,
                            cumulative=params.cumulative, channels=CHANNELS)
-        q, o, s = quantize(red.grid * scale, params.bits)
+        kept = np.asarray(grid, dtype=np.float64)
+        while kept.shape[0] > red.resolution:  # the halvings accepted, on the RCVs
+            kept = box2(kept)
+        q, o, s = quantize(kept, params.bits)
         rcv.append(q)
         offs.append(o)
         steps.append(s)
@@ -307,6 +345,9 @@ def build_radiance_field(sampled: SampledShells, emitter: Emitter,
         emitter_area=float(emitter.areas[emitter.emissive].sum()),
         reduction_error=np.asarray(cum_err),
         level_error=np.asarray([e[-1] if e else 0.0 for e in level_err]),
+        lamp_vertices=np.asarray(emitter.vertices, dtype=np.float64),
+        lamp_faces=np.asarray(emitter.faces, dtype=np.int64),
+        lamp_emissive=np.asarray(emitter.emissive, dtype=bool),
         attrs=attrs,
     )
     report = FieldReport(res, level_err, cum_err, rays=sampled.rays,
@@ -316,7 +357,7 @@ def build_radiance_field(sampled: SampledShells, emitter: Emitter,
 
 
 def sample_radiance_field(emitter: Emitter, params: FieldParameters | None = None, *,
-                          error_scale: str = "peak",
+                          error_scale: str = DEFAULT_ERROR_SCALE,
                           progress: Callable[[int], None] | None = None,
                           scheduler: str | None = None,
                           workers: int | None = None) -> tuple[RadianceField, FieldReport]:
@@ -329,7 +370,7 @@ def sample_radiance_field(emitter: Emitter, params: FieldParameters | None = Non
     params : FieldParameters, optional
         ``shells``, ``resolution``, ``map_size``, ``order``, ``threshold``,
         ``min_resolution``, ``bits``, ``cumulative`` are used.
-    error_scale : {"peak", "emitter"}
+    error_scale : {"receiver", "peak", "emitter"}
         See :data:`ERROR_SCALES`.
     progress, scheduler, workers
         As :func:`shtools.fields.build.sample_shells`.

@@ -1,4 +1,4 @@
-"""Inputs of the runtime: blockers and spherical lights.
+"""Inputs of the runtime: blockers, spherical lights, and the checks of a frame's inputs.
 
 Two kinds of blocker reach :meth:`shtools.runtime.ShadowRuntime.visibility`:
 
@@ -36,11 +36,17 @@ class SphereBlocker:
         sphere-set index of leaf nodes and -1 for inner nodes.  Only the topology
         is used: the inner spheres are refit from the leaves every frame
         (:func:`shtools.runtime.spheres.refit_tree`).
+    static : bool
+        The spheres do not move between frames: with receiver rows flagged
+        static too (``static_receivers`` of
+        :meth:`~shtools.runtime.ShadowRuntime.visibility`), their pairs' log sum
+        is kept between frames (:mod:`shtools.runtime.static_pairs`).
     """
 
     centers: Any
     radii: Any
     tree: Any = None
+    static: bool = False
     parent: np.ndarray | None = field(init=False, default=None, repr=False)
     leaf: np.ndarray | None = field(init=False, default=None, repr=False)
 
@@ -213,3 +219,37 @@ def _checked(name: str, value) -> np.ndarray:
     if not np.isfinite(value).all():
         raise InputError(f"self-visibility {name} contains NaN or infinite values")
     return value
+
+
+def check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
+    """Receivers of a frame as float64 ``(V, 3)`` arrays, normals made unit length."""
+    pts = np.asarray(vertices, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or nrm.shape != pts.shape:
+        raise InputError(
+            f"vertices and normals must both have shape (V, 3), got {pts.shape} and {nrm.shape}"
+        )
+    if not (np.isfinite(pts).all() and np.isfinite(nrm).all()):
+        raise InputError("receiver vertices or normals contain NaN or infinite values")
+    # mesh normals are often only nearly unit; a zero normal (unreferenced vertex)
+    # stays zero and shades black
+    square = np.einsum("vi,vi->v", nrm, nrm)
+    # np.allclose(|n|, 1, atol=1e-6)'s test, on |n|^2 in one pass: |n| - 1 ~ (|n|^2 - 1) / 2
+    if not (np.abs(square - 1.0) <= 2.0 * (1e-6 + 1e-5)).all():
+        length = np.linalg.norm(nrm, axis=1, keepdims=True)
+        nrm = nrm / np.where(length > 0, length, 1.0)
+    return pts, nrm
+
+
+def check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
+    """Split blockers into sphere sets and blockers with their own log visibility."""
+    spheres, others = [], []
+    for b in blockers:
+        if isinstance(b, SphereBlocker):
+            spheres.append(b)
+        elif isinstance(b, LogBlocker):
+            others.append(b)
+        else:
+            raise InputError(f"blockers must be SphereBlocker objects or have "
+                             f"log_visibility(points, normals, order), got {type(b).__name__}")
+    return spheres, others

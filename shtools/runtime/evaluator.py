@@ -16,7 +16,13 @@ import numpy as np
 
 from shtools.errors import InputError, ShtoolsError
 from shtools.runtime.accumulate import BlockKernel, accumulate_log
-from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
+from shtools.runtime.blockers import (
+    SelfVisibility,
+    SphereBlocker,
+    SphereLight,
+    check_blockers,
+    check_receivers,
+)
 from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
 from shtools.runtime.fast_exp import FAST_METHODS, fast_exp
 from shtools.runtime.fields import FieldBlocker
@@ -43,6 +49,7 @@ from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import desaturate_negative
 from shtools.runtime.shading import shade as _shade
 from shtools.runtime.shading_cache import ShadingCache
+from shtools.runtime.static_pairs import StaticPairs
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
 
@@ -104,6 +111,7 @@ class ShadowRuntime:
         self._auto_groups: np.ndarray | None = None
         self._self = SelfTerms(self.order, self.acc_order)  # self-visibility and its caches
         self._shading = ShadingCache(self.order, self.settings)
+        self._static = StaticPairs()  # static spheres x static receivers, kept
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         self._exp_zero: np.ndarray | None = None  # exp(0) at the shading order
         #: processes sharing the per-vertex stages (worker processes start on the
@@ -139,7 +147,7 @@ class ShadowRuntime:
 
         Parameters are those of :meth:`visibility`.  Evaluated in this process.
         """
-        pts, nrm = _check_receivers(vertices, normals)
+        pts, nrm = check_receivers(vertices, normals)
         spheres, _ = self._blockers(blockers)
         own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
@@ -153,7 +161,8 @@ class ShadowRuntime:
 
     def visibility(self, vertices, normals, blockers: list[SphereBlocker],
                    clusters: ReceiverClusters | None = None, *,
-                   self_visibility: tuple[SelfVisibility, ...] | list = ()) -> np.ndarray:
+                   self_visibility: tuple[SelfVisibility, ...] | list = (),
+                   static_receivers=None) -> np.ndarray:
         """Shadowing visibility per receiver vertex: accumulate logs, exp, truncate.
 
         Parameters
@@ -177,6 +186,12 @@ class ShadowRuntime:
             ``blockers``: a sphere set or a log blocker such as a deformable
             field) on those rows.  Clusters must not mix rows of different
             objects (build them with ``groups``).
+        static_receivers : array_like of bool, shape (V,), optional
+            Rows that do not move between frames.  With sphere blockers flagged
+            ``static``, the log sum of those pairs is computed once and kept while
+            they stay equal (:mod:`~shtools.runtime.static_pairs`); frames with
+            and without the flags agree to float32 rounding.  Ignored in frames
+            with shadow fields.
 
         Returns
         -------
@@ -192,19 +207,31 @@ class ShadowRuntime:
         :meth:`close` stops them).  The split does not depend on the process
         count, so the result is the same bytes with any number of processes.
         """
-        pts, nrm = _check_receivers(vertices, normals)
-        g = self._visibility(pts, nrm, blockers, clusters, self_visibility)
+        pts, nrm = check_receivers(vertices, normals)
+        g = self._visibility(pts, nrm, blockers, clusters, self_visibility, static_receivers)
         return self._multiply_self(g, self_visibility)
 
-    def _visibility(self, pts, nrm, blockers, clusters, self_visibility) -> np.ndarray:
+    def _visibility(self, pts, nrm, blockers, clusters, self_visibility,
+                    static_receivers=None) -> np.ndarray:
         """:meth:`visibility` before the self-visibilities given as visibility."""
         spheres, others = self._blockers(blockers)
         if any(isinstance(b, FieldBlocker) for b in others):
             return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
         own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
+        kept = None
+        if static_receivers is not None and self.settings.hierarchy and spheres:
+            if clusters is None:  # the clusters a frame without the flags would use
+                clusters = self._clusters_for(pts, None if exclude is None else exclude.labels)
+            split = self._static.split(pts, nrm, spheres, static_receivers, exclude, clusters)
+            if split is not None:
+                kept = self._static.log_sum(split, lambda skipped: self._accumulate(
+                    self._frame_work(pts, spheres, clusters, skipped).task(pts, nrm),
+                    {"pairs_evaluated": 0}))
+                exclude = split.frame_exclude
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = _add(self._other_logs(pts, nrm, blockers, skip, in_parts=True), own)
+        extra = _add(_add(self._other_logs(pts, nrm, blockers, skip, in_parts=True), own),
+                     kept)
         parts = self._part_blockers(blockers, skip, pts.shape[0])
         cost = 0 if parts is None else DEFORMABLE_RECEIVER_PAIRS * len(parts.deformables)
         if stats["pairs"] + cost * pts.shape[0] >= MIN_PARALLEL_PAIRS:
@@ -243,8 +270,8 @@ class ShadowRuntime:
         return self.exponentiate(f), stats["pairs_evaluated"]
 
     def _blockers(self, blockers) -> tuple[list[SphereBlocker], list]:
-        """:func:`_check_blockers`, and shadow fields must have the shading order."""
-        spheres, others = _check_blockers(blockers)
+        """:func:`~shtools.runtime.blockers.check_blockers`; fields must have the shading order."""
+        spheres, others = check_blockers(blockers)
         for b in others:
             if isinstance(b, FieldBlocker) and b.table.order != self.order:
                 raise InputError(f"a shadow field has SH order {b.table.order} but the runtime "
@@ -523,7 +550,7 @@ class ShadowRuntime:
         :func:`~shtools.runtime.shading.desaturate_negative`).
         """
         s = self.settings
-        pts, nrm = _check_receivers(vertices, normals)
+        pts, nrm = check_receivers(vertices, normals)
         transfer, changed = self._shading.cosine_transfer(nrm)
         env_transfer = None
         if (env_sh is not None and local_visibility is None and form == "tabulated"
@@ -532,7 +559,9 @@ class ShadowRuntime:
         out = _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
                      window_kind=s.resolved_window(), window_h=s.window_h,
                      local_visibility=local_visibility, form=form, transfer=transfer,
-                     env_transfer=env_transfer)
+                     env_transfer=env_transfer,
+                     light_terms=self._shading.light_terms(sphere_lights, pts)
+                     if sphere_lights else None)
         if s.deringing == "desaturate":
             out = desaturate_negative(out)
         return out
@@ -546,37 +575,6 @@ class ShadowRuntime:
             self._auto_clusters = self.clusters(pts, groups=groups)
             self._auto_groups = None if groups is None else np.array(groups)
         return self._auto_clusters
-
-
-def _check_receivers(vertices, normals) -> tuple[np.ndarray, np.ndarray]:
-    pts = np.asarray(vertices, dtype=np.float64)
-    nrm = np.asarray(normals, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3 or nrm.shape != pts.shape:
-        raise InputError(
-            f"vertices and normals must both have shape (V, 3), got {pts.shape} and {nrm.shape}"
-        )
-    if not (np.isfinite(pts).all() and np.isfinite(nrm).all()):
-        raise InputError("receiver vertices or normals contain NaN or infinite values")
-    # mesh normals are often only nearly unit; a zero normal (unreferenced vertex)
-    # stays zero and shades black
-    length = np.linalg.norm(nrm, axis=1, keepdims=True)
-    if not np.allclose(length, 1.0, atol=1e-6):
-        nrm = nrm / np.where(length > 0, length, 1.0)
-    return pts, nrm
-
-
-def _check_blockers(blockers) -> tuple[list[SphereBlocker], list[LogBlocker]]:
-    """Split blockers into sphere sets and blockers with their own log visibility."""
-    spheres, others = [], []
-    for b in blockers:
-        if isinstance(b, SphereBlocker):
-            spheres.append(b)
-        elif isinstance(b, LogBlocker):
-            others.append(b)
-        else:
-            raise InputError(f"blockers must be SphereBlocker objects or have "
-                             f"log_visibility(points, normals, order), got {type(b).__name__}")
-    return spheres, others
 
 
 def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:

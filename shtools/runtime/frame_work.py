@@ -135,10 +135,12 @@ def frame_work(settings, table: CapLogTable, pts, blockers, clusters, exclude,
             clusters = clusters.split(exclude.labels)
         cl_centers, cl_radii = clusters.bounds(pts)
         cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
+        skipped = None if exclude is None else excluded_nodes(clusters, exclude,
+                                                              forest.blocker)
         weights = ratio_weights(forest, cuts, cl_centers, table,
-                                s.resolved_theta_min())
-        in_cut = cuts.in_cut
-    if exclude is not None:
+                                s.resolved_theta_min(), skipped)
+        in_cut = cuts.in_cut if skipped is None else cuts.in_cut & ~skipped
+    if exclude is not None and not s.hierarchy:
         in_cut = in_cut & ~excluded_nodes(clusters, exclude, forest.blocker)
     sizes = in_cut.sum(axis=1)
     s_max = max(1, int(sizes.max(initial=0)))

@@ -11,16 +11,12 @@ blend of the reconstructed maps, since the transform is linear.  Inside the
 first shell the first shell is used; beyond the last, the map fades to
 unoccluded over one shell spacing, as for SH fields.
 
-Shading (:func:`haar_radiance`): the triple integral of lighting, visibility
-and the cosine transfer over the map's cells,
-``(1/pi) sum_q w_q L_q V_q max(0, N . s_q)``.  All three are piecewise
-constant on the map's cells (the Haar basis spans exactly those functions),
-so this is the wavelet triple product of Ng et al. (2004) evaluated in the
-pixel domain -- the same number, at ``O(cells)`` per receiver instead of
-their ``O(kept coefficients)`` -- and several occluders combine by the
-cell-wise product of their maps (the product in the Haar basis).  Objects
-are not rotated: a map is in its object's frame, and a rotated object would
-need its map resampled (not done).
+Shading (:func:`haar_radiance`): the integral of lighting, visibility and
+the cosine transfer over the map's cells in the object's frame,
+``(1/pi) sum_q w_q L_q V_q max(0, N . s_q)``.  Posed objects (world-frame
+maps, rotation, several occluders, SH blockers mixed in) and Ng et al.'s
+wavelet triple product are in :mod:`shtools.runtime.haar_shading` and
+:mod:`shtools.runtime.haar_triple`.
 """
 
 from __future__ import annotations
@@ -113,14 +109,69 @@ class HaarField:
         out[:, 0] = self.offset[c, 0] + q[:, 0] * self.step[c, 0]
         return out
 
+    @classmethod
+    def from_asset(cls, path) -> HaarField:
+        """Read a ``haar`` asset (:mod:`shtools.data_formats.haar`)."""
+        from shtools.data_formats.haar import read_haar_asset
+
+        d = read_haar_asset(path)
+        return cls(d["center"], d["bounding_radius"], d["shell_radii"], d["resolution"],
+                   d["index"], d["q"], d["offset"], d["step"], d["map_size"])
+
+    @property
+    def fade_end(self) -> float:
+        """Distance from the centre beyond which the field is exactly unoccluded."""
+        r = np.asarray(self.shell_radii, dtype=np.float64)
+        return float(r[-1] + (r[1] - r[0] if len(r) > 1 else r[0]))
+
     def visibility_maps(self, points) -> np.ndarray:
         """Visibility maps at object-frame points, shape ``(P, N*N)`` float64, in [0, 1].
 
         Cell ``(s, t)`` of a map is the direction ``theta_s = (s + 1/2) pi / N``
         from ``+z``, ``phi_t = (t + 1/2) 2 pi / N`` (the field's direction map).
         """
+        N = self.map_size
+        maps = ihaar2(self.coefficients(points).reshape(-1, N, N)).reshape(-1, N * N)
+        # truncation rings slightly outside [0, 1], which a visibility cannot be (and
+        # products must not amplify)
+        return np.clip(maps, 0.0, 1.0)
+
+    def coefficients(self, points) -> np.ndarray:
+        """Haar coefficients of the visibility maps at object-frame points, ``(P, N*N)``.
+
+        The bilinear blend of the kept coefficients of the nearest samples on the two
+        nearest shells (:meth:`sparse_terms`), faded to the unoccluded map (scaling
+        coefficient ``N``) beyond the last shell; not clipped (the stored function).
+        """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         N = self.map_size
+        terms, fade = self.sparse_terms(p)
+        coeff = np.zeros((p.shape[0], N * N))
+        for rows, w, kidx, vals in terms:
+            # one sample's kept indices are distinct: no repeated (row, index) pair within
+            # one term, so a buffered += is exact
+            coeff[rows[:, None], kidx] += vals * w[:, None]
+        coeff[:, 0] += fade * N
+        return coeff
+
+    def sparse_terms(self, points) -> tuple[list, np.ndarray]:
+        """The weighted sparse samples whose sum is each point's map, and the fade.
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Object frame.
+
+        Returns
+        -------
+        terms : list of (rows (n,), weight (n,), index (n, K), value (n, K))
+            Per shell and bilinear corner: the receiver rows, their weights and the
+            kept coefficients (flat positions, dequantized values) of the sample used.
+        fade : ndarray, shape (P,)
+            Weight of the unoccluded map (beyond the last shell), the terms' weights
+            already scaled by ``1 - fade``.
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         radii = np.asarray(self.shell_radii, dtype=np.float64)
         C = radii.shape[0]
         rel = p - self.center
@@ -133,8 +184,7 @@ class HaarField:
         c1 = np.minimum(np.floor(x).astype(np.int64), max(C - 2, 0))
         w2 = x - c1 if C > 1 else np.zeros_like(d)
         fade = np.clip((d - radii[-1]) / spacing, 0, 1)
-        coeff = np.zeros((p.shape[0], N * N))
-        rows = np.arange(p.shape[0])
+        terms = []
         for off, wshell in ((0, 1 - w2), (1, w2)):
             c = np.minimum(c1 + off, C - 1)
             for shell in np.unique(c):
@@ -146,13 +196,8 @@ class HaarField:
                 kidx = np.asarray(self.index[shell], np.int64).reshape(vals.shape)
                 for k in range(4):
                     w = wb[:, k] * wshell[sel] * (1 - fade[sel])
-                    # one sample's kept indices are distinct: no repeated (row, index)
-                    # pair within one corner, so a buffered += is exact
-                    coeff[rows[sel][:, None], kidx[idx[:, k]]] += vals[idx[:, k]] * w[:, None]
-        maps = ihaar2(coeff.reshape(-1, N, N)).reshape(p.shape[0], -1)
-        # beyond the fade: unoccluded (1 everywhere); truncation rings slightly outside
-        # [0, 1], which a visibility cannot be (and products must not amplify)
-        return np.clip(maps + fade[:, None], 0.0, 1.0)
+                    terms.append((sel, w, kidx[idx[:, k]], vals[idx[:, k]]))
+        return terms, fade
 
 
 def haar_radiance(visibility_maps, env_map, normals, dirs, weights) -> np.ndarray:

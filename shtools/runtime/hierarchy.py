@@ -174,7 +174,7 @@ def tree_cuts(forest: Forest, cluster_centers, cluster_radii, theta_max: float) 
 
 
 def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTable,
-                  theta_min: float) -> dict[tuple[int, int], np.ndarray]:
+                  theta_min: float, skip: np.ndarray | None = None) -> np.ndarray:
     """Eq. 37 ratio vectors of the inner cut nodes.
 
     Parameters
@@ -187,6 +187,9 @@ def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTabl
         Log table of the accumulation order ``n``.
     theta_min : float
         Leaves subtending less than this at ``p*`` are left out of the detailed sum.
+    skip : ndarray of bool, shape (C, M), optional
+        (cluster, node) pairs whose weights are not needed (left at ones): nodes
+        the cluster's receivers skip.  The others do not depend on it.
 
     Returns
     -------
@@ -198,9 +201,12 @@ def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTabl
     n_c = pc.shape[0]
     weights = np.ones((n_c, forest.n_nodes, n))
     c_idx, j_idx = np.nonzero(cuts.owner != forest.leaf_nodes[None, :])
+    o_idx = cuts.owner[c_idx, j_idx]
+    if skip is not None:
+        kept = ~skip[c_idx, o_idx]
+        c_idx, j_idx, o_idx = c_idx[kept], j_idx[kept], o_idx[kept]
     if c_idx.size == 0:
         return weights
-    o_idx = cuts.owner[c_idx, j_idx]
     # By the addition theorem, sum_m y_lm(s_b) y_lm(s_j) = (2l+1)/(4 pi) P_l(s_b . s_j),
     # so the band-l projection of a leaf's log vector on the bounding direction is
     # f*_l(theta_j) P_l(cos gamma_j) (2l+1)/(4 pi): no n*n basis per pair is needed.

@@ -15,10 +15,12 @@ translation and a uniform scale.  Per receiver point:
    looks small (at the default 6.4 V_r it subtends 9 degrees);
 4. each channel's SH vector rotated to the world (one rotation matrix per lamp).
 
-Shading (Tamura et al. Fig. 3): the receiver's transfer, multiplied by the
-visibility of only the blockers **nearer than the lamp**, double-producted with
-the world RCV: :func:`field_light_radiance` passes the RCVs as a per-vertex
-environment to :func:`shtools.runtime.shading.shade`.
+Shading (Tamura et al. Fig. 3): the receiver's transfer, multiplied by a
+visibility, double-producted with the world RCV: :func:`field_light_radiance`
+passes the RCVs as a per-vertex environment to
+:func:`shtools.runtime.shading.shade`.  Which visibility -- that of only the
+blockers nearer than the lamp, or none, the blockers' shadow then traced -- is
+the scene's choice (:mod:`shtools.scene.field_light`).
 """
 
 from __future__ import annotations
@@ -143,7 +145,8 @@ def field_light_radiance(light: FieldLight, visibility, points, normals, *, orde
     ----------
     light : FieldLight
     visibility : array_like, shape (V, n*n)
-        Visibility of the blockers nearer than the lamp.
+        The receivers' visibility (of the blockers nearer than the lamp, or of
+        none).
     points, normals : array_like, shape (V, 3)
     order : int
         Shading order; the field must have it.

@@ -67,7 +67,8 @@ def desaturate_negative(radiance) -> np.ndarray:
         Non-negative linear RGB.
     """
     rgb = np.asarray(radiance, dtype=np.float64)
-    negative = rgb.min(axis=-1) < 0.0
+    # channel by channel: several times faster than a reduction over the short last axis
+    negative = np.minimum(np.minimum(rgb[..., 0], rgb[..., 1]), rgb[..., 2]) < 0.0
     if not negative.any():
         return rgb
     out = rgb.copy()
@@ -179,8 +180,23 @@ def sphere_light_sh(light: SphereLight, points, order: int) -> np.ndarray:
 LIGHT_CHUNK = 8192
 
 
-def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win
-                           ) -> np.ndarray:
+def sphere_light_terms(light: SphereLight, points, order: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """What a light's term needs of the receivers' positions alone (kept for static rows).
+
+    Returns
+    -------
+    zh : ndarray, shape (V, n) float32
+        Zonal coefficients of the light's radiance cap (:func:`_sphere_light_zonal`).
+    y : ndarray, shape (V, n*n) float32
+        The SH basis at the direction to the light.
+    """
+    zh, axis = _sphere_light_zonal(light, points, order)
+    return zh, basis(axis, order)
+
+
+def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win,
+                           terms=None) -> np.ndarray:
     """Radiance of spherical lights through the visibility, shape ``(V, 3)``.
 
     Per light, ``(H * g) . L_cap``: the shadowed transfer ``H * g`` by exact
@@ -199,6 +215,9 @@ def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win
     order : int
     win : ndarray, shape (n*n,)
         Window factors of the lighting.
+    terms : sequence of (zh, y), optional
+        :func:`sphere_light_terms` of each light at ``points`` (a cache; the
+        same values as computed here).
 
     Returns
     -------
@@ -223,9 +242,12 @@ def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win
             shadowed = vals_h[:rows] @ proj
         else:
             shadowed = ops.product(transfer[start:stop], visibility[start:stop])
-        for light in lights:
-            zh, axis = _sphere_light_zonal(light, points[start:stop], order)
-            per_band = (basis(axis, order) * shadowed) @ band_sum
+        for k, light in enumerate(lights):
+            if terms is None:
+                zh, y = sphere_light_terms(light, points[start:stop], order)
+            else:
+                zh, y = terms[k][0][start:stop], terms[k][1][start:stop]
+            per_band = (y * shadowed) @ band_sum
             lit = np.einsum("vl,vl->v", per_band, zh * zonal_win.astype(np.float32))
             out[start:stop] += lit[:, None].astype(np.float64) * light.color[None, :]
     return out
@@ -304,7 +326,7 @@ def sphere_light_unshadowed(light: SphereLight, points, normals) -> np.ndarray:
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,
           window_kind: str | None = "cosine", window_h: float | None = None,
           local_visibility=None, form: str = "tabulated", transfer=None,
-          env_transfer=None) -> np.ndarray:
+          env_transfer=None, light_terms=None) -> np.ndarray:
     """Outgoing radiance of white Lambertian receivers, shape ``(V, 3)``.
 
     Parameters
@@ -332,6 +354,8 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         Precomputed :func:`lit_transfer` of ``transfer`` and the windowed
         environment (:func:`environment_matrices`); the tabulated form then
         costs one dot product per vertex and colour.
+    light_terms : sequence of (zh, y), optional
+        Precomputed :func:`sphere_light_terms` of each sphere light (a cache).
 
     Returns
     -------
@@ -358,7 +382,7 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         out += fn(transfer, mats, g_w)
     if sphere_lights:
         out += sphere_lights_radiance(sphere_lights, np.asarray(points), transfer, g_w, order,
-                                      win)
+                                      win, light_terms)
     return out
 
 

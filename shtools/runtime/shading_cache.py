@@ -1,4 +1,4 @@
-"""Per-vertex shading terms kept between frames: cosine transfer and lit transfer.
+"""Per-vertex shading terms kept between frames: cosine transfer, lit transfer, light terms.
 
 Static receivers (most of a scene) keep their normals, and a scene's light often
 holds still: the runtime then reuses H(N) and L_H = L * H(N) row by row instead of
@@ -9,7 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from shtools.runtime.shading import cosine_transfer, environment_matrices, lit_transfer
+from shtools.runtime.shading import (
+    cosine_transfer,
+    environment_matrices,
+    lit_transfer,
+    sphere_light_terms,
+)
 
 
 class ShadingCache:
@@ -28,6 +33,8 @@ class ShadingCache:
         self.settings = settings
         self._transfer: tuple[np.ndarray, np.ndarray] | None = None
         self._lit: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._points: np.ndarray | None = None  # receivers of the kept light terms
+        self._lights: list = []  # per light: (position, radius, zh, y)
 
     def cosine_transfer(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
@@ -72,3 +79,30 @@ class ShadingCache:
         if changed.size:
             l_h[changed] = lit_transfer(transfer[changed], mats)
         return l_h
+
+    def light_terms(self, lights, points: np.ndarray) -> list:
+        """:func:`~shtools.runtime.shading.sphere_light_terms` of each light, kept per row.
+
+        Rows are refreshed where the receiver moved, all of them for a light that
+        moved or changed size (or when the receivers or the lights changed).
+        """
+        points = np.asarray(points)
+        if (self._points is None or self._points.shape != points.shape
+                or len(self._lights) != len(lights)):
+            self._points = points.copy()
+            self._lights = [self._fresh(light, points) for light in lights]
+            return [(zh, y) for _, _, zh, y in self._lights]
+        moved = np.flatnonzero(np.any(self._points != points, axis=1))
+        if moved.size:
+            self._points[moved] = points[moved]
+        for k, light in enumerate(lights):
+            position, radius, zh, y = self._lights[k]
+            if radius != light.radius or not np.array_equal(position, light.position):
+                self._lights[k] = self._fresh(light, points)
+            elif moved.size:
+                zh[moved], y[moved] = sphere_light_terms(light, points[moved], self.order)
+        return [(zh, y) for _, _, zh, y in self._lights]
+
+    def _fresh(self, light, points) -> tuple:
+        zh, y = sphere_light_terms(light, points, self.order)
+        return np.array(light.position, dtype=np.float64), float(light.radius), zh, y

@@ -406,6 +406,11 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
 
     if st.deringing != ShadowSettings.deringing:  # absent: the default; relighting reads it
         parameters["deringing"] = st.deringing
+    if (sphere := prepared.midrange) is not None:  # absent: at infinity; relighting reads it
+        scaling = scene.environment.scaling
+        parameters["environment_sphere"] = {
+            "center": [float(c) for c in sphere.center], "radius": sphere.radius,
+            "scaling": None if scaling is None else Path(scaling).name}
     inputs = {"scene": scene.path, **prepared.inputs}
     return BakeWriter(
         output,

@@ -1,5 +1,7 @@
 """The ``field`` blocker kind: ``blocker = { field = "x.field.h5" }`` (Tamura et al.).
 
+A ``haar`` asset (an all-frequency field) is handed to :mod:`shtools.scene.haar_blocker`.
+
 A rigid object carries a precomputed adaptive shadow field (``shtools field
 sample``).  The kind checks that the object can use one (no skin, one uniform
 scale in every pose), loads the asset once (its SH order must be the scene's)
@@ -47,8 +49,14 @@ class FieldKind(BlockerKind):
 
     def prepare(self, spec, prep, ctx):
         from shtools.data_formats.field import read_field
+        from shtools.data_formats.haar import asset_kind
         from shtools.runtime import FieldTable
 
+        if asset_kind(spec.path) == "haar":  # an all-frequency field (shtools.scene.haar_blocker)
+            from shtools.scene.haar_blocker import prepare_haar
+
+            prepare_haar(spec, prep, ctx)
+            return
         fld = read_field(spec.path)
         order = ctx.settings.order
         if fld.order != order:
@@ -75,6 +83,12 @@ class FieldKind(BlockerKind):
 
     def pose(self, prep, world, joints):
         from shtools.runtime import FieldBlocker
+        from shtools.runtime.haar import HaarField
+
+        if isinstance(prep.blocker_data, HaarField):
+            from shtools.scene.haar_blocker import pose_haar
+
+            return pose_haar(prep, world)
 
         try:
             return FieldBlocker.from_matrix(prep.blocker_data, world)

@@ -31,6 +31,9 @@ class FrameState:
     blocker_meshes: list  # list[(vertices (Vb,3), faces (Fb,3))]
     light_shadows: list = field(default_factory=list)  # the way of each light (by name)
     self_visibility: list = field(default_factory=list)  # list[shtools.runtime.SelfVisibility]
+    # (V,) bool: rows of objects that never move (their sphere blockers are flagged
+    # static too), so the runtime keeps the static pairs' log sum between frames
+    static_rows: np.ndarray | None = None
 
 
 #: Largest world coordinate a posed vertex may have: the runtime works in float32,
@@ -63,6 +66,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     kinds = BLOCKER_KINDS
     worlds = world_matrices(prepared.scene.objects, t)
     verts, norms, blockers, meshes, selfs = [], [], [], [], []
+    still = static_objects(prepared.scene.objects, prepared.objects)
+    static_rows = []
     n_rows = 0
     ground = []  # (rows, vertices, normals) of receiver-only objects
     casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
@@ -109,9 +114,12 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         if o.spec.receives:
             verts.append(world_v)
             norms.append(world_n)
+            static_rows.append(np.full(len(world_v), o.spec.name in still))
             n_rows += len(world_v)
         if o.spec.blocks:
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
+            if o.spec.name in still and isinstance(blockers[-1], SphereBlocker):
+                blockers[-1].static = True
             stands_in = (o.motion is None and trace and st.traced_shadows and len(o.faces)
                          and ((field_traced and isinstance(blockers[-1], FieldBlocker))
                               or (isinstance(blockers[-1], SphereBlocker)
@@ -157,7 +165,22 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                                  for receivers, c in contact_casters(parts, n_contact))
                      if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
-                      [spec.shadows for spec in prepared.scene.lights], selfs)
+                      [spec.shadows for spec in prepared.scene.lights], selfs,
+                      np.concatenate(static_rows))
+
+
+def static_objects(specs: list, prepared_objects: list) -> set[str]:
+    """Names of the objects that never move: no skinned motion, and no keyframes on
+    them or on any of their parents (a fact of the scene file, not of the frames)."""
+    by_name = {o.name: o for o in specs}
+    skinned = {o.spec.name for o in prepared_objects if o.motion is not None}
+
+    def moves(name: str) -> bool:
+        o = by_name[name]
+        return bool(o.keyframes) or name in skinned or (
+            o.parent is not None and moves(o.parent))
+
+    return {o.name for o in specs if not moves(o.name)}
 
 
 def pose_lights(scene, t: float) -> list:

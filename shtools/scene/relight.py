@@ -15,7 +15,14 @@ rounding.
 Spherical lights (a scene's ``[[lights]]``, posed at each frame's time) are
 shaded through the same stored visibility, the baker's ``shexp`` way; the
 other ways (SSOC, ray tracing) need the posed blocker meshes, which a bake
-does not keep.
+does not keep.  A bake lit from a finite environment sphere (mid-range
+lighting, Wang et al. 2005, Sec. 3.2) records it, and the new light is put on
+that sphere (:func:`relight_midrange`).
+
+Frames stream from the open bake a batch at a time
+(:func:`~shtools.data_formats.bake_stream.open_bake`), so memory is set by the
+vertex count, not the frame count (:func:`relight_bytes`); the geometry and
+visibility are copied into the output as stored.
 
 From Python::
 
@@ -43,7 +50,7 @@ class _RelightSource:
     """What :func:`~shtools.scene.shadows.shade_frame` reads of a prepared scene."""
 
     env_sh: np.ndarray | None
-    midrange: None = None  # a relit environment is distant (at infinity)
+    midrange: object = None  # a MidrangeEnvironment, or None at infinity
 
 
 def relight_settings(bake):
@@ -112,6 +119,47 @@ def relight_environment(light: str | os.PathLike, order: int, window, rotate: fl
     return _environment(scene, {} if inputs is None else inputs)
 
 
+def relight_midrange(bake, env_sh: np.ndarray):
+    """``env_sh`` on the finite environment sphere the bake was lit from, or None.
+
+    A bake under a mid-range environment (Wang et al. 2005, Sec. 3.2)
+    records its sphere (``parameters.environment_sphere``); the new light is
+    put on that sphere, with the plain mid-range scaling table a bake of a
+    ``light`` asset builds (:func:`shtools.scene.midrange.prepare_midrange`).
+    A bake that records no sphere was lit from infinity.
+
+    Parameters
+    ----------
+    bake : shtools.data_formats.bake.Bake
+    env_sh : ndarray, shape (n*n, 3)
+        The new light (:func:`relight_environment`).
+
+    Returns
+    -------
+    shtools.scene.midrange.MidrangeEnvironment or None
+
+    Raises
+    ------
+    InputError
+        The sphere was scaled with a table asset of its own, which a bake does
+        not keep.
+    """
+    sphere = bake.parameters.get("environment_sphere")
+    if sphere is None:
+        return None
+    if sphere.get("scaling") is not None:
+        raise InputError(f"was lit from a finite environment sphere scaled by the table "
+                         f"'{sphere['scaling']}', which a bake does not keep; bake the scene "
+                         "with the new light instead of relighting it", bake.path)
+    from shtools.runtime.scaling import ScalingTable
+    from shtools.scene.midrange import MidrangeEnvironment, _scaling_table
+
+    return MidrangeEnvironment(np.asarray(sphere["center"], dtype=float),
+                               float(sphere["radius"]),
+                               ScalingTable(_scaling_table(bake.sh_order)),
+                               np.asarray(env_sh, dtype=float), bake.sh_order, bake.path)
+
+
 def scene_lights(scene) -> object:
     """The parsed scene whose ``[[lights]]`` a relight adds (each must use ``shexp``).
 
@@ -143,24 +191,30 @@ def scene_lights(scene) -> object:
     return scene
 
 
-def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None = None):
+def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None = None,
+                   midrange=None):
     """Radiance of every frame of ``bake`` under ``env_sh`` (and ``scene``'s lights).
 
     Shading is linear in the visibility ``g`` before de-ringing: a vertex whose
     position, normal and lights do not change over the bake has radiance
-    ``K g`` with a fixed ``K (3, n*n)``.  ``K`` is made once by the baker's own
-    :func:`~shtools.scene.shadows.shade_frame` (without de-ringing) of the unit
-    visibility vectors, so these vertices cost one float32 product per batch of
-    frames; the others are shaded with ``shade_frame`` as the baker does (a
-    batch of frames in one call while the lights do not change).  A batch holds
-    at most :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads``
-    batches are in flight.  De-ringing
-    (``settings.deringing``) follows, as in the runtime's ``shade``.
+    ``K g`` with a fixed ``K (3, n*n)`` -- for the environment ``K = M(L) H``,
+    the light's product matrix applied to the cosine lobe (Sloan et al. 2002,
+    Sec. 4), plus the spherical lights' lobes.  ``K`` is made once by the
+    baker's own :func:`~shtools.scene.shadows.shade_frame` (without
+    de-ringing) of the unit visibility vectors, so these vertices cost one
+    float32 product per batch of frames; the others are shaded with
+    ``shade_frame`` as the baker does (a batch of frames in one call while the
+    lights do not change).  Frames are read from the bake a batch at a time:
+    a batch holds at most :data:`BATCH_ROWS` receiver rows, and at most
+    ``2 * threads`` batches are in flight, so memory does not grow with the
+    frame count (:func:`relight_bytes`).  De-ringing (``settings.deringing``)
+    follows, as in the runtime's ``shade``.
 
     Parameters
     ----------
     bake : shtools.data_formats.bake.Bake
-        With stored visibility.
+        With stored visibility: arrays (:func:`~shtools.data_formats.bake.read_bake`)
+        or the open datasets of :func:`~shtools.data_formats.bake_stream.open_bake`.
     env_sh : ndarray, shape (n*n, 3) or None
         Distant environment (:func:`relight_environment`).
     scene : shtools.scene.scene.Scene, optional
@@ -171,6 +225,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     threads : int, optional
         Threads sharing the work (NumPy releases the GIL in its array loops),
         each with its own runtime; default one per usable core.
+    midrange : shtools.scene.midrange.MidrangeEnvironment, optional
+        ``env_sh`` on the finite sphere the bake recorded
+        (:func:`relight_midrange`).
 
     Yields
     ------
@@ -179,8 +236,8 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     """
     from concurrent.futures import ThreadPoolExecutor
 
+    from shtools.data_formats.bake_stream import check_finite
     from shtools.runtime.shading import desaturate_negative
-    from shtools.scene.pose import pose_lights
     from shtools.tasks import default_workers
 
     if bake.visibility is None:
@@ -188,29 +245,30 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
                          "--store-visibility' to relight it", bake.path)
     settings = settings or relight_settings(bake)
     threads = max(1, threads or default_workers())
-    times = [float(t) for t in bake.times]
-    lights = [[] if scene is None else pose_lights(scene, t) for t in times]
+    lights = frame_lights(bake, scene)
     same = _same_lights(lights)
-    still = _fixed_rows(bake) if same else np.zeros(bake.n_vertices, bool)
-    fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
     # under the same lights, several frames go in one batch: their moving rows in one
-    # shading call, their still rows in one product with K; a batch holds at most
-    # BATCH_ROWS receiver rows of every frame's visibility and radiance
+    # shading call, their still rows in one product with K
     batch = max(1, BATCH_ROWS // bake.n_vertices) if same else 1
-    batches = [list(range(a, min(a + batch, bake.n_frames)))
-               for a in range(0, bake.n_frames, batch)]
-    shaders = _Shaders(env_sh, settings)
+    still, held = _fixed_rows(bake, batch) if same else (np.zeros(bake.n_vertices, bool), None)
+    fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
+    batches = [range(a, min(a + batch, bake.n_frames)) for a in range(0, bake.n_frames, batch)]
+    shaders = _Shaders(env_sh, settings, midrange)
+    path = bake.path
 
     def linear_part(rows):
-        return shaders.linear(_state(bake, [0], rows, lights[0]), bake.sh_order ** 2)
+        return shaders.linear(_state(bake, range(1), rows, lights[0]), bake.sh_order ** 2)
 
     def frames_of(frames, K):
         """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
         out = np.empty((len(frames), bake.n_vertices, 3))
-        vis = bake.visibility[frames[0]:frames[-1] + 1]  # consecutive frames: one slice
+        vis = check_finite(np.asarray(bake.visibility[frames.start:frames.stop]),
+                           "visibility", path)
         if moving.size:
             g = vis[:, moving].reshape(-1, vis.shape[2])
-            shaded = shaders.shade(_state(bake, frames, moving, lights[frames[0]]), g)
+            state = (_state(bake, frames, moving, lights[frames.start]) if held is None
+                     else _state(held, frames, slice(None), lights[frames.start]))
+            shaded = shaders.shade(state, g)
             out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
         if K is not None:  # every frame of the batch in one float32 product, as the
             # baker dots its float32 lit transfer with the visibility
@@ -225,9 +283,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
 
     with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
         K = None
-        if fixed.size:
-            parts = [p for p in np.array_split(fixed, threads) if p.size]
-            K = np.concatenate(list(pool.map(linear_part, parts))).astype(np.float32)
+        if fixed.size:  # parts of at most BATCH_ROWS rows: bounded shading scratch
+            parts = np.array_split(fixed, max(threads, -(-fixed.size // BATCH_ROWS)))
+            K = np.concatenate(list(pool.map(linear_part, [p for p in parts if p.size])))
         window = 2 * threads  # batches in flight: bounded memory, every thread busy
         pending = [pool.submit(frames_of, frames, K) for frames in batches[:window]]
         for i in range(len(batches)):
@@ -242,20 +300,51 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
 BATCH_ROWS = 1 << 16
 
 
+def relight_bytes(n_frames: int, n_vertices: int, size: int, threads: int) -> int:
+    """Peak working memory of :func:`relight_frames`, bytes: the fixed ``K``, the
+    geometry held and the batches in flight (a frame count of its own does not add
+    to it).
+
+    Parameters
+    ----------
+    n_frames, n_vertices : int
+    size : int
+        ``n*n``.
+    threads : int
+    """
+    batch = max(1, BATCH_ROWS // n_vertices) * n_vertices  # receiver rows of one batch
+    # float32 visibility as read, gathered, windowed and its products in the shading
+    # (6 copies); float64 radiance, scratch and geometry
+    per_row = 4 * size * 6 + 8 * 3 * 3 + 8 * 6
+    K = n_vertices * 3 * size * 4  # float32
+    return int(K + GEOMETRY_BYTES + 2 * threads * batch * per_row + 2 * batch * (4 * 3 + 4 * 6))
+
+
+def frame_lights(bake, scene=None) -> list:
+    """The posed spherical lights of each frame: ``scene``'s at the bake's times."""
+    if scene is None:
+        return [[] for _ in range(bake.n_frames)]
+    from shtools.scene.pose import pose_lights
+
+    return [pose_lights(scene, float(t)) for t in bake.times]
+
+
 class _Shaders:
     """One runtime per thread, without de-ringing (applied to each whole frame after)."""
 
-    def __init__(self, env_sh, settings):
+    def __init__(self, env_sh, settings, midrange=None):
         import threading
         from dataclasses import replace
 
-        self.source = _RelightSource(env_sh)
+        self.env_sh, self.midrange = env_sh, midrange
         self.settings = replace(settings, deringing="none")
         self.local = threading.local()
         self.runtimes: list = []
         self.lock = threading.Lock()
 
     def _run(self):
+        from dataclasses import replace
+
         from shtools.runtime import ShadowRuntime
         from shtools.scene.shadows import BakeRun
 
@@ -264,7 +353,10 @@ class _Shaders:
             with self.lock:  # one at a time: the second reuses the first's cached log tables
                 runtime = ShadowRuntime(self.settings)
                 self.runtimes.append(runtime)
-            run = self.local.run = BakeRun(self.source, runtime, "relight")
+            # a sphere of its own per thread: it caches the last vertices' radiance SH
+            sphere = None if self.midrange is None else replace(self.midrange, _cache={})
+            run = self.local.run = BakeRun(_RelightSource(self.env_sh, sphere), runtime,
+                                           "relight")
         return run
 
     def shade(self, state, visibility) -> np.ndarray:
@@ -274,9 +366,10 @@ class _Shaders:
         return shade_frame(self._run(), state, visibility)
 
     def linear(self, state, size: int) -> np.ndarray:
-        """``K (R, 3, n*n)``: the radiance of each unit visibility vector, before de-ringing."""
+        """``K (R, 3, n*n)`` float32: the radiance of each unit visibility vector, before
+        de-ringing."""
         rows = len(state.vertices)
-        K = np.empty((rows, 3, size))
+        K = np.empty((rows, 3, size), np.float32)
         unit = np.zeros((rows, size), np.float32)
         for j in range(size):
             unit[:, j] = 1.0
@@ -292,24 +385,29 @@ class _Shaders:
             runtime.close()
 
 
-def _state(bake, frames, rows, lights):
-    """The FrameState shading reads: rows ``rows`` of asset frames ``frames``, stacked."""
+def _state(bake, frames: range, rows, lights):
+    """Rows ``rows`` of asset frames ``frames`` (consecutive), stacked; ``bake`` has
+    ``vertices`` and ``normals``, ``(V, 3)`` or ``(T, V, 3)``, and a ``path`` when they
+    are read from its file (then checked for NaN/inf).  No blockers: the visibility is
+    stored."""
+    from shtools.data_formats.bake_stream import check_finite
     from shtools.scene.pose import FrameState
     from shtools.scene.shadows import ShexpLight
 
-    vertices = np.concatenate([bake.frame_vertices(t)[rows] for t in frames])
-    normals = np.concatenate([bake.frame_normals(t)[rows] for t in frames])
-    return FrameState(vertices.astype(np.float64), normals.astype(np.float64), [], lights, [],
+    path = getattr(bake, "path", None)
+
+    def block(name):
+        values = getattr(bake, name)
+        if values.ndim == 2:
+            return np.tile(values[rows], (len(frames), 1))
+        read = np.asarray(values[frames.start:frames.stop])
+        if path is not None:
+            check_finite(read, name, path)
+        return read[:, rows].reshape(-1, 3)
+
+    return FrameState(block("vertices").astype(np.float64),
+                      block("normals").astype(np.float64), [], lights, [],
                       [ShexpLight.name] * len(lights))
-
-
-def _fixed_rows(bake) -> np.ndarray:
-    """Vertices whose position and normal are the same in every frame, ``(V,)`` bool."""
-    if bake.vertices.ndim == 2:
-        return np.ones(bake.n_vertices, bool)
-    v, n = bake.vertices, bake.normals  # finite (read_bake checks): equal iff min == max
-    return np.all(v.min(axis=0) == v.max(axis=0), axis=1) & np.all(
-        n.min(axis=0) == n.max(axis=0), axis=1)
 
 
 def _same_lights(lights: list) -> bool:
@@ -321,6 +419,42 @@ def _same_lights(lights: list) -> bool:
         for frame in lights)
 
 
+def _fixed_rows(bake, batch: int):
+    """Vertices whose position and normal are the same in every frame, ``(V,)`` bool, and
+    the others' geometry when it is small.
+
+    Read ``batch`` frames at a time, each checked for NaN/inf.  The second
+    value holds ``vertices`` and ``normals`` ``(T, M, 3)`` of the ``M``
+    moving rows when every frame's geometry fits in :data:`GEOMETRY_BYTES`
+    (read once, not again per batch), else None.
+    """
+    from shtools.data_formats.bake_stream import check_finite
+
+    if bake.vertices.ndim == 2:
+        return np.ones(bake.n_vertices, bool), None
+    T, V = bake.n_frames, bake.n_vertices
+    names = ("vertices", "normals")
+    held = ({name: np.empty((T, V, 3), np.float32) for name in names}
+            if T * V * 3 * 4 * len(names) <= GEOMETRY_BYTES else None)
+    first = {name: np.asarray(getattr(bake, name)[0]) for name in names}
+    still = np.ones(V, bool)
+    for a in range(0, T, batch):
+        for name, ref in first.items():
+            values = check_finite(np.asarray(getattr(bake, name)[a:a + batch]), name,
+                                  bake.path)
+            still &= np.all(values == ref, axis=(0, 2))
+            if held is not None:
+                held[name][a:a + batch] = values
+    if held is not None:
+        moving = np.flatnonzero(~still)
+        held = SimpleNamespace(**{name: values[:, moving] for name, values in held.items()})
+    return still, held
+
+
+#: Most bytes of per-frame geometry relighting keeps in memory to read it once.
+GEOMETRY_BYTES = 1 << 27
+
+
 def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
             rotate: float = 0.0, scene=None, compression: str | None = None,
             threads: int | None = None, progress=None) -> dict:
@@ -329,9 +463,12 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     One call from Python; ``shtools relight`` runs it.  The output is a bake
     like the input (geometry, albedo, objects, visibility kept, so it can be
     relit again) whose radiance is what a fresh bake of the same scene with
-    ``[environment] light = LIGHT`` (``rotate_deg = rotate``) and, given
-    ``scene``, that scene's spherical lights gives.  It appears atomically,
-    and never replaces the bake or the light it reads.
+    ``[environment] light = LIGHT`` (``rotate_deg = rotate``; the bake's
+    ``radius`` and ``center`` when it was lit from a finite sphere) and,
+    given ``scene``, that scene's spherical lights gives.  Frames stream
+    through a batch at a time (:func:`relight_frames`); the geometry and
+    visibility are copied as stored.  The output appears atomically, and
+    never replaces the bake or the light it reads.
 
     Parameters
     ----------
@@ -346,10 +483,9 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     scene : path-like or Scene, optional
         Add this scene's ``[[lights]]`` (``shexp`` shadows from the stored visibility).
     compression : str or None
-        h5py filter of the output's per-frame geometry and radiance: None (the
-        default) stores them plain, so writing costs no more than the shading
-        (gzip at HDF5's flush took longer than shading every frame); ``"gzip"``
-        as a bake stores them, for a smaller file.
+        h5py filter of the output's radiance: None (the default) stores it
+        plain, so writing costs no more than the shading; ``"gzip"`` as a bake
+        stores it, for a smaller file.
     threads : int, optional
         Threads shading (:func:`relight_frames`; default one per usable core).
     progress : callable, optional
@@ -364,12 +500,13 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     ------
     InputError, AssetError
         One line naming the file: no stored visibility, a light of another
-        SH order, an output that is an input.
+        SH order, a mid-range bake it cannot relight, an output that is an input.
     """
-    import h5py
+    from concurrent.futures import ThreadPoolExecutor
 
     from shtools.data_formats._base import same_file
-    from shtools.data_formats.bake import BakeWriter, read_bake
+    from shtools.data_formats.bake import BakeWriter
+    from shtools.data_formats.bake_stream import open_bake
     from shtools.progress import silent
 
     start = time.perf_counter()
@@ -377,57 +514,46 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                                  else (scene,)):
         if same_file(output, src):
             raise InputError(f"is also an input ({src}); choose another output", output)
-    b = read_bake(bake)
-    if b.visibility is None:  # before reading the light: the bake is what is missing
-        raise InputError("has no stored visibility; rebake it with 'shtools bake "
-                         "--store-visibility' to relight it", bake)
-    settings = relight_settings(b)
-    inputs = {"bake": bake}
-    env = relight_environment(light, b.sh_order, b.parameters.get("window", settings.window),
-                              rotate, inputs)
-    if scene is not None:
-        scene = scene_lights(scene)
-        inputs["scene"] = scene.path
-    parameters = dict(b.parameters)
-    parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
-                             "lights": None if scene is None else Path(scene.path).name}
-    static = b.vertices.ndim == 2
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(1, thread_name_prefix="relight-inputs") as hasher:
-        # the writer hashes its inputs (the bake is large; hashlib frees the GIL) while
-        # the first frames are shaded
-        made = hasher.submit(
-            BakeWriter, output, n_frames=b.n_frames, faces=b.faces, sh_order=b.sh_order,
-            static_vertices=b.vertices if static else None,
-            static_normals=b.normals if static else None, n_vertices=b.n_vertices,
-            visibility_size=b.visibility.shape[2], times=b.times, frame_index=b.frame_index,
-            albedo=b.albedo, object_offsets=b.object_offsets, object_names=b.object_names,
-            parameters=parameters, inputs=inputs, fps=b.attrs.get("fps"),
-            compression=compression)
-        frames = relight_frames(b, env, scene, settings, threads)
-        first = next(frames)
-        writer = made.result()
-    with (h5py.File(bake, "r") as source, writer as w,
-          (progress or silent)(total=b.n_frames, desc="relight", unit="frames") as bar):
-        # compressed geometry stored as the output stores it is copied as stored (not
-        # compressed again), frame by frame; otherwise everything comes from memory, a
-        # block of frames in one write per dataset (the output's visibility is plain)
-        kept = {name: source[name] for name in ("vertices", "normals")
-                if source[name].ndim == 3 and source[name].compression is not None
-                and source[name].compression == compression}
-        block = 1 if kept else max(1, BATCH_ROWS // b.n_vertices)
-        relit = itertools.chain([first], frames)
-        for a in range(0, b.n_frames, block):
-            z = min(a + block, b.n_frames)
-            radiance = np.stack(list(itertools.islice(relit, z - a)))
-            geometry = {} if static else {"vertices": b.vertices[a:z], "normals": b.normals[a:z]}
-            if kept:
-                geometry = {name: kept.get(name, values[0]) for name, values in geometry.items()}
-                w.write_frame(a, radiance[0], visibility=b.visibility[a], **geometry)
-            else:
-                w.write_frames(a, radiance, visibility=b.visibility[a:z], **geometry)
-            bar.update(z - a)
+    with open_bake(bake) as b:
+        if b.visibility is None:  # before reading the light: the bake is what is missing
+            raise InputError("has no stored visibility; rebake it with 'shtools bake "
+                             "--store-visibility' to relight it", bake)
+        settings = relight_settings(b)
+        inputs = {"bake": bake}
+        env = relight_environment(light, b.sh_order,
+                                  b.parameters.get("window", settings.window), rotate, inputs)
+        sphere = relight_midrange(b, env)
+        if scene is not None:
+            scene = scene_lights(scene)
+            inputs["scene"] = scene.path
+        parameters = dict(b.parameters)
+        parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
+                                 "lights": None if scene is None else Path(scene.path).name}
+        static = b.vertices.ndim == 2
+        copy = {name: getattr(b, name) for name in ("vertices", "normals", "visibility")
+                if getattr(b, name).ndim == 3}
+        with ThreadPoolExecutor(1, thread_name_prefix="relight-inputs") as hasher:
+            # the writer hashes its inputs (the bake is large; hashlib frees the GIL)
+            # while the first frames are shaded
+            made = hasher.submit(
+                BakeWriter, output, n_frames=b.n_frames, faces=b.faces, sh_order=b.sh_order,
+                static_vertices=b.vertices if static else None,
+                static_normals=b.normals if static else None, n_vertices=b.n_vertices,
+                visibility_size=b.visibility.shape[2], times=b.times,
+                frame_index=b.frame_index, albedo=b.albedo, object_offsets=b.object_offsets,
+                object_names=b.object_names, parameters=parameters, inputs=inputs,
+                fps=b.attrs.get("fps"), compression=compression, copy=copy)
+            frames = relight_frames(b, env, scene, settings, threads, midrange=sphere)
+            first = next(frames)
+            writer = made.result()
+        with writer as w, (progress or silent)(total=b.n_frames, desc="relight",
+                                               unit="frames") as bar:
+            block = max(1, BATCH_ROWS // b.n_vertices)  # frames in one write
+            relit = itertools.chain([first], frames)
+            for a in range(0, b.n_frames, block):
+                z = min(a + block, b.n_frames)
+                w.write_frames(a, np.stack(list(itertools.islice(relit, z - a))))
+                bar.update(z - a)
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),
             "lights": 0 if scene is None else len(scene.lights)}

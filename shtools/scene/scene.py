@@ -315,8 +315,13 @@ def _field_light(t: schema.Light, name: str, settings: Settings, ctx: _Ctx,
         poses = _sorted_keys([Keyframe(_key_time(k, settings.fps), pose_of(k, first))
                               for k in t.keyframes], ctx.sub("keyframes"))
     keys = [LightKey(k.time, k.pose.translate, 0.0, np.zeros(3)) for k in poses]
-    return SphereLightSpec(str(name), keys, t.loop, "field", srf=path, poses=poses,
-                           intensity=float(t.intensity))
+    from shtools.scene.field_light import FIELD_SAMPLES, field_light_way
+
+    way = field_light_way(t.shadows if "shadows" in t.model_fields_set else None,
+                          ctx.sub("shadows"))
+    samples = t.samples if "samples" in t.model_fields_set else FIELD_SAMPLES
+    return SphereLightSpec(str(name), keys, t.loop, way, samples=samples, srf=path,
+                           poses=poses, intensity=float(t.intensity))
 
 
 def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx,

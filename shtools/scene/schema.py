@@ -427,7 +427,7 @@ def _light_shadow_names() -> tuple[str, ...]:
 
 #: Keys of a spherical light that a field light (``field = "x.srf.h5"``) does not take,
 #: and keys only a field light takes.
-SPHERE_ONLY = ("radius", "color", "shadows", "samples", "ssoc")
+SPHERE_ONLY = ("radius", "color", "ssoc")
 FIELD_ONLY = ("rotate", "quaternion", "scale")
 
 
@@ -466,7 +466,7 @@ class Light(Table):
                 continue
             for key in (SPHERE_ONLY if is_field else FIELD_ONLY):
                 if key in table:
-                    why = ("a field light's shape, colour and shadows are in its field "
+                    why = ("a field light's shape and colour are in its field "
                            "(scale it with 'intensity')" if is_field else
                            "only a field light (field = \"x.srf.h5\") has an orientation")
                     raise fail(f"'{key}' does not apply: {why}", key)

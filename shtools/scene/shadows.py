@@ -111,7 +111,8 @@ class RuntimeVisibility(VisibilityMethod):
             run.cache["setup_seconds"] = time.perf_counter() - start
         return run.runtime.visibility(state.vertices, state.normals, state.blockers,
                                       clusters=clusters,
-                                      self_visibility=state.self_visibility)
+                                      self_visibility=state.self_visibility,
+                                      static_receivers=state.static_rows)
 
 
 class ProductVisibility(VisibilityMethod):
@@ -146,7 +147,8 @@ class ProductVisibility(VisibilityMethod):
         deformables = [(k, b) for k, b in enumerate(state.blockers)
                        if isinstance(b, DeformableBlocker)]
         spheres = [(k, b) for k, b in enumerate(state.blockers)
-                   if not isinstance(b, FieldBlocker | DeformableBlocker)]
+                   if not isinstance(b, FieldBlocker | DeformableBlocker)
+                   and not getattr(b, "all_frequency", False)]  # shaded in the map basis
         vis = None
         if spheres or not (fields or deformables):
             vis = np.zeros((n_rows, st.order * st.order))
@@ -340,10 +342,16 @@ def shade_frame(run: BakeRun, state, visibility: np.ndarray | None) -> np.ndarra
                              "and the lights that join it")
         radiance = np.zeros((len(state.vertices), 3))
     else:
-        if run.prepared.midrange is not None:  # a finite environment sphere: per-vertex SH
-            env = run.prepared.midrange.radiance_sh(state.vertices)
-        radiance = run.runtime.shade(visibility, state.vertices, state.normals, env,
-                                     sphere_lights=joined)
+        from shtools.scene.haar_blocker import haar_blockers, shade_all_frequency
+
+        haar = haar_blockers(run, state)
+        if haar:  # all-frequency fields: the environment in their map basis
+            radiance = shade_all_frequency(run, state, visibility, haar, joined)
+        else:
+            if run.prepared.midrange is not None:  # a finite environment sphere: per-vertex SH
+                env = run.prepared.midrange.radiance_sh(state.vertices)
+            radiance = run.runtime.shade(visibility, state.vertices, state.normals, env,
+                                         sphere_lights=joined)
     for way, group in groups.items():
         if not LIGHT_SHADOWS[way].joins_environment:
             radiance = radiance + LIGHT_SHADOWS[way].radiance(run, state, visibility, group)

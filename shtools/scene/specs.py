@@ -128,7 +128,8 @@ class SphereLightSpec:
     samples: int = 64
     #: ``SSOCSettings`` of ``shadows = "ssoc"``/``"auto"`` (None: the defaults)
     ssoc: Any = None
-    #: a field light: its ``srf`` asset (``shadows`` is then ``"field"``) ...
+    #: a field light: its ``srf`` asset (``shadows`` is then ``"field"`` or
+    #: ``"field-shexp"``, :mod:`shtools.scene.field_light`) ...
     srf: Path | None = None
     #: ... its keyed lamp poses (translate = position; rotation, uniform scale) ...
     poses: list[Keyframe] = field(default_factory=list)

@@ -1,14 +1,20 @@
-"""Relighting a stored-visibility bake equals a real re-bake under the new light."""
+"""Relighting a stored-visibility bake equals a real re-bake under the new light.
+
+Also streamed in tiny batches, within bounded memory, and on a mid-range bake's
+environment sphere.
+"""
 
 from __future__ import annotations
 
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
 
 from shtools.data_formats.bake import read_bake
 from shtools.data_formats.light import write_light
+from shtools.scene import relight as relight_module
 from shtools.scene.bake import bake_to_file
 from shtools.scene.relight import relight
 from shtools.scene.scene import load_scene
@@ -170,6 +176,17 @@ def test_relight_refuses_bad_input_in_one_line(baked_a, tmp_path, run_cli):
     err = _one_line_error(run_cli, "relight", bake_a, "--light", tmp_path / "b.h5",
                           "--lights", ssoc, "-o", out)
     assert "ssoc" in err
+    # NaN in a later frame's visibility: found as the frames stream, nothing written
+    import shutil
+
+    import h5py
+
+    shutil.copy(bake_a, tmp_path / "nan.h5")
+    with h5py.File(tmp_path / "nan.h5", "r+") as f:
+        f["visibility"][2, 3, 0] = np.nan
+    err = _one_line_error(run_cli, "relight", tmp_path / "nan.h5", "--light",
+                          tmp_path / "b.h5", "-o", out)
+    assert "nan.h5" in err and "'visibility' contains NaN" in err
     assert not out.exists() and bake_a.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
 
@@ -185,7 +202,8 @@ def test_relight_cli_writes_the_asset(baked_a, tmp_path, run_cli):
     relit = read_bake(tmp_path / "relit.h5")
     assert relit.parameters["relight"] == {"light": "b.h5", "rotate_deg": 90.0,
                                            "lights": "a.toml"}
-    # --compress stores geometry and radiance as a bake does, the same values as plain
+    # --compress stores the radiance as a bake does (geometry copied as stored), the same
+    # values as plain
     relight(bake_a, tmp_path / "b.h5", tmp_path / "plain.h5", rotate=90.0, scene=scene_a)
     plain = read_bake(tmp_path / "plain.h5")
     np.testing.assert_array_equal(plain.radiance, relit.radiance)
@@ -230,3 +248,162 @@ def test_relit_bytes_do_not_depend_on_the_thread_count(baked_a, tmp_path):
         relight(bake_a, tmp_path / "b.h5", tmp_path / f"t{threads}.h5", rotate=20.0,
                 scene=scene_a, threads=threads)
     assert (tmp_path / "t1.h5").read_bytes() == (tmp_path / "t3.h5").read_bytes()
+
+
+def _bake(scene, path, **kwargs):
+    bake_to_file(load_scene(scene), path, processes=1, workers=1, **kwargs)
+    return path
+
+
+def _assert_fresh(relit_path, fresh_path):
+    fresh = read_bake(fresh_path).radiance
+    # float32 rounding of the same shading (tests/scene/test_relight.py says why)
+    top = float(np.max(np.abs(fresh)))
+    np.testing.assert_allclose(read_bake(relit_path).radiance, fresh, rtol=1e-4,
+                               atol=1e-6 * top)
+
+
+@pytest.mark.parametrize("held", [True, False], ids=["geometry-held", "geometry-reread"])
+def test_streamed_relight_in_tiny_batches_equals_a_fresh_bake(tmp_path, monkeypatch, held):
+    """One frame a batch, the K of the still ground built in parts of 5 rows, the moving
+    ball's geometry kept in memory or read again per batch: the same radiance."""
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    scene_a = _scene(tmp_path, "a.toml", "a.h5", moving="ball")
+    scene_b = _scene(tmp_path, "b.toml", "b.h5", rotate=25.0, moving="ball")
+    _bake(scene_a, tmp_path / "a_baked.h5", store_visibility=True)
+    _bake(scene_b, tmp_path / "b_baked.h5")
+    monkeypatch.setattr(relight_module, "BATCH_ROWS", 5)
+    if not held:
+        monkeypatch.setattr(relight_module, "GEOMETRY_BYTES", 0)
+    relight(tmp_path / "a_baked.h5", tmp_path / "b.h5", tmp_path / "relit.h5", rotate=25.0,
+            scene=scene_a, threads=2)
+    _assert_fresh(tmp_path / "relit.h5", tmp_path / "b_baked.h5")
+
+
+def _frames_scene(tmp_path, name, light, frames):
+    """The ball scene with a finer ground, ``frames`` frames."""
+    path = _scene(tmp_path, name, light, moving="ball")
+    text = path.read_text().replace("frames = 3", f"frames = {frames}")
+    path.write_text(text.replace("subdivisions = 12", "subdivisions = 30"))
+    return path
+
+
+def _peak_relight(bake, light, out, scene) -> int:
+    tracemalloc.start()
+    try:
+        relight(bake, light, out, scene=scene, threads=1)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_relight_memory_does_not_grow_with_the_frame_count(tmp_path, monkeypatch):
+    """6 and 48 frames relit one frame a batch: the peak of traced allocations grows by
+    far less than the extra frames' visibility (the whole bake was read into memory)."""
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    # 1,123 vertices: one frame a batch, the ground's K in one part
+    monkeypatch.setattr(relight_module, "BATCH_ROWS", 1200)
+    monkeypatch.setattr(relight_module, "GEOMETRY_BYTES", 0)
+    peaks, sizes = [], []
+    for frames in (6, 48):
+        scene = _frames_scene(tmp_path, f"a{frames}.toml", "a.h5", frames)
+        bake = _bake(scene, tmp_path / f"a{frames}.h5", store_visibility=True)
+        sizes.append(read_bake(bake).visibility.nbytes)
+        peaks.append(_peak_relight(bake, tmp_path / "b.h5", tmp_path / f"r{frames}.h5", scene))
+    # 42 more frames of visibility (~2 MB); a streamed relight holds a few frames
+    # whatever their count, so its peak moves by allocation noise only
+    assert peaks[1] - peaks[0] < 0.25 * (sizes[1] - sizes[0]), (peaks, sizes)
+    fresh = _bake(_frames_scene(tmp_path, "b48.toml", "b.h5", 48), tmp_path / "b48.h5")
+    _assert_fresh(tmp_path / "r48.h5", fresh)
+
+
+SPHERE = "radius = 6.0\ncenter = [0.3, 0.5, -0.2]"
+
+
+def _midrange_scene(tmp_path, name, light, extra=SPHERE, rotate=0.0):
+    path = _scene(tmp_path, name, light, rotate=rotate, moving="ball")
+    text = path.read_text()
+    assert f'light = "{light}"' in text
+    path.write_text(text.replace(f'light = "{light}"', f'light = "{light}"\n{extra}', 1))
+    return path
+
+
+def test_midrange_bake_is_relit_on_its_sphere(tmp_path):
+    """A bake under a finite environment sphere records it, and its relight equals a
+    fresh bake of the new light on that sphere (not the light at infinity)."""
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    scene_a = _midrange_scene(tmp_path, "a.toml", "a.h5")
+    bake_a = _bake(scene_a, tmp_path / "a_baked.h5", store_visibility=True)
+    assert read_bake(bake_a).parameters["environment_sphere"] == {
+        "center": [0.3, 0.5, -0.2], "radius": 6.0, "scaling": None}
+    fresh = _bake(_midrange_scene(tmp_path, "b.toml", "b.h5", rotate=40.0),
+                  tmp_path / "b_baked.h5")
+    distant = _bake(_scene(tmp_path, "far.toml", "b.h5", rotate=40.0, moving="ball"),
+                    tmp_path / "far_baked.h5")
+    # the sphere matters here: at infinity the radiance is visibly another
+    far, near = read_bake(distant).radiance, read_bake(fresh).radiance
+    assert np.max(np.abs(far - near)) > 1e-2 * np.max(np.abs(near))
+    relight(bake_a, tmp_path / "b.h5", tmp_path / "relit.h5", rotate=40.0, scene=scene_a)
+    _assert_fresh(tmp_path / "relit.h5", fresh)
+
+
+def test_midrange_bake_with_a_scaling_asset_is_refused(tmp_path, run_cli):
+    _sky(tmp_path / "a.h5", 1)
+    _sky(tmp_path / "b.h5", 2)
+    code, _, err = run_cli("tables", "scaling", "-n", 3, "--function", "midrange",
+                           "--samples", 16, "-o", tmp_path / "mid.h5")
+    assert code == 0, err
+    scene = _midrange_scene(tmp_path, "a.toml", "a.h5",
+                            extra='radius = 6.0\nscaling = "mid.h5"')
+    bake = _bake(scene, tmp_path / "a_baked.h5", store_visibility=True)
+    before = bake.read_bytes()
+    code, _, err = run_cli("relight", bake, "--light", tmp_path / "b.h5",
+                           "-o", tmp_path / "relit.h5")
+    assert code not in (0, 3) and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "a_baked.h5" in err and "mid.h5" in err and "bake the scene" in err
+    assert not (tmp_path / "relit.h5").exists() and bake.read_bytes() == before
+
+
+def test_a_long_bake_is_not_refused_for_its_size_but_a_wide_one_is(tmp_path):
+    """Memory is set by the vertex count: 10^5 frames x 10^4 vertices (76 GB to read
+    whole) streams in a few MB; 10^7 vertices needs GiB per frame batch and is refused."""
+    import h5py
+
+    from shtools.cli._limits import MEMORY_LIMIT, asset_bytes
+    from shtools.cli.relight import _check_memory
+    from shtools.errors import InputError
+
+    def declared(name, frames, vertices):  # metadata only: chunks are never written
+        path = tmp_path / name
+        with h5py.File(path, "w") as f:
+            f.attrs["sh_order"] = 4
+            f.create_dataset("radiance", (frames, vertices, 3), "f4", chunks=(1, 64, 3))
+            f.create_dataset("visibility", (frames, vertices, 16), "f4", chunks=(1, 64, 16))
+        return path
+
+    long_bake = declared("long.h5", 10**5, 10**4)
+    assert asset_bytes(long_bake) > 10 * MEMORY_LIMIT  # what reading it whole would take
+    _check_memory(long_bake, force=False)  # streamed: accepted
+    wide = declared("wide.h5", 10, 10**7)
+    with pytest.raises(InputError, match=r"GiB of memory.*10,000,000 vertices.*--force"):
+        _check_memory(wide, force=False)
+    _check_memory(wide, force=True)
+
+
+@pytest.mark.parametrize("moving", ["all", "ball"])  # lights per frame / the same lights
+def test_nan_geometry_is_found_as_frames_stream(baked_a, tmp_path, run_cli, moving):
+    import shutil
+
+    import h5py
+
+    scene_a, bake_a = baked_a
+    shutil.copy(bake_a, tmp_path / "nan.h5")
+    with h5py.File(tmp_path / "nan.h5", "r+") as f:
+        f["vertices"][2, -1, 1] = np.inf  # a ball vertex (it moves in both bakes)
+    err = _one_line_error(run_cli, "relight", tmp_path / "nan.h5", "--light",
+                          tmp_path / "b.h5", "--lights", scene_a, "-o", tmp_path / "r.h5")
+    assert "nan.h5" in err and "'vertices' contains NaN or inf" in err
+    assert not (tmp_path / "r.h5").exists()

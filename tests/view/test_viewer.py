@@ -102,7 +102,8 @@ def server(bake_path):
 
 
 def _get(url):
-    with urllib.request.urlopen(url, timeout=10) as r:
+    # generous: a hang fails the test, a loaded 2-core CI machine must not
+    with urllib.request.urlopen(url, timeout=60) as r:
         return r.status, r.headers["Content-Type"], r.read()
 
 
@@ -166,7 +167,7 @@ def test_command_serves_then_stops_cleanly_on_a_signal(bake_path, sig):
         assert _get(url)[0] == 200
         assert _children(proc.pid) == []
         proc.send_signal(sig)
-        out, err = proc.communicate(timeout=20)
+        out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -218,7 +219,7 @@ def test_headless_chromium_shows_the_scene(bake_path, tmp_path):
         screenshot(url + "?ui=0", shot)  # the panel hidden: only the drawn scene counts
     finally:
         proc.send_signal(signal.SIGTERM)
-        proc.communicate(timeout=20)
+        proc.communicate(timeout=60)
     img = np.asarray(Image.open(shot).convert("RGB"), dtype=np.float64)
     background = np.array([0x1d, 0x1f, 0x22])
     drawn = np.any(np.abs(img - background) > 12, axis=2)
