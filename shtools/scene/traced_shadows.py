@@ -215,6 +215,8 @@ def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
 #: 1.5 receiver spacings where the receivers are dense enough).
 FILTER_NEIGHBOURS = 24
 
+#: Receiver sets whose neighbour lists a process keeps (the newest first).
+NEIGHBOUR_ENTRIES = 16
 #: Per process: the last receivers' neighbour lists and the last meshes' search trees
 #: (a static ground and a rigid object are searched once per bake).
 _NEIGHBOURS: list = []
@@ -257,19 +259,27 @@ def sphere_distance(points, centers, radii) -> np.ndarray:
 def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
     """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
     (-1 for a neighbour facing away by more than ``FILTER_MIN_COS``: a wall's receivers
-    are not a floor's) and distances, kept while the same receivers come back."""
+    are not a floor's) and distances, kept while the same receivers come back (the last
+    ``NEIGHBOUR_ENTRIES`` sets: the ground and the objects a frame traces)."""
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    if _NEIGHBOURS and _NEIGHBOURS[0][0].shape == p.shape and np.array_equal(
-            _NEIGHBOURS[0][0], p) and np.array_equal(_NEIGHBOURS[0][1], nrm):
-        return _NEIGHBOURS[0][2:]
+    for k, entry in enumerate(_NEIGHBOURS):  # the ground and the objects of a frame
+        if entry[0].shape == p.shape and np.array_equal(entry[0], p) and np.array_equal(
+                entry[1], nrm):
+            _NEIGHBOURS.insert(0, _NEIGHBOURS.pop(k))  # the least recently used go first
+            return entry[2:]
     k = min(FILTER_NEIGHBOURS, len(p))
     dist, idx = cKDTree(p).query(p, k=k)
     dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
+    # self first even where a coincident vertex (a mesh's split normals) came first
+    r = np.arange(len(p))
+    at = np.argmax(idx == r[:, None], axis=1)  # 0 where self is first or missing
+    idx[r, at], dist[r, at] = idx[:, 0], dist[:, 0]
+    idx[:, 0], dist[:, 0] = r, 0.0
     idx = np.where(np.einsum("vk,vnk->vn", nrm, nrm[idx]) >= FILTER_MIN_COS, idx, -1)
-    _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist)]
+    _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist), *_NEIGHBOURS[:NEIGHBOUR_ENTRIES - 1]]
     return idx, dist
 
 
