@@ -26,6 +26,8 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
+from benchmarks.machine import cpu_model
+
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
 
@@ -87,16 +89,6 @@ def _commit() -> str:
     return f"{head}{' (uncommitted changes)' if dirty else ''}" if head else "unknown"
 
 
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
 def write_results(path: Path, records: list[Record], command: str, started: datetime.datetime,
                   load_start: tuple[float, float, float], load_end: tuple[float, float, float]
                   ) -> None:
@@ -115,7 +107,7 @@ def write_results(path: Path, records: list[Record], command: str, started: date
         f"| date | {started:%Y-%m-%d %H:%M} UTC |",
         f"| commit | {_commit()} |",
         f"| machine | {platform.system()} {platform.machine()}, {os.cpu_count()} CPUs, "
-        f"{_cpu()} |",
+        f"{cpu_model()} |",
         f"| python | {platform.python_version()} |",
         f"| load (1 / 5 / 15 min) | {fmt(load_start)} at the start, {fmt(load_end)} at the end |",
         f"| command | `{command}` |",

@@ -56,6 +56,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
+if __package__:  # run by ``python -m benchmarks``
+    from benchmarks.machine import cpu_model
+else:  # run as a script: its folder is sys.path[0]
+    from machine import cpu_model
+
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
 
@@ -381,7 +386,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     externals = dict(parse_external(spec) for spec in args.external)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    print(f"CPU: {_cpu_model()}, {os.cpu_count()} cores; one process, one BLAS thread; "
+    print(f"CPU: {cpu_model()}, {os.cpu_count()} cores; one process, one BLAS thread; "
           f"load average at start {load()}\n")
     if args.spheretree_only:
         print("## Against spheretree (medial axis) at its sphere counts (target <= 0.5x)\n")
@@ -414,18 +419,6 @@ def main(argv=None) -> None:
     if not args.quick and not args.no_spheretree:
         print("\n## Against spheretree (medial axis) at its sphere counts (target <= 0.5x)\n")
         print(spheretree_table())
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    import platform
-
-    return platform.processor() or "unknown"
 
 
 def spheretree_table() -> str:

@@ -3,11 +3,11 @@
 On a random subset of each real mesh's vertices (``../shared/data``, never
 committed), at the default accumulation order 6:
 
-* **product rule** -- :func:`shtools.geometry.visibility.mesh_transfer`'s
+* **product rule** -- :func:`shtools.geometry.transfer.mesh_transfer`'s
   estimator at :data:`~shtools.geometry.visibility.DEFAULT_DIRECTIONS`
   (3,200 Gauss-Legendre x uniform directions over the sphere, about half of them
   above each vertex's tangent plane and cast);
-* **hemisphere** -- :func:`~shtools.geometry.visibility.hemisphere_transfer`'s,
+* **hemisphere** -- :func:`~shtools.geometry.transfer.hemisphere_transfer`'s,
   N spherical Fibonacci rays over each vertex's own hemisphere, every one cast;
 
 both against the product rule at 51,200 directions.  Errors (relative RMSE over
@@ -83,7 +83,7 @@ def evaluate(name: str, rays, subset: int) -> list[dict]:
 def _hemisphere_rows(mesh, normals, rows, n_rays: int) -> np.ndarray:
     """:func:`hemisphere_transfer`'s visibility at ``rows`` only (same caster and offset)."""
     from shtools.geometry.raycast import RayCaster
-    from shtools.geometry.visibility import hemisphere_transfer_visibility
+    from shtools.geometry.transfer import hemisphere_transfer_visibility
 
     caster = RayCaster(np.asarray(mesh.vertices), np.asarray(mesh.faces), robust=False)
     return hemisphere_transfer_visibility(np.asarray(mesh.vertices)[rows], normals, caster,

@@ -212,7 +212,7 @@ def _bake(run_cli, scene, out, *extra):
 
 
 def _count_transfers(monkeypatch):
-    import shtools.geometry.visibility as sv
+    import shtools.geometry.transfer as sv
 
     return count_calls(monkeypatch, sv, "hemisphere_transfer")
 

@@ -1,4 +1,4 @@
-"""No surprises for programs that embed shtools (issue 9, item 8)."""
+"""No surprises for programs that embed shtools (docs/architecture.md, "Embedding")."""
 
 from __future__ import annotations
 

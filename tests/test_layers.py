@@ -258,3 +258,15 @@ def test_every_shtools_name_exists():
         else:
             missing.append(name)
     assert missing == []
+
+
+# --------------------------------------------------------------------------- module size
+
+#: Longest module a reader should have to hold in their head (docs/architecture.md)
+MAX_MODULE_LINES = 600
+
+
+def test_no_module_is_longer_than_the_limit():
+    long = {str(p.relative_to(REPO)): n for p in sorted(ROOT.rglob("*.py"))
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    assert long == {}, f"split these by responsibility: {long}"

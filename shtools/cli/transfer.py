@@ -1,6 +1,6 @@
 """``shtools transfer``: precompute a rigid object's self-visibility (a ``transfer`` asset).
 
-Thin: load the mesh, call :func:`shtools.geometry.visibility.mesh_transfer`,
+Thin: load the mesh, call :func:`shtools.geometry.transfer.mesh_transfer`,
 write the asset, report.
 """
 
@@ -49,7 +49,7 @@ def transfer(mesh_path, output, order, n_dirs, floor, force, as_json):
     from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.transfer import write_transfer
     from shtools.geometry.mesh import load_mesh
-    from shtools.geometry.visibility import mesh_transfer
+    from shtools.geometry.transfer import mesh_transfer
 
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)

@@ -32,6 +32,10 @@ FORMAT_PREFIX = "shtools/"
 
 #: Root attributes every asset carries (docs/formats.md, "Root attributes").
 PROVENANCE_ATTRS = ("generator", "inputs", "parameters")
+#: Elements read at once when a dataset is validated without being loaded
+#: (``read_asset(load=False)``: ``shtools info``, ``check``, ``diff``), so memory stays
+#: bounded however large the asset.
+BLOCK_ELEMENTS = 1 << 22
 
 
 @dataclass(frozen=True)
@@ -446,8 +450,10 @@ def read_asset(path: str | os.PathLike, kind: str | None = None, *, load: bool =
     kind : str, optional
         Required kind; ``None`` accepts any registered kind.
     load : bool
-        Read every dataset into memory (default).  With ``False`` only the
-        attributes are read and validated.
+        Read every dataset into memory (default).  With ``False`` nothing is kept:
+        the attributes and the datasets' shapes and dtypes are validated, and float
+        datasets are checked for NaN/inf block by block (:data:`BLOCK_ELEMENTS`), so
+        an asset larger than memory can be checked.
     lazy : tuple of str
         Datasets whose shapes and dtypes are checked but whose values are
         neither read nor checked for NaN/inf (a streaming reader checks them
@@ -561,9 +567,28 @@ def _check_dataset(f, spec: DatasetSpec, dims, path, load, data, read: bool = Tr
         want = " or ".join(str(tuple(s)) for s in options)
         raise AssetError(f"dataset '{spec.name}' has shape {ds.shape}, expected {want}", path)
     dims.update(matched)
-    if read and ((spec.finite and ds.dtype.kind == "f") or load):
+    if not read:  # a lazy dataset: its streaming reader checks the values it reads
+        return
+    check_finite = spec.finite and ds.dtype.kind == "f"
+    if load:
         arr = ds[()]
-        if spec.finite and ds.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        if check_finite and not np.all(np.isfinite(arr)):
             raise AssetError(f"dataset '{spec.name}' contains NaN or inf; rebuild it", path)
-        if load:
-            data[spec.name] = arr
+        data[spec.name] = arr
+    elif check_finite:
+        # block by block: a dataset larger than memory is validated without loading it
+        for block in row_blocks(ds.shape, BLOCK_ELEMENTS):
+            if not np.all(np.isfinite(ds[block])):
+                raise AssetError(f"dataset '{spec.name}' contains NaN or inf; rebuild it",
+                                 path)
+
+
+def row_blocks(shape: tuple, elements: int) -> list:
+    """Slices along the first axis of about ``elements`` elements each (at least one
+    row), covering a dataset of ``shape``; ``[()]`` for a scalar."""
+    if len(shape) == 0:
+        return [()]
+    size = int(np.prod(shape))
+    row = max(1, size // max(shape[0], 1))
+    step = max(1, elements // row)
+    return [slice(i, i + step) for i in range(0, shape[0], step)] or [slice(0, 0)]

@@ -17,7 +17,7 @@ import json
 import h5py
 import numpy as np
 
-from shtools.data_formats._base import read_asset
+from shtools.data_formats._base import read_asset, row_blocks
 from shtools.errors import AssetError, InputError
 
 
@@ -62,12 +62,7 @@ def summarize_asset(path) -> dict:
 
 def _blocks(shape):
     """Slices along the first axis of about BLOCK_ELEMENTS elements each."""
-    if len(shape) == 0:
-        return [()]
-    size = int(np.prod(shape))
-    row = max(1, size // max(shape[0], 1))
-    step = max(1, BLOCK_ELEMENTS // row)
-    return [slice(i, i + step) for i in range(0, shape[0], step)] or [slice(0, 0)]
+    return row_blocks(shape, BLOCK_ELEMENTS)
 
 
 def _dataset_summary(name, ds) -> dict:

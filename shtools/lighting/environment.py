@@ -77,7 +77,7 @@ def project_environment(
         ``docs/conventions.md``).
     order : int
         SH order ``n``.
-    window : {"none", "cosine", "hann", "lanczos"}, optional
+    window : {"cosine", "hann", "lanczos", "none"}, optional
         Per-band window applied after projection (:func:`shtools.sh.window`).
     window_h : float, optional
         Window width in bands (default: the window's own default).

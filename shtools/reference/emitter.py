@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from shtools.geometry.visibility import RAY_OFFSET
+
 #: Shadow rays stop this fraction of their length short of the emitter sample.
 END_FRACTION = 1e-4
-#: Receiver origin offset along the normal, relative to the occluders' diagonal.
-RAY_OFFSET = 1e-5
 
 
 def area_samples(vertices, faces, n_samples: int, seed: int = 0

@@ -29,9 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from shtools.errors import InputError
+from shtools.geometry.visibility import RAY_OFFSET
 
-#: Ray origin offset along the normal, relative to the occluders' bounding-box diagonal.
-RAY_OFFSET = 1e-5
 #: Default strata per receiver (16 x 16).
 DEFAULT_SAMPLES = 256
 

@@ -20,17 +20,20 @@ Geometry (*derived*; the paper's Fig. 5 pseudo-code is missing).  For a
 silhouette at depth :math:`z_n`, a receiver at depth :math:`p_z` and a light
 of radius :math:`r_L`, the penumbra is the band of half-width
 
-.. math::  d_{max}(p_z) = f\,r_L\,\bigl(1/z_n - 1/\min(p_z, z_f)\bigr)_+
+.. math::  d_{max}(p_z) = f\,r_L\,\bigl(1/z_n - 1/\min(p_z, z_f)\bigr)_+ \, g
 
 (pixels) about the hard-shadow boundary -- the DDOC's 1/z-linear form with
-:math:`d_f = f r_L (1/z_n - 1/z_f)`, which is why ``d_f`` is not stored.  With
+:math:`d_f = f r_L (1/z_n - 1/z_f)`, which is why ``d_f`` is not stored; ``g``
+(:func:`~shtools.runtime.ssoc_maps.obliquity`, 1 on the face's axis) is the
+pinhole image's stretch of an angle across the edge away from the axis.  With
 :math:`s = (u - e)\cdot n` the signed image distance of the receiver's
 projection from the edge, the SSOC squeezes the band ``[-d_max, d_max]`` into
 its visible half: distortion :math:`d = (d_{max} - s)/2` and (Eq. 1)
-:math:`S = 1 - d/d_{max}`, smoothed by :math:`3t^2 - 2t^3` (``falloff="smoothstep"``,
-as in the paper) or replaced by the exact disk-segment fraction
+:math:`S = 1 - d/d_{max}`, mapped to the exact disk-segment fraction
 :math:`\tfrac12 + (\sin^{-1}\tau + \tau\sqrt{1-\tau^2})/\pi`, :math:`\tau = s/d_{max}`
-(``falloff="disk"``, beyond the paper).
+(``falloff="disk"``, the default: the visible part of a disk light behind a
+straight edge) or smoothed by :math:`3t^2 - 2t^3` (``falloff="smoothstep"``, as
+in the paper).
 
 Boundary rules (Sec. 3.2.2): no record -> plain shadow map; :math:`s \le -d_{max}`
 -> umbra (0); :math:`s \ge d_{max}` or :math:`d_{max} = 0` -> the edge does not
@@ -82,7 +85,13 @@ from shtools.errors import InputError
 from shtools.runtime.light_camera import LightCamera, fit_light_camera
 from shtools.runtime.raster import depth_buffer
 from shtools.runtime.silhouettes import EdgeAdjacency, edge_adjacency, silhouette_edges
-from shtools.runtime.ssoc_maps import OUTSIDE_PX, DistortionMap, distortion_maps, sample_map
+from shtools.runtime.ssoc_maps import (
+    OUTSIDE_PX,
+    DistortionMap,
+    distortion_maps,
+    obliquity,
+    sample_map,
+)
 
 #: Valid map resolutions (pixels per face side).
 RESOLUTION_RANGE = (16, 8192)
@@ -109,8 +118,8 @@ class SSOCSettings:
     max_steps : int
         Distortion-map lookups per tap (1 = the paper's naive approach, Fig. 5;
         2-3 = Sec. 3.2.3).
-    falloff : {"smoothstep", "disk"}
-        The paper's Bernstein smoothstep, or the exact disk-segment fraction.
+    falloff : {"disk", "smoothstep"}
+        The exact disk-segment fraction (default), or the paper's Bernstein smoothstep.
     filter : bool
         The paper's 4-tap bilinear blend (False: nearest texel).
     visibility_check : bool
@@ -132,7 +141,7 @@ class SSOCSettings:
     camera: str = "cube"
     guard: float = 0.125
     max_steps: int = 3
-    falloff: str = "smoothstep"
+    falloff: str = "disk"
     filter: bool = True
     visibility_check: bool = True
     bias_rel: float = 2e-3
@@ -435,7 +444,8 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
     seen = [edge]
     alive = np.ones(act.size, dtype=bool)
     for step in range(int(st.max_steps)):
-        dmax = f * radius * np.maximum(1.0 / zn - 1.0 / np.minimum(zz, zf), 0.0)
+        dmax = (f * radius * np.maximum(1.0 / zn - 1.0 / np.minimum(zz, zf), 0.0)
+                * obliquity(ux_ - 0.5 * R, uy_ - 0.5 * R, n[:, 0], n[:, 1], f))
         s = (ux_ - e[:, 0]) * n[:, 0] + (uy_ - e[:, 1]) * n[:, 1]
         pos_d = dmax > 0
         umbra = alive & pos_d & (s <= -dmax)

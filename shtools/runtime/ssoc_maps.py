@@ -59,6 +59,23 @@ def sample_map(depth: np.ndarray, R: int, x, y) -> np.ndarray:
     return depth[j * R + i]
 
 
+def obliquity(x, y, nx, ny, f):
+    """Pixels per unit of angle across an edge at ``(x, y)``, relative to the image centre.
+
+    A pinhole image stretches angles away from its axis: a step of angle
+    ``dθ`` along the unit image direction ``(nx, ny)`` at ``u = (x, y)``
+    (pixels from the principal point) spans ``(f dθ / cos φ) / sqrt(1 - (n.û)² sin² φ)``
+    pixels, ``φ`` the angle off the axis.  The ``1 / cos φ`` cancels against
+    depth being measured along the axis (``z = D cos φ``) in the penumbra's
+    half-width, which leaves this factor
+    ``sqrt((f² + |u|²) / (f² + |u|² - (n.u)²))`` (1 on the axis; wider penumbrae
+    in pixels across edges seen obliquely, as at the borders of a cube face).
+    """
+    uu = f * f + x * x + y * y
+    nu = x * nx + y * ny
+    return np.sqrt(uu / np.maximum(uu - nu * nu, 1e-12 * uu))
+
+
 def _clip_segments(x0, y0, x1, y1, lo, hi):
     """Liang-Barsky: parameter range ``[t0, t1]`` of segments inside the square ``[lo, hi]^2``."""
     t0 = np.zeros_like(x0)
@@ -127,7 +144,12 @@ def distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius:
         tt = t0 + t * (t1 - t0)
         zn_t = 1.0 / (inv_za + tt * (inv_zb - inv_za))
         zf = np.maximum(zf, _z_far(flat, R, ax + tt * ex, ay + tt * ey, nx, ny, zn_t, z_recv))
-    width = np.minimum(f * radius * np.maximum(inv_zn - 1.0 / zf, 0.0), w_max)
+    stretch = np.ones(len(sel))
+    for t in (0.0, 1.0):  # the obliquity is largest at an end of the clipped edge
+        tt = t0 + t * (t1 - t0)
+        stretch = np.maximum(stretch, obliquity(ax + tt * ex - 0.5 * R, ay + tt * ey - 0.5 * R,
+                                                nx, ny, f))
+    width = np.minimum(f * radius * np.maximum(inv_zn - 1.0 / zf, 0.0) * stretch, w_max)
     live = width > 0
     # split each clipped edge into sub-segments of at most SEGMENT_PX pixels
     length = np.hypot(ex, ey) * (t1 - t0)

@@ -15,6 +15,7 @@ from shtools.scene.animation import (
     vertex_normals,
     world_matrices,
 )
+from shtools.scene.contact_shadows import ContactPart, contact_casters, contact_directions
 from shtools.scene.kinds import BLOCKER_KINDS
 from shtools.scene.prepare import PreparedScene
 
@@ -71,6 +72,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     ground = []  # (rows, vertices, normals) of receiver-only objects
     casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
     rigid = []  # (object, transform, posed vertices, blocker index) of rigid traced objects
+    parts = []  # ContactPart of the objects that receive and block (contact shadows)
     has_ground = any(o.spec.receives and not o.spec.blocks for o in prepared.objects)
     # a lamp's field leaves out the blockers beyond it by the blocker a traced shadow
     # names (shtools.scene.field_light), which a field's traced shadow cannot name
@@ -97,6 +99,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             # exact self-shadowing: its own spheres (appended next) are skipped on its rows
             selfs.append(SelfVisibility(o.self_log, own, rotation=rotation,
                                         blocker=len(blockers)))
+        caster = None
         if o.traced and trace:  # its posed real mesh, traced this frame; its own blocker skipped
             caster = posed_caster(world_v, o.faces)
             selfs.append(SelfVisibility(None, own, blocker=len(blockers), visibility=(
@@ -117,13 +120,27 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             blockers.append(kinds[o.spec.blocker.kind].pose(o, m, joints))
             if o.spec.name in still and isinstance(blockers[-1], SphereBlocker):
                 blockers[-1].static = True
-            if (o.motion is None and trace and st.traced_shadows and has_ground and len(o.faces)
-                    and ((field_traced and isinstance(blockers[-1], FieldBlocker))
-                         or (isinstance(blockers[-1], SphereBlocker)
-                             and not kinds[o.spec.blocker.kind].exact))):
+            stands_in = (o.motion is None and trace and st.traced_shadows and len(o.faces)
+                         and ((field_traced and isinstance(blockers[-1], FieldBlocker))
+                              or (isinstance(blockers[-1], SphereBlocker)
+                                  and not kinds[o.spec.blocker.kind].exact)))
+            if stands_in and has_ground:
                 # a rigid sphere-set or field blocker: its real mesh shadows the ground
                 # near it instead (a field's innermost shells are coarse next to the object)
                 rigid.append((o, m, world_v, len(blockers) - 1))
+            # an exact sphere shades the receivers outside it exactly, but not those
+            # buried in it where objects interpenetrate: its mesh is traced there too
+            touches = stands_in or caster is not None or (
+                o.motion is None and trace and st.traced_shadows and len(o.faces)
+                and isinstance(blockers[-1], SphereBlocker))
+            if o.spec.receives or touches:
+                parts.append(ContactPart(o, world_v, m, rows=(
+                    np.arange(n_rows - len(world_v), n_rows) if o.spec.receives else None),
+                    normals=world_n, caster=caster,
+                    blocker=len(blockers) - 1 if touches else None,
+                    # a convex mesh's traced self-visibility is zero: it cannot shadow itself
+                    convex=o.motion is None and o.self_log is not None and not o.self_log.any(),
+                    exact=touches and not (stands_in or caster is not None)))
             if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
                 _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
                                 selfs, len(blockers) - 1)
@@ -140,6 +157,13 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
         selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
                                                 lights) for c in casters) if v is not None)
+    if trace and st.traced_shadows and field_traced:
+        # the other objects' real meshes on each object receiver near them (contact)
+        n_contact = contact_directions(st.traced_shadow_directions)
+        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
+                                                lights, n_dirs=n_contact)
+                                 for receivers, c in contact_casters(parts, n_contact))
+                     if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs,
                       np.concatenate(static_rows))
@@ -179,7 +203,7 @@ def pose_lights(scene, t: float) -> list:
 
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
-                   lights=()):
+                   lights=(), n_dirs: int | None = None):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -188,7 +212,9 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     ``bench_fidelity``'s rigid scenes).
 
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
-    ``(R,)``, ``(R, 3)``, ``(R, 3)``; returns None when none is within the object's reach."""
+    ``(R,)``, ``(R, 3)``, ``(R, 3)`` (or of one object receiver, for contact shadows);
+    ``n_dirs`` the rays of a cone filling the hemisphere (default
+    ``traced_shadow_directions``); returns None when none is within the object's reach."""
     from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
     from shtools.scene.traced_shadows import traced_ground
 
@@ -201,7 +227,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     own = [dataclasses.replace(blockers[k], skip_rows=None)
            if isinstance(blockers[k], FieldBlocker) else blockers[k] for k in indices]
     handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
-                                      st.traced_shadow_directions,
+                                      n_dirs or st.traced_shadow_directions,
                                       spheres=_bounding_spheres(own),
                                       lights=[(x.position, x.radius) for x in lights
                                               if isinstance(x, SphereLight)])

@@ -28,13 +28,14 @@ from pydantic import ValidationError
 
 from shtools.errors import InputError
 from shtools.geometry.transforms import euler_to_quaternion
-from shtools.geometry.visibility import CONE_DIRECTIONS, HEMISPHERE_DIRECTIONS
+from shtools.geometry.visibility import CONE_DIRECTIONS
 from shtools.runtime.settings import ShadowSettings, Unit, setting
 from shtools.runtime.settings import scene_fields as _scene_fields
 from shtools.scene import schema
 from shtools.scene.kinds import BLOCKER_KINDS, bake_method_names
 from shtools.scene.light_shadows import ssoc_settings
 from shtools.scene.schema import GLTF_SUFFIXES, IMAGE_SUFFIXES, MESH_SUFFIXES
+from shtools.scene.skinned_visibility import SKINNED_DIRECTIONS
 from shtools.scene.specs import (
     BlockerSpec,
     EnvironmentSpec,
@@ -69,8 +70,9 @@ class Settings(ShadowSettings):
                                     doc="self-shadowing of role-\"both\" objects by their real "
                                         "mesh (rigid: traced once; skinned: every frame)")
     self_visibility_directions: int = setting(
-        HEMISPHERE_DIRECTIONS, "int", lo=4, hi=4096,
-        doc="rays per vertex and frame tracing skinned objects' posed mesh")
+        SKINNED_DIRECTIONS, "int", lo=4, hi=4096,
+        doc="rays per self-shadowed vertex and frame tracing skinned objects' posed mesh "
+            "(a ninth of them on every vertex finds which are)")
     traced_shadows: bool = setting(True, "bool",
                                    doc="the shadow of skinned objects that trace their posed "
                                        "mesh and of rigid sphere-set blockers is ray traced "

@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import functools
 import math
+import weakref
 
 import numpy as np
 
@@ -214,6 +215,8 @@ def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
 #: 1.5 receiver spacings where the receivers are dense enough).
 FILTER_NEIGHBOURS = 24
 
+#: Receiver sets whose neighbour lists a process keeps (the newest first).
+NEIGHBOUR_ENTRIES = 16
 #: Per process: the last receivers' neighbour lists and the last meshes' search trees
 #: (a static ground and a rigid object are searched once per bake).
 _NEIGHBOURS: list = []
@@ -256,19 +259,27 @@ def sphere_distance(points, centers, radii) -> np.ndarray:
 def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
     """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
     (-1 for a neighbour facing away by more than ``FILTER_MIN_COS``: a wall's receivers
-    are not a floor's) and distances, kept while the same receivers come back."""
+    are not a floor's) and distances, kept while the same receivers come back (the last
+    ``NEIGHBOUR_ENTRIES`` sets: the ground and the objects a frame traces)."""
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    if _NEIGHBOURS and _NEIGHBOURS[0][0].shape == p.shape and np.array_equal(
-            _NEIGHBOURS[0][0], p) and np.array_equal(_NEIGHBOURS[0][1], nrm):
-        return _NEIGHBOURS[0][2:]
+    for k, entry in enumerate(_NEIGHBOURS):  # the ground and the objects of a frame
+        if entry[0].shape == p.shape and np.array_equal(entry[0], p) and np.array_equal(
+                entry[1], nrm):
+            _NEIGHBOURS.insert(0, _NEIGHBOURS.pop(k))  # the least recently used go first
+            return entry[2:]
     k = min(FILTER_NEIGHBOURS, len(p))
     dist, idx = cKDTree(p).query(p, k=k)
     dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
+    # self first even where a coincident vertex (a mesh's split normals) came first
+    r = np.arange(len(p))
+    at = np.argmax(idx == r[:, None], axis=1)  # 0 where self is first or missing
+    idx[r, at], dist[r, at] = idx[:, 0], dist[:, 0]
+    idx[:, 0], dist[:, 0] = r, 0.0
     idx = np.where(np.einsum("vk,vnk->vn", nrm, nrm[idx]) >= FILTER_MIN_COS, idx, -1)
-    _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist)]
+    _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist), *_NEIGHBOURS[:NEIGHBOUR_ENTRIES - 1]]
     return idx, dist
 
 
@@ -339,6 +350,10 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     """
     from shtools.geometry.visibility import bounding_cones
 
+    key = (caster, points, normals, vertices, faces, order, n_dirs, spheres, tuple(lights))
+    kept = _kept_ground(key)
+    if kept is not None:  # a static object over static receivers: the last frame's result
+        return kept
     v = np.asarray(vertices, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -352,7 +367,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     rows = np.flatnonzero(weight > 0)
     weight = weight[rows]
     if not rows.size:
-        return rows, weight, np.zeros((0, order * order))
+        return _keep_ground(key, (rows, weight, np.zeros((0, order * order))))
     g = set_visibility(p[rows], nrm[rows], caster, axis[rows], cos_half[rows], order, n_dirs)
     idx, dist = neighbours(p, nrm)
     # neighbours among the traced receivers only (row of each in ``rows``, -1 if none)
@@ -372,4 +387,56 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
         around = local[busy]
         g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
-    return rows, weight, g
+    return _keep_ground(key, (rows, weight, g))
+
+
+#: Per process: the last results of :func:`traced_ground`, by caster (a weak reference
+#: to it and copies of the other inputs kept beside them).  A rigid object's Embree scene
+#: is reused while it stays put, so an object and receivers that do not move are traced
+#: once per bake, not once per frame.
+_GROUND: dict = {}
+#: Casters whose last result :data:`_GROUND` keeps (a scene's traced objects).
+GROUND_KEPT = 16
+
+
+def _same(a, b) -> bool:
+    """Equal inputs of :func:`traced_ground` (arrays by value, the caster by identity)."""
+    if a is b:
+        return True
+    if isinstance(a, tuple | list) and isinstance(b, tuple | list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
+    if isinstance(a, int | float | np.number) and isinstance(b, int | float | np.number):
+        return a == b
+    return False
+
+
+def _kept_ground(key: tuple):
+    """Copies of the kept result of the same inputs ``key`` (caster first), or None."""
+    kept = _GROUND.get(id(key[0]))
+    if kept is None or kept[0][0]() is not key[0] or not _same(kept[0][1:], key[1:]):
+        return None
+    return tuple(x.copy() for x in kept[1])
+
+
+def _keep_ground(key: tuple, result: tuple) -> tuple:
+    """Keep copies of ``result`` (the inputs as copies too: a caller may reuse its arrays)."""
+    if len(_GROUND) >= GROUND_KEPT:
+        _GROUND.pop(next(iter(_GROUND)))
+    try:
+        ref = weakref.ref(key[0])  # a skinned mesh's per-frame caster is not kept alive
+    except TypeError:
+        return result
+    _GROUND.pop(id(key[0]), None)
+    _GROUND[id(key[0])] = ((ref, *(_copied(x) for x in key[1:])),
+                           tuple(x.copy() for x in result))
+    return result
+
+
+def _copied(x):
+    """Nested tuples/lists of arrays, the arrays copied."""
+    if isinstance(x, tuple | list):
+        return tuple(_copied(y) for y in x)
+    return np.array(x, copy=True) if isinstance(x, np.ndarray) else x

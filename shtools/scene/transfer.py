@@ -2,7 +2,7 @@
 
 A rigid object that both receives and casts (``role = "both"``, no skin) is
 shadowed on its own vertices by its **real mesh**: its self-visibility is ray
-traced once in its own frame (:func:`shtools.geometry.visibility.hemisphere_transfer`,
+traced once in its own frame (:func:`shtools.geometry.transfer.hemisphere_transfer`,
 or read from a ``transfer`` asset), and every frame the runtime adds its log,
 rotated with the object, to the log of every *other* blocker
 (:class:`shtools.runtime.SelfVisibility`).  The object's own spheres then shadow
@@ -16,9 +16,9 @@ approximated by the rotation part of the transform.
 Skinned objects deform, so nothing can be precomputed: every frame their
 **posed** real mesh is ray traced on their own vertices
 (:func:`traced_self_visibility`,
-:data:`~shtools.geometry.visibility.HEMISPHERE_DIRECTIONS` directions per
-vertex over its hemisphere); the runtime multiplies that visibility into the
-vertices' visibility from every other blocker, the object's own blocker skipped
+:data:`~shtools.scene.skinned_visibility.SKINNED_DIRECTIONS` directions over the
+hemisphere of each vertex it shadows, a few elsewhere); the runtime multiplies that
+visibility into the vertices' visibility from every other blocker, the object's own blocker skipped
 on its rows.  The same per-frame Embree scene traces the object's shadow on the
 receiver-only objects (the ground, ``traced_shadows``;
 :mod:`shtools.scene.traced_shadows`: rays only inside the cone of its bounding
@@ -98,7 +98,8 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         return stored, None
     if cache is None:
         return _traced_self_log(obj, acc_order, log), None
-    from shtools.geometry.visibility import LOG_FLOOR, TRANSFER_DIRECTIONS
+    from shtools.geometry.transfer import TRANSFER_DIRECTIONS
+    from shtools.geometry.visibility import LOG_FLOOR
 
     parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
              "faces": np.asarray(obj.faces), "order": int(acc_order),
@@ -114,14 +115,14 @@ def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
 
     if is_convex(obj.vertices, obj.faces):
         return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
-    from shtools.geometry.visibility import hemisphere_transfer
+    from shtools.geometry.transfer import hemisphere_transfer
 
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if log:
         log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
             "the set-up cache keeps it for the next bake)")
     # rays over each vertex's own hemisphere only: fewer than the product rule of
-    # `shtools transfer` casts, at no larger error (geometry.visibility.TRANSFER_DIRECTIONS)
+    # `shtools transfer` casts, at no larger error (geometry.transfer.TRANSFER_DIRECTIONS)
     _, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
     return f.astype(np.float32)
 
@@ -214,12 +215,12 @@ def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int, *,
                            caster=None) -> np.ndarray:
     """Self-visibility ``(V, order^2)`` float32 of a posed mesh on its own vertices.
 
-    Binary visibility of the mesh over each vertex's hemisphere
-    (:func:`~shtools.geometry.visibility.hemisphere_visibility`, ``n_dirs``
-    rays per vertex), projected to the shading order.  The runtime multiplies it
-    into the vertices' visibility after the exp (no per-frame log: the eigen log
-    of CesiumMan's vertices cost more than the rest of its frame,
-    ``bench_fidelity --skinned``).
+    Binary visibility of the mesh over each vertex's hemisphere, ``n_dirs`` rays
+    where the mesh shadows the vertex and a first few elsewhere
+    (:func:`shtools.scene.skinned_visibility.adaptive_self_visibility`), projected to
+    the shading order.  The runtime multiplies it into the vertices' visibility after
+    the exp (no per-frame log: the eigen log of CesiumMan's vertices cost more than
+    the rest of its frame, ``bench_fidelity --skinned``).
 
     Parameters
     ----------
@@ -229,15 +230,15 @@ def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int, *,
     order : int
         Shading order.
     n_dirs : int
-        Rays per vertex.
+        Rays per self-shadowed vertex.
     caster : RayCaster, optional
         The posed mesh's Embree scene (:func:`posed_caster`), when already built.
     """
-    from shtools.geometry.visibility import hemisphere_visibility
+    from shtools.scene.skinned_visibility import adaptive_self_visibility
 
     caster = caster if caster is not None else posed_caster(vertices, faces)
-    return hemisphere_visibility(vertices, normals, caster, order,
-                                 n_dirs=n_dirs).astype(np.float32)
+    return adaptive_self_visibility(vertices, normals, faces, caster, order,
+                                    n_dirs).astype(np.float32)
 
 
 #: Algorithm version of the cached local visibility log (:mod:`shtools.cache`).

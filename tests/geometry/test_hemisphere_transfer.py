@@ -1,5 +1,5 @@
 """The bake's exact self-transfer from hemisphere rays
-(:func:`shtools.geometry.visibility.hemisphere_transfer`) against the independent
+(:func:`shtools.geometry.transfer.hemisphere_transfer`) against the independent
 reference ray tracer, at the accuracy of the product-rule transfer it replaces."""
 
 from __future__ import annotations
@@ -9,13 +9,8 @@ import math
 import numpy as np
 import trimesh
 
-from shtools.geometry.visibility import (
-    DEFAULT_DIRECTIONS,
-    TRANSFER_DIRECTIONS,
-    hemisphere_transfer,
-    mesh_transfer,
-    self_visibility_log,
-)
+from shtools.geometry.transfer import TRANSFER_DIRECTIONS, hemisphere_transfer, mesh_transfer
+from shtools.geometry.visibility import DEFAULT_DIRECTIONS, self_visibility_log
 from shtools.reference import raytrace_visibility
 
 
@@ -64,10 +59,8 @@ def test_tangent_frame_projection_matches_per_ray_basis_sums():
     # tangent frame rotated by an exact product rule; they differ by rounding only
     # (the per-ray path sums float32 basis values: ~1e-7 of g_0 = 3.54)
     from shtools.geometry.raycast import RayCaster
-    from shtools.geometry.visibility import (
-        hemisphere_transfer_visibility,
-        hemisphere_visibility,
-    )
+    from shtools.geometry.transfer import hemisphere_transfer_visibility
+    from shtools.geometry.visibility import hemisphere_visibility
 
     torus = _torus()
     v, n = np.asarray(torus.vertices), np.asarray(torus.vertex_normals)
@@ -80,7 +73,7 @@ def test_tangent_frame_projection_matches_per_ray_basis_sums():
 
 
 def test_spatial_order_is_a_deterministic_permutation_along_the_box():
-    from shtools.geometry.visibility import spatial_order
+    from shtools.geometry.transfer import spatial_order
 
     rng = np.random.default_rng(3)
     p = rng.uniform(-5.0, 5.0, size=(2000, 3))

@@ -1,4 +1,4 @@
-"""Issue 4 §8: default settings vs ray tracing on procedural blocker-over-ground scenes."""
+"""The runtime's accuracy targets: default settings vs ray tracing, blocker-over-ground scenes."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from shtools.runtime.fast_exp import fast_exp
 from shtools.sh import exp
 from shtools.sh.tables import default_tables
 
-#: Targets of issue 4 §8 (relative RMSE of per-vertex radiance, default settings).
+#: Accuracy targets (relative RMSE of per-vertex radiance, default settings).
 TARGET_VS_SPHERES = 0.03
 TARGET_VS_MESH = 0.08
 N_DIRS = 1500

@@ -109,7 +109,7 @@ def test_runtime_matches_ray_tracing_of_the_mesh(tmp_path):
     assert shadow.sum() > 20
     a, b = shexp.radiance[shadow], truth.radiance[shadow]
     err = np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2))
-    # issue 4's accuracy target against the real mesh is 8 % relative RMSE
+    # the runtime's accuracy target against the real mesh is 8 % relative RMSE
     assert err < 0.08
     # and the occlusion itself (SKY - radiance) agrees to 20 %: a weak shadow
     # drawn in the wrong place or size would fail this

@@ -191,12 +191,13 @@ def test_one_field_asset_shadows_the_object_and_the_ground_like_ray_tracing(
     """``blocker = { field = ... }`` alone: the field shadows the ground, its stored O_v
     the torus itself (no ray tracing at bake time), both close to ray tracing of the
     real mesh; without the O_v the torus is not self-shadowed."""
+    import shtools.geometry.transfer as st
     import shtools.geometry.visibility as sv
 
     def no_tracing(*args, **kwargs):
         raise AssertionError("the bake ray-traced the self-visibility the field holds")
 
-    monkeypatch.setattr(sv, "hemisphere_transfer", no_tracing)
+    monkeypatch.setattr(st, "hemisphere_transfer", no_tracing)
     monkeypatch.setattr(sv, "self_visibility", no_tracing)
     rad = {}
     for name, field, extra, obj_extra in (
@@ -232,7 +233,7 @@ def test_an_o_v_below_the_accumulation_order_is_traced_at_bake_time(torus_dir, m
 
     assert main(["field", "sample", str(torus_dir / "torus.obj"), "-o",
                  str(torus_dir / "t4.field.h5"), "--self-order", "4", *map(str, FIELD_ARGS)]) == 0
-    import shtools.geometry.visibility as sv
+    import shtools.geometry.transfer as sv
 
     calls = []
     real = sv.hemisphere_transfer

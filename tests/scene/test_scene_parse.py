@@ -216,7 +216,7 @@ role = "blocker"
          "objects[1] ('ball').blocker.fit: must be >= 1, got 0"),
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, sed = 1 }'),
          "objects[1] ('ball').blocker: unknown key 'sed'; did you mean 'seed'?"),
-        # wave 6's race of two starts is gone (the split start replaced it)
+        # a key no blocker kind has ('race', a removed option) is refused with the allowed keys
         (BALL.replace('role = "blocker"', 'role = "blocker"\nblocker = { fit = 8, race = true }'),
          "objects[1] ('ball').blocker: unknown key 'race'; allowed: spheres, tree, bound, fit, "
          "method, seed, branching, exact, deformable, alpha_deg, samples, rays, log, field"),
@@ -295,8 +295,8 @@ def test_settings_errors_come_from_the_schema(tmp_path, setting, message):
 
 
 def test_order_limits_agree_with_the_runtime(tmp_path):
-    """A scene accepts exactly the orders the runtime runs (issue 9: order = 10 parsed, then
-    failed late)."""
+    """A scene accepts exactly the orders the runtime runs (an order the runtime refuses must
+    fail at parse time, not late in the bake)."""
     from shtools.runtime.settings import MAX_ACC_ORDER, MAX_ORDER
 
     text = MINIMAL.replace("order = 2", f"order = {MAX_ORDER}\nacc_order = {MAX_ACC_ORDER}")

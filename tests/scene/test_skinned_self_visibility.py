@@ -50,15 +50,16 @@ def test_traced_skinned_object_matches_ray_tracing_of_its_posed_mesh(folded_tube
                                    "self_visibility = false"))
     err_on = relative_rmse(np.concatenate(got), np.concatenate(ref))
     err_off = relative_rmse(np.concatenate(spheres), np.concatenate(ref))
-    # 32 directions per vertex over its hemisphere against 3,200 over the sphere, both
-    # of the posed mesh: quadrature only (measured 0.82 %); the 8 spheres with the
+    # 112 directions over the hemisphere of each vertex the mesh shadows (12 on the
+    # others) against 3,200 over the sphere, both of the posed mesh: quadrature only
+    # (measured 0.29 %; 0.82 % with 32 on every vertex); the 8 spheres with the
     # self-shadow rules misplace the fold's shadow (measured 33 %)
-    assert err_on < 0.02
+    assert err_on < 0.01
     assert err_off > 5 * err_on
-    # more directions converge on the reference (measured 0.14 % at 256)
+    # more directions converge on the reference (measured 0.16 % at 256)
     _, fine = _tube_rows(_scene(folded_tube, '{ spheres = "tube.h5" }',
                                 "self_visibility_directions = 256"))
-    assert relative_rmse(np.concatenate(fine), np.concatenate(ref)) < 0.5 * err_on
+    assert relative_rmse(np.concatenate(fine), np.concatenate(ref)) < 0.75 * err_on
 
 
 def test_own_deformable_field_is_skipped_like_own_spheres(folded_tube):
@@ -273,12 +274,12 @@ def test_every_traced_skinned_object_traces_the_ground(folded_tube):
     ground = [sv.skipped for sv in state.self_visibility
               if np.arange(len(state.vertices))[sv.rows][0] < GROUND_VERTICES]
     assert ground == [(0,), (1,)]  # each tube's spheres
-    assert len(state.self_visibility) == 4  # each tube's own rows and the ground
+    # each tube's own rows, the ground, and each tube's rows by the other's real mesh
+    assert len(state.self_visibility) == 6
     ref = _ground_rows(scene(), method="raytrace", raytrace_dirs=3200)
     both = _ground_rows(scene())
     spheres = _ground_rows(scene("traced_shadows = false"))
     err, err_spheres = relative_rmse(both, ref), relative_rmse(spheres, ref)
     # measured 1.3 % (both traced, product; 1.4 % at 64 rays) vs 5.6 % (both by spheres);
-    # before wave 4's rigid shift only the first tube traced the ground (2.7 %)
     assert err < 0.02, err
     assert err < 0.4 * err_spheres, (err, err_spheres)

@@ -135,3 +135,33 @@ def test_runtime_splits_a_cluster_whose_rows_skip_different_blockers():
     assert one.split([0, 0, 0, 0]) is one
     split = one.split([1, 1, 0, 0])
     assert split.n_clusters == 2 and split.labels[0] == split.labels[1] != split.labels[2]
+
+
+def test_a_static_object_is_traced_once_and_a_moved_one_again(monkeypatch):
+    """The same caster over the same receivers gives the kept result (no ray cast); any
+    input that changes (the receivers, the mesh, a light) traces again, and the caller
+    may change what it got without changing what is kept."""
+    import shtools.scene.traced_shadows as ts
+
+    v, f, caster = _unit_sphere()
+    x = np.linspace(-3.0, 3.0, 25)
+    X, Z = np.meshgrid(x, x)
+    pts = np.column_stack([X.ravel(), np.full(X.size, -1.05), Z.ravel()])
+    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    first = traced_ground(pts, nrm, v, f, caster, 3, 96)
+    assert first[0].size > 100 and (first[2][:, 0] < math.sqrt(4 * math.pi) - 0.1).any()
+    first[2][:] = 0.0  # the caller's copy
+    traced = []
+    real = ts.set_visibility
+    monkeypatch.setattr(ts, "set_visibility", lambda *a, **k: traced.append(1) or real(*a, **k))
+    again = traced_ground(pts.copy(), nrm.copy(), v.copy(), f, caster, 3, 96)
+    assert not traced
+    fresh = traced_ground(pts, nrm, v, f, RayCaster(v, f), 3, 96)  # an independent trace
+    assert len(traced) == 1
+    for a, b in zip(again, fresh, strict=True):
+        np.testing.assert_array_equal(a, b)
+    moved = pts + np.array([0.0, -0.2, 0.0])
+    lower = traced_ground(moved, nrm, v, f, caster, 3, 96)
+    assert len(traced) == 2 and not np.array_equal(lower[2][:, 0], fresh[2][:, 0])
+    traced_ground(moved, nrm, v, f, caster, 3, 96, lights=[((0.0, 5.0, 0.0), 0.1)])
+    assert len(traced) == 3

@@ -118,7 +118,7 @@ def test_methods_close_to_exact_on_cap_scenes(scenes, method):
 
 
 def test_statistical_accuracy_against_product_space(scenes):
-    """Issue 2 §5: 3–25 caps of radius 0.05–0.6 rad at order 4, relative L2 of log-space
+    """3–25 caps of radius 0.05–0.6 rad at order 4, relative L2 of log-space
     exponentials against product-space accumulation of the same caps."""
     log_sum, accumulated = scenes
     hyb = rel_l2(exp(log_sum, "hyb", acc_order=6), accumulated)

@@ -22,8 +22,6 @@ from shtools.geometry.sphere_fit.starts import (
 )
 from shtools.geometry.sphere_set import SphereSet
 
-METHODS = FIT_METHODS
-
 #: Default round budget (rounds at N spheres; see ``max_iterations``) at every
 #: N: enough for the search to settle at the sphere counts the scenes use,
 #: from COARSE_TO_FINE_MIN spheres on too, where the coarse fit spends half.
@@ -113,8 +111,8 @@ def fit_spheres(
     InputError
         Unknown method, ``n < 1``, more spheres than sample points, no volume.
     """
-    if method not in METHODS:
-        raise InputError(f"unknown method '{method}'; use one of {', '.join(METHODS)}")
+    if method not in FIT_METHODS:
+        raise InputError(f"unknown method '{method}'; use one of {', '.join(FIT_METHODS)}")
     if int(n) != n or n < 1:
         raise InputError(f"the number of spheres must be >= 1 (got {n})")
     if int(restarts) != restarts or restarts < 1:

@@ -1,0 +1,198 @@
+r"""Objects' shadows on each other where they touch: the other objects' real meshes traced.
+
+An object that both receives and blocks (``role = "both"``) is shadowed by the
+other objects' blockers.  Far from a blocker its spheres (or its field) shade a
+receiver well; close to it they do not: a sphere set bulges out of the surface
+it bounds, so where two objects touch or interpenetrate (a character's arm on
+its torso, the parts of a walker, a dragon against an armadillo) the receivers
+next to the contact sit inside or against spheres that the real mesh does not
+fill, and come out far too dark.  Contact surfaces are exactly where spheres fail.
+
+So an object receiver gets the same treatment as the ground
+(:mod:`shtools.scene.traced_shadows`): the **real posed meshes of the other
+objects touching it** are traced on its vertices over the shared world direction
+set, filtered over its surface by the distance to them, and handed over per
+vertex, smoothly, to their blockers far from them.  The caller
+(:func:`shtools.scene.pose.pose_frame`) runs that hand-over; this module says
+who is traced on whom (:func:`contact_casters`):
+
+* the traceable blockers are sphere sets fitted to a mesh, shadow fields, skinned
+  objects that trace their posed mesh, and sphere primitives for the receivers with
+  vertices buried in them (exact outside, they leave the buried vertices lit where
+  objects interpenetrate);
+* a receiver is traced against the traceable objects whose bounding spheres overlap
+  its own, or nearly (:data:`NEAR_MARGIN`: the objects it may touch), jointly (one
+  Embree scene, one cone, so the parts around a receiver never multiply
+  visibilities that overlap), and their
+  blockers are skipped on the rows traced; farther objects keep their blockers,
+  which shade well away from contact;
+* a convex receiver (its own mesh never blocks above its tangent planes) is traced
+  with itself among them (one scene serves the receivers that touch the same objects); a receiver
+  that can shadow itself is traced against the others alone (its self-visibility
+  shadows it already).
+
+The Embree scene of rigid objects is kept while their transforms hold (a static
+scene builds it once per bake); a lone skinned object's per-frame scene is reused.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class ContactPart:
+    """One object of the frame, as the contact shadows see it (world space).
+
+    Attributes
+    ----------
+    obj : object
+        The prepared object (identity and faces; ``motion`` None for rigid ones).
+    vertices : ndarray, shape (V, 3)
+        Its posed vertices.
+    matrix : ndarray, shape (4, 4)
+        Its world transform this frame.
+    rows : ndarray of int, shape (V,), or None
+        Its receiver rows in the frame (None: it does not receive).
+    normals : ndarray, shape (V, 3), or None
+        Its unit normals (receivers only).
+    blocker : int or None
+        Index of its blocker in the frame's blockers when its real mesh can stand for
+        that blocker near it (None: it blocks exactly already, or not at all).
+    caster : RayCaster or None
+        Its posed mesh's Embree scene when the frame built one (skinned objects).
+    convex : bool
+        Its own mesh cannot block its vertices above their tangent planes (a convex
+        rigid mesh, whose self-visibility is exactly 1).
+    exact : bool
+        Its blocker is its exact shape (a sphere primitive): traced only on the
+        receivers with vertices buried in it, which the exact sphere leaves lit.
+    """
+
+    obj: object
+    vertices: np.ndarray
+    matrix: np.ndarray
+    rows: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    blocker: int | None = None
+    caster: object = None
+    convex: bool = False
+    exact: bool = False
+
+
+#: Rays of an object receiver's cone that fills its hemisphere, as a share of the
+#: ground's ``traced_shadow_directions``: an object's receivers are few and close to
+#: what they trace, where the surface filter is narrow (what each share costs and buys:
+#: ``benchmarks/bench_look.py --demo``, docs/scenes.md).
+CONTACT_SCALE = 0.5
+
+
+def contact_directions(ground_directions: int) -> int:
+    """Rays of an object receiver whose cone fills its hemisphere (at least 8)."""
+    return max(8, round(CONTACT_SCALE * int(ground_directions)))
+
+
+#: Objects whose bounding spheres come within this factor of the sum of their radii
+#: may touch (bounding spheres are loose about long or flat meshes).
+NEAR_MARGIN = 1.25
+
+
+def _sphere(v: np.ndarray) -> tuple[np.ndarray, float]:
+    """Bounding sphere of posed vertices: the box centre and the farthest vertex."""
+    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    return center, float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
+
+
+def _buried(points, center, radius) -> bool:
+    """Whether any point lies inside the sphere."""
+    d = np.asarray(points, dtype=np.float64) - center
+    return bool((np.einsum("vk,vk->v", d, d) < radius * radius).any())
+
+
+def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, tuple]]:
+    """Who is traced on whom: ``[(receivers, caster_of), ...]`` for the frame's object
+    receivers.
+
+    Parameters
+    ----------
+    parts : list of ContactPart
+        Every object of the frame that receives or has a traceable blocker.
+    n_dirs : int
+        Rays of a receiver whose cone fills its hemisphere (the hand-over's scale).
+
+    Returns
+    -------
+    list of (receivers, caster_of)
+        ``receivers`` is ``(rows (R,), points (R, 3), normals (R, 3))`` of the object
+        receivers traced against one scene that skip the same blockers; ``caster_of``
+        is ``(caster, vertices (Vc, 3), faces (Fc, 3), blocker indices tuple)`` of that
+        scene and those blockers.
+    """
+    traceable = [p for p in parts if p.blocker is not None and len(p.obj.faces)]
+    if not traceable:
+        return []
+    spheres = [_sphere(p.vertices) for p in traceable]
+    built: dict = {}  # the frame's Embree scenes, one per set of members
+    out: dict = {}  # (scene, blockers skipped) -> its receivers
+    for receiver in parts:
+        if receiver.rows is None or not len(receiver.rows):
+            continue
+        center, radius = _sphere(receiver.vertices)
+        near = [p for p, (c, r) in zip(traceable, spheres, strict=True)
+                if p is not receiver and np.linalg.norm(c - center) < NEAR_MARGIN * (r + radius)
+                and (not p.exact or _buried(receiver.vertices, c, r))]
+        if not near:
+            continue
+        if receiver.convex and any(p is receiver for p in traceable):
+            # a convex receiver's own mesh never blocks above its tangent planes: traced
+            # with the others, the scene is the one its neighbours share; its own
+            # blocker, which its self-visibility skips on its rows already, is skipped
+            # too (it lies inside the members' bounding sphere, where the traced mesh
+            # takes the whole weight, no hand-over)
+            near = [p for p in traceable if p is receiver or any(p is q for q in near)]
+        key = tuple(id(m) for m in near)
+        if key not in built:
+            built[key] = _joint_caster(near)
+        out.setdefault((key, tuple(m.blocker for m in near)), []).append(receiver)
+    calls = []
+    for (key, skipped), receivers in out.items():
+        caster, vertices, faces, _ = built[key]
+        joint = tuple(np.concatenate(a) for a in zip(
+            *((r.rows, r.vertices, r.normals) for r in receivers), strict=True))
+        calls.append((joint, (caster, vertices, faces, skipped)))
+    return calls
+
+
+#: Embree scenes of rigid objects' meshes in world space, per process: ids of the
+#: objects -> (pid, their faces, their matrices, caster); rebuilt when a transform changes.
+_CASTERS: dict = {}
+
+
+def _joint_caster(members: list[ContactPart]) -> tuple:
+    """``(caster, vertices, faces, blocker indices)`` of the members' real meshes."""
+    from shtools.scene.transfer import posed_caster
+
+    vertices = np.concatenate([m.vertices for m in members])
+    offsets = np.cumsum([0] + [len(m.vertices) for m in members])
+    faces = np.concatenate([m.obj.faces + offsets[i] for i, m in enumerate(members)])
+    index = tuple(m.blocker for m in members)
+    if len(members) == 1 and members[0].caster is not None:
+        return members[0].caster, vertices, faces, index
+    if any(m.obj.motion is not None for m in members):  # a skinned mesh moves every frame
+        return posed_caster(vertices, faces), vertices, faces, index
+    key = tuple(id(m.obj) for m in members)
+    hit = _CASTERS.get(key)
+    # the entry holds the faces arrays themselves: an id alone can be reused once freed
+    if (hit is not None and hit[0] == os.getpid()
+            and all(a is m.obj.faces for a, m in zip(hit[1], members, strict=True))
+            and all(np.array_equal(a, m.matrix) for a, m in zip(hit[2], members, strict=True))):
+        return hit[3], vertices, faces, index
+    if len(_CASTERS) >= 64:
+        _CASTERS.clear()
+    caster = posed_caster(vertices, faces)
+    _CASTERS[key] = (os.getpid(), [m.obj.faces for m in members],
+                     [np.array(m.matrix, copy=True) for m in members], caster)
+    return caster, vertices, faces, index
