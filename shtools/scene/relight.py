@@ -330,13 +330,16 @@ def frame_lights(bake, scene=None) -> list:
 
 
 class _Shaders:
-    """One runtime per thread, without de-ringing (applied to each whole frame after)."""
+    """One runtime per thread, without de-ringing (applied to each whole frame after) and
+    with the accumulation order of the shading (nothing is accumulated)."""
 
     def __init__(self, env_sh, settings, midrange=None):
         import threading
 
         self.env_sh, self.midrange = env_sh, midrange
-        self.settings = replace(settings, deringing="none")
+        # no blockers are accumulated here, so the runtime's log tables (built when
+        # it starts) need only the shading order: the smallest and quickest to build
+        self.settings = replace(settings, deringing="none", acc_order=settings.order)
         self.local = threading.local()
         self.runtimes: list = []
         self.lock = threading.Lock()
