@@ -12,7 +12,8 @@ then puts it under a warmer sky turned 90 degrees about +Y, side by side:
 * a relight of the first bake (the scene's lamp kept, through the stored
   visibility), from Python and as the whole ``shtools relight`` command (a new
   process: its start and imports included, its modules' bytecode compiled
-  beforehand as an installed package's is).
+  beforehand as an installed package's is); and the command without
+  ``--lights`` (the environment alone: the scene parser is not imported).
 
 Reports the times, the ratios and how far the radiances differ.
 
@@ -92,6 +93,14 @@ def main() -> None:
             subprocess.run(command, check=True, stdout=subprocess.DEVNULL, env=env)
             cli_runs.append(time.perf_counter() - start)
         cli_s = float(np.median(cli_runs))
+        # the same without --lights: the environment alone, no scene parser imported
+        plain = [*command[:command.index("--lights")], "-o", str(demo / "relit_env.h5")]
+        env_runs = []
+        for _ in range(RELIGHT_RUNS):
+            start = time.perf_counter()
+            subprocess.run(plain, check=True, stdout=subprocess.DEVNULL, env=env)
+            env_runs.append(time.perf_counter() - start)
+        env_s = float(np.median(env_runs))
         same_bytes = (demo / "relit_cli.h5").read_bytes() == (demo / "relit.h5").read_bytes()
 
         fresh = read_bake(demo / "b.h5").radiance
@@ -119,6 +128,9 @@ def main() -> None:
         print(f"| `shtools relight` command (process start and imports too; median of "
               f"{RELIGHT_RUNS}: {min(cli_runs):.2f}-{max(cli_runs):.2f} s) | {cli_s:.2f} | "
               f"{1000 * cli_s / frames:.1f} |")
+        print(f"| `shtools relight` command without `--lights` (the environment only: no "
+              f"scene parser; median of {RELIGHT_RUNS}: {min(env_runs):.2f}-"
+              f"{max(env_runs):.2f} s) | {env_s:.2f} | {1000 * env_s / frames:.1f} |")
         print(f"\nthe `shtools relight` command is {bake_s / cli_s:.1f}x faster than the bake "
               f"without a cache (target >= 20x), {warm_s / cli_s:.1f}x the bake with a warm "
               f"cache; relight() from Python {bake_s / relight_s:.1f}x / "
