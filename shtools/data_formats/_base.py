@@ -150,8 +150,9 @@ def get_schema(kind: str) -> Schema | None:
     return SCHEMAS.get(kind)
 
 
-def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
-    """Hex sha256 of a file's bytes."""
+def sha256_file(path: str | os.PathLike, chunk: int = 1 << 16) -> str:
+    """Hex sha256 of a file's bytes, read ``chunk`` bytes at a time (a small buffer: a
+    writer hashes its inputs beside streaming work whose memory stays bounded)."""
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         while block := fh.read(chunk):
