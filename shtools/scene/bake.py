@@ -406,6 +406,10 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
 
     if st.deringing != ShadowSettings.deringing:  # absent: the default; relighting reads it
         parameters["deringing"] = st.deringing
+    from shtools.runtime.haar import HaarField
+
+    if haar := [o.spec.name for o in prepared.objects if isinstance(o.blocker_data, HaarField)]:
+        parameters["all_frequency_blockers"] = haar  # absent: none; relighting refuses them
     if (sphere := prepared.midrange) is not None:  # absent: at infinity; relighting reads it
         scaling = scene.environment.scaling
         parameters["environment_sphere"] = {

@@ -240,9 +240,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     from shtools.runtime.shading import desaturate_negative
     from shtools.tasks import default_workers
 
-    if bake.visibility is None:
-        raise InputError("has no stored visibility; rebake it with 'shtools bake "
-                         "--store-visibility' to relight it", bake.path)
+    check_relightable(bake)
     settings = settings or relight_settings(bake)
     threads = max(1, threads or default_workers())
     lights = frame_lights(bake, scene)
@@ -461,6 +459,22 @@ def _fixed_rows(bake, batch: int):
 GEOMETRY_BYTES = 1 << 27
 
 
+def check_relightable(bake) -> None:
+    """Refuse a bake whose stored visibility cannot reproduce its shading.
+
+    The stored visibility is the SH visibility the runtime shaded with.  An
+    all-frequency (``haar``) field blocker shades the environment in its map basis
+    instead and is not in it, so relighting would silently lose its shadow.
+    """
+    if bake.visibility is None:
+        raise InputError("has no stored visibility; rebake it with 'shtools bake "
+                         "--store-visibility' to relight it", bake.path)
+    if names := bake.parameters.get("all_frequency_blockers"):
+        raise InputError(f"has all-frequency (haar) field blockers ({', '.join(names)}) whose "
+                         "shadows its stored SH visibility leaves out; bake the scene under "
+                         "the new light instead", bake.path)
+
+
 def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.PathLike, *,
             rotate: float = 0.0, scene=None, compression: str | None = None,
             keep_visibility: bool = False, threads: int | None = None,
@@ -527,9 +541,7 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         if same_file(output, src):
             raise InputError(f"is also an input ({src}); choose another output", output)
     with open_bake(bake) as b:
-        if b.visibility is None:  # before reading the light: the bake is what is missing
-            raise InputError("has no stored visibility; rebake it with 'shtools bake "
-                             "--store-visibility' to relight it", bake)
+        check_relightable(b)  # before reading the light: the bake is what is missing
         settings = relight_settings(b)
         inputs = {"bake": bake}
         env = relight_environment(light, b.sh_order,

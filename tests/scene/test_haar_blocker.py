@@ -280,3 +280,16 @@ def test_environment_cells_project_to_the_scenes_environment_sh(haar_dir, rotate
     # the image binned into 64 x 64 cells vs projected per pixel (the SH path, with its own
     # rotation and intensity): the same low-order moments up to the binning (< 1 %)
     np.testing.assert_allclose(got, prepared.env_sh, atol=0.01 * np.abs(prepared.env_sh).max())
+
+
+def test_relighting_a_bake_with_haar_blockers_is_refused_in_one_line(haar_dir, run_cli):
+    # the stored SH visibility leaves the Haar field's shadow out: a relight would
+    # silently shade the box as if it cast none
+    (haar_dir / "store.toml").write_text(scene_text(sphere=False))
+    baked, light, out = (haar_dir / n for n in ("store.h5", "light.h5", "relit.h5"))
+    assert run_cli("bake", haar_dir / "store.toml", "-o", baked, "--store-visibility")[0] == 0
+    assert run_cli("light", "project", haar_dir / "sun.hdr", "-n", 4, "-o", light)[0] == 0
+    code, _, err = run_cli("relight", baked, "--light", light, "-o", out)
+    assert code not in (0, 3) and len(err.strip().splitlines()) == 1, err
+    assert "all-frequency" in err and "box" in err and "store.h5" in err
+    assert not out.exists()
