@@ -20,10 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shtools.geometry.visibility import RAY_OFFSET
-
-#: Shadow rays stop this fraction of their length short of the emitter sample.
-END_FRACTION = 1e-4
+from shtools.geometry.visibility import END_FRACTION, RAY_OFFSET
 
 
 def area_samples(vertices, faces, n_samples: int, seed: int = 0
