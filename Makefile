@@ -8,6 +8,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cksum < pyproject.toml | cut -d' ' -f1)
 OUT    ?= out
 QUICK  ?=
+ONLY   ?=
 GLTF_VALIDATOR := 2.0.0-dev.3.10
 THREE_JS       := 0.170.0
 
@@ -17,7 +18,7 @@ THREE_JS       := 0.170.0
 help: ## Show this help
 	@echo "shtools make targets (a fresh clone needs only $(PYTHON) >= 3.11 and make):"
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-8s\033[0m %s\n", $$1, $$2}'
-	@echo "Variables: PYTHON=$(PYTHON)  OUT=$(OUT) (demo output)  QUICK=1 (short benchmarks)"
+	@echo "Variables: PYTHON=$(PYTHON)  OUT=$(OUT) (demo output)  QUICK=1 (short benchmarks)  ONLY=\"a b\" (re-run some)"
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
@@ -77,8 +78,8 @@ test-extras: ## Each extra alone in a fresh venv: the modules it promises import
 	done
 	rm -rf $(EXTRA_VENV) build/extras-wheel build/extras-src
 
-bench: $(STAMP) ## Run every benchmarks/bench_*.py, print their tables, write benchmarks/RESULTS.md (QUICK=1: short)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick)
+bench: $(STAMP) ## Run every benchmarks/bench_*.py, print their tables, write benchmarks/RESULTS.md (QUICK=1: short; ONLY="look relight": re-run these, keep the other rows)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick) $(if $(ONLY),--update $(foreach n,$(ONLY),-k $(n)))
 
 golden: $(STAMP) ## Regenerate tests/golden/golden.h5 on purpose (review with shtools diff)
 	$(PY) tests/golden/regenerate.py

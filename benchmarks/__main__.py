@@ -7,8 +7,11 @@ stop the others; the exit status is 1 if any failed.
 
 Everything the benchmarks print goes to the terminal and into a generated results
 file (``benchmarks/RESULTS.md``; ``--results PATH``, ``--no-results``): the machine,
-date, load and commit, one summary row per benchmark saying what it measures, then
-each benchmark's own tables.  Nobody edits its numbers by hand.
+date, load and commit, one summary row per benchmark saying what it measures (and the
+commit and date it was measured at), then each benchmark's own tables.  ``--update``
+re-runs only the ``-k`` benchmarks and replaces their rows and sections in the existing
+file, so a change re-measures what it touched without an hours-long full run.  Nobody
+edits its numbers by hand.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import importlib.util
 import io
 import os
 import platform
+import re
 import subprocess
 import sys
 import time
@@ -42,6 +46,9 @@ class Record:
     ok: bool
     seconds: float
     load: tuple[float, float, float]
+    commit: str = ""
+    date: str = ""
+    command: str = ""
 
 
 class _Tee(io.TextIOBase):
@@ -92,10 +99,19 @@ def _commit() -> str:
 def write_results(path: Path, records: list[Record], command: str, started: datetime.datetime,
                   load_start: tuple[float, float, float], load_end: tuple[float, float, float]
                   ) -> None:
-    """Write the results file ``path`` (Markdown) for ``records``."""
+    """Write the results file ``path`` (Markdown) for ``records``.
+
+    Every record carries the commit, date and command it was measured with (a record
+    kept from an earlier run by ``--update`` keeps its own); the header lists them all.
+    """
     def fmt(load) -> str:
         return " / ".join(f"{x:.2f}" for x in load)
 
+    def distinct(values) -> str:
+        return ", ".join(dict.fromkeys(v for v in values if v))
+
+    dates = sorted(r.date for r in records if r.date) or [f"{started:%Y-%m-%d %H:%M}"]
+    span = dates[0] if dates[0] == dates[-1] else f"{dates[0]} to {dates[-1]}"
     lines = [
         "# Benchmark results",
         "",
@@ -104,26 +120,62 @@ def write_results(path: Path, records: list[Record], command: str, started: date
         "",
         "| | |",
         "|---|---|",
-        f"| date | {started:%Y-%m-%d %H:%M} UTC |",
-        f"| commit | {_commit()} |",
+        f"| date | {span} UTC |",
+        f"| commit | {distinct(r.commit for r in records) or _commit()} |",
         f"| machine | {platform.system()} {platform.machine()}, {os.cpu_count()} CPUs, "
         f"{cpu_model()} |",
         f"| python | {platform.python_version()} |",
-        f"| load (1 / 5 / 15 min) | {fmt(load_start)} at the start, {fmt(load_end)} at the end |",
-        f"| command | `{command}` |",
+        f"| load (1 / 5 / 15 min) | {fmt(load_start)} at the start, {fmt(load_end)} at the end "
+        "of the last run |",
+        f"| command | {distinct(f'`{r.command or command}`' for r in records)} |",
         "",
         "## Summary",
         "",
-        "| benchmark | what it measures | status | wall s | load at its start (1 min) |",
-        "|---|---|---|---:|---:|",
+        "| benchmark | what it measures | status | commit | date (UTC) | wall s "
+        "| load at its start (1 min) |",
+        "|---|---|---|---|---|---:|---:|",
     ]
     for r in records:
         lines.append(f"| [{r.name}](#{r.name.replace('_', '-')}) | {r.measures} | "
-                     f"{'ok' if r.ok else 'FAILED'} | {r.seconds:.1f} | {r.load[0]:.2f} |")
+                     f"{'ok' if r.ok else 'FAILED'} | {r.commit} | {r.date} | "
+                     f"{r.seconds:.1f} | {r.load[0]:.2f} |")
     for r in records:
         lines += ["", f"## {r.name.replace('_', '-')}", "", r.measures, "",
+                  f"_Measured at {r.commit}, {r.date} UTC: `{r.command or command}`._", "",
                   r.output.strip() or "(no output)"]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def read_results(path: Path) -> list[Record]:
+    """The records of a results file written by :func:`write_results`.
+
+    A file from before rows carried their commit and date takes the header's.
+    """
+    text = path.read_text(encoding="utf-8")
+    header = dict(re.findall(r"^\| (date|commit|command) \| (.*) \|$", text, re.M))
+    summary, _, body = text.partition("\n## Summary\n")[2].partition("\n## bench-")
+    outputs = {}
+    for block in ("## bench-" + body).split("\n## bench-"):
+        name, _, rest = block.removeprefix("## bench-").partition("\n")
+        if name:
+            output = rest.strip().partition("\n\n")[2]
+            measured = re.match(r"_Measured at .*?: `(.*)`\._\n\n", output)
+            outputs["bench_" + name.strip().replace("-", "_")] = (
+                (output[measured.end():], measured.group(1)) if measured
+                else (output, header.get("command", "").strip("`")))
+    records = []
+    for row in summary.splitlines():
+        cells = [c.strip() for c in row.strip().strip("|").split("|")]
+        found = re.match(r"\[(bench_\w+)\]", cells[0]) if cells else None
+        if not found:
+            continue
+        if len(cells) == 5:  # the older layout: no per-row commit and date
+            cells[3:3] = [header.get("commit", ""), header.get("date", "").removesuffix(" UTC")]
+        name = found.group(1)
+        output, command = outputs.get(name, ("", ""))
+        records.append(Record(name, cells[1], output, cells[2] == "ok", float(cells[5]),
+                              (float(cells[6]),) * 3, cells[3], cells[4], command))
+    return records
 
 
 def discover(names: list[str] | None = None) -> list[Path]:
@@ -162,7 +214,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--results", type=Path, default=RESULTS, metavar="PATH",
                         help="the generated results file (default benchmarks/RESULTS.md)")
     parser.add_argument("--no-results", action="store_true", help="write no results file")
+    parser.add_argument("--update", action="store_true",
+                        help="with -k: replace only these benchmarks' rows in the results file")
     args, rest = parser.parse_known_args(argv)
+    if args.update and not (args.names and args.results.exists()):
+        parser.error(f"--update needs -k NAME and an existing {args.results}")
     passthrough = (["--quick"] if args.quick else []) + rest
     modules = discover(args.names)
     if not modules:
@@ -170,6 +226,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     started = datetime.datetime.now(datetime.UTC)
     load_start = _load()
+    command = " ".join(["python -m benchmarks", *(argv if argv is not None else sys.argv[1:])])
+    commit = _commit()
     failed, records = [], []
     for path in modules:
         print(f"\n## {path.stem}{' (quick)' if args.quick else ''}\n", flush=True)
@@ -184,10 +242,15 @@ def main(argv: list[str] | None = None) -> int:
         seconds = time.perf_counter() - start
         if not ok:
             failed.append(path.stem)
-        records.append(Record(path.stem, measures(path), tee.copy.getvalue(), ok, seconds, load))
+        records.append(Record(path.stem, measures(path), tee.copy.getvalue(), ok, seconds, load,
+                              commit, f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M}",
+                              command))
         print(f"\n_{path.stem}: {seconds:.1f} s_", flush=True)
     if not args.no_results:
-        command = " ".join(["python -m benchmarks", *(argv if argv is not None else sys.argv[1:])])
+        if args.update:
+            fresh = {r.name for r in records}
+            kept = [r for r in read_results(args.results) if r.name not in fresh]
+            records = sorted(kept + records, key=lambda r: r.name)
         write_results(args.results, records, command, started, load_start, _load())
         print(f"\nresults: {args.results}", flush=True)
     if failed:
