@@ -21,6 +21,7 @@ Sample ``(s, t)`` of a shell of resolution ``R`` is the object-frame direction
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, field
@@ -220,6 +221,12 @@ def shell_resolution(asset, path: str | os.PathLike) -> np.ndarray:
 
 
 
+#: Root attributes a shell-field reader does not hand on in ``attrs``: the asset's
+#: identity and the ``bounding_radius`` it reads into a field of its own.
+READ_ATTRS = frozenset({"format", "format_version", "sh_order", "sh_convention",
+                        "bounding_radius"})
+
+
 def shell_geometry(asset, path: str | os.PathLike) -> dict:
     """What every shell-field asset (``field``, ``srf``, ``haar``) stores of its shells:
     ``center (3,)``, ``bounding_radius``, ``shell_radii (C,)`` float64 and
@@ -246,11 +253,7 @@ def read_field(path: str | os.PathLike) -> ShadowField:
     asset = read_asset(path, "field")
     shells = shell_geometry(asset, path)
     C = shells["resolution"].shape[0]
-
-    def stack(name):
-        return stack_shells(asset, C, name)
-
-    skip = {"format", "format_version", "sh_order", "sh_convention", "bounding_radius"}
+    stack = functools.partial(stack_shells, asset, C)
     return ShadowField(
         **shells,
         ocv=[asset[f"shells/{c}/ocv"] for c in range(C)],
@@ -263,5 +266,5 @@ def read_field(path: str | os.PathLike) -> ShadowField:
         self_visibility=asset.data.get("self_visibility"),
         reduction_error=asset.data.get("reduction_error"),
         level_error=asset.data.get("level_error"),
-        attrs={k: v for k, v in asset.attrs.items() if k not in skip},
+        attrs={k: v for k, v in asset.attrs.items() if k not in READ_ATTRS},
     )

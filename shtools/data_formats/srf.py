@@ -21,13 +21,20 @@ Version-1 files (no lamp mesh) still read; only the product-space shadow
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from shtools.data_formats._base import DatasetSpec, Schema, read_asset, register, write_asset
-from shtools.data_formats.field import LAYOUT_ATTRS, check_shells, shell_geometry, stack_shells
+from shtools.data_formats.field import (
+    LAYOUT_ATTRS,
+    READ_ATTRS,
+    check_shells,
+    shell_geometry,
+    stack_shells,
+)
 from shtools.errors import AssetError
 
 #: Colour channels of an RCV.
@@ -219,12 +226,8 @@ def read_radiance_field(path: str | os.PathLike) -> RadianceField:
     asset = read_asset(path, "srf")
     shells = shell_geometry(asset, path)
     C = shells["resolution"].shape[0]
-
-    def stack(name):
-        return stack_shells(asset, C, name)
-
-    skip = {"format", "format_version", "sh_order", "sh_convention", "bounding_radius",
-            "emitter_radius", "emitter_area"}
+    stack = functools.partial(stack_shells, asset, C)
+    skip = READ_ATTRS | {"emitter_radius", "emitter_area"}
     rcv = []
     for c in range(C):
         q = np.asarray(asset[f"shells/{c}/rcv"])
