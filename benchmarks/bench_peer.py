@@ -45,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shtools.geometry.visibility import GOLDEN_ANGLE
+
 if __package__:  # run by ``python -m benchmarks``
     from benchmarks.bench_fidelity import placement
 else:  # run as a script: its folder is sys.path[0]
@@ -62,7 +64,6 @@ QUICK_RAYS = (32, 128)
 #: Object vertices the reference traces (a random subset; every ground vertex is traced).
 SUBSET = 4000
 DEMO_FRAME = 12
-_GOLDEN = math.pi * (3.0 - math.sqrt(5.0))
 
 
 def fibonacci_directions(n: int) -> np.ndarray:
@@ -70,7 +71,7 @@ def fibonacci_directions(n: int) -> np.ndarray:
     k = np.arange(n, dtype=np.float64)
     y = 1.0 - (2.0 * k + 1.0) / n
     r = np.sqrt(np.maximum(0.0, 1.0 - y * y))
-    phi = k * _GOLDEN
+    phi = k * GOLDEN_ANGLE
     return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1)
 
 

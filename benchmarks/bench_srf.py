@@ -186,7 +186,7 @@ def _references(prep, frame, em, n, order, scene):
     from shtools.fields.emitter import Emitter
     from shtools.fields.radiance import emitter_sphere, sample_rcvs
     from shtools.geometry.raycast import RayCaster
-    from shtools.reference.emitter import emitter_radiance
+    from shtools.reference.emitter import shadowed_and_free
     from shtools.runtime.shading import shade
     from shtools.scene.pose import pose_frame
 
@@ -194,10 +194,7 @@ def _references(prep, frame, em, n, order, scene):
     m = st.lights[0].matrix
     wv = em.vertices @ m[:3, :3].T + m[:3, 3]
     pts, nrm = st.vertices[:n], st.normals[:n]
-    ref = emitter_radiance(pts, nrm, wv, em.faces, em.emissive, em.radiance,
-                           st.blocker_meshes, n_samples=8192)
-    free = emitter_radiance(pts, nrm, wv, em.faces, em.emissive, em.radiance, [],
-                            n_samples=8192)
+    ref, free = shadowed_and_free(pts, nrm, em, wv, st.blocker_meshes, n_samples=8192)
     wem = Emitter(wv, em.faces, em.emissive, em.radiance, em.normals @ m[:3, :3].T, em.areas)
     c, r = emitter_sphere(wem)
     exact = sample_rcvs(RayCaster(wv, em.faces), wem, c, r, pts, 32, order)

@@ -15,7 +15,7 @@ def sample_haar(mesh_path, output, params, keep: float, emission, force: bool,
     """Sample, reduce, quantize and write the Haar field of ``mesh_path`` (see ``field sample``)."""
     from shtools.cli._limits import check_memory, check_rays
     from shtools.cli._outputs import guard_outputs
-    from shtools.data_formats.haar import write_haar_field
+    from shtools.data_formats.haar import MAX_MAP_SIZE, write_haar_field
     from shtools.fields.haar import build_haar_field, kept_count
     from shtools.geometry.mesh import load_mesh
 
@@ -23,9 +23,10 @@ def sample_haar(mesh_path, output, params, keep: float, emission, force: bool,
     if emission is not None:
         raise InputError("--radiance samples a source radiance field in SH; drop --basis haar",
                          mesh_path)
-    if M & (M - 1) or M > 256:
-        raise InputError(f"--map must be a power of two <= 256 with --basis haar (the Haar "
-                         f"transform halves it; indices are 16-bit), got {M}", mesh_path)
+    if M & (M - 1) or M > MAX_MAP_SIZE:
+        raise InputError(f"--map must be a power of two <= {MAX_MAP_SIZE} with --basis haar "
+                         f"(the Haar transform halves it; indices are 16-bit), got {M}",
+                         mesh_path)
     if not 0 < keep <= 1:
         raise InputError(f"--keep must be a fraction in (0, 1], got {keep!r}", mesh_path)
     if params.self_order is not None:

@@ -21,6 +21,7 @@ Sample ``(s, t)`` of a shell of resolution ``R`` is the object-frame direction
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, field
@@ -101,18 +102,32 @@ class ShadowField:
         return int(sum(int(r) ** 2 for r in self.resolution) * self.order ** 2)
 
 
+def check_shells(f, path) -> np.ndarray:
+    """The ``shell_resolution`` of an open shell-field file (``field``, ``srf``,
+    ``haar``), after checking that ``shell_radii`` is non-empty, positive and
+    increasing and that every resolution is a power of two.
+
+    Raises
+    ------
+    AssetError
+        When either is not.
+    """
+    radii = f["shell_radii"][()]
+    res = f["shell_resolution"][()]
+    if radii.shape[0] < 1 or np.any(radii <= 0) or np.any(np.diff(radii) <= 0):
+        raise AssetError("shell_radii must be positive and increasing; resample the field", path)
+    if np.any(res < 1) or np.any(res & (res - 1)):
+        raise AssetError("shell_resolution must be powers of two; resample the field", path)
+    return res
+
+
 def _check(f, ctx) -> None:
     path = ctx["path"]
     n = int(ctx["attrs"]["sh_order"])
     n2 = n * n
-    radii = f["shell_radii"][()]
-    res = f["shell_resolution"][()]
-    if radii.shape[0] < 1:
+    if f["shell_radii"].shape[0] < 1:
         raise AssetError("the field has no shells; resample it", path)
-    if np.any(radii <= 0) or np.any(np.diff(radii) <= 0):
-        raise AssetError("shell_radii must be positive and increasing; resample the field", path)
-    if np.any(res < 1) or np.any(res & (res - 1)):
-        raise AssetError("shell_resolution must be powers of two; resample the field", path)
+    res = check_shells(f, path)
     for c, r in enumerate(res):
         for name in ("ocv", "log"):
             key = f"shells/{c}/{name}"
@@ -205,6 +220,22 @@ def shell_resolution(asset, path: str | os.PathLike) -> np.ndarray:
     return np.asarray(asset["shell_resolution"], dtype=np.int64)
 
 
+
+#: Root attributes a shell-field reader does not hand on in ``attrs``: the asset's
+#: identity and the ``bounding_radius`` it reads into a field of its own.
+READ_ATTRS = frozenset({"format", "format_version", "sh_order", "sh_convention",
+                        "bounding_radius"})
+
+
+def shell_geometry(asset, path: str | os.PathLike) -> dict:
+    """What every shell-field asset (``field``, ``srf``, ``haar``) stores of its shells:
+    ``center (3,)``, ``bounding_radius``, ``shell_radii (C,)`` float64 and
+    ``resolution (C,)`` int64 (checked by :func:`shell_resolution`)."""
+    return {"center": np.asarray(asset["center"], np.float64),
+            "bounding_radius": float(asset.attrs["bounding_radius"]),
+            "shell_radii": np.asarray(asset["shell_radii"], np.float64),
+            "resolution": shell_resolution(asset, path)}
+
 def stack_shells(asset, n_shells: int, name: str) -> np.ndarray:
     """The per-shell datasets ``shells/<c>/<name>`` of a read asset, each flattened and
     stacked: shape ``(n_shells, k)`` float32."""
@@ -220,18 +251,11 @@ def read_field(path: str | os.PathLike) -> ShadowField:
     ShadowField
     """
     asset = read_asset(path, "field")
-    res = shell_resolution(asset, path)
-    C = res.shape[0]
-
-    def stack(name):
-        return stack_shells(asset, C, name)
-
-    skip = {"format", "format_version", "sh_order", "sh_convention", "bounding_radius"}
+    shells = shell_geometry(asset, path)
+    C = shells["resolution"].shape[0]
+    stack = functools.partial(stack_shells, asset, C)
     return ShadowField(
-        center=np.asarray(asset["center"], np.float64),
-        bounding_radius=float(asset.attrs["bounding_radius"]),
-        shell_radii=np.asarray(asset["shell_radii"], np.float64),
-        resolution=res,
+        **shells,
         ocv=[asset[f"shells/{c}/ocv"] for c in range(C)],
         offset=stack("offset"),
         step=stack("step"),
@@ -242,5 +266,5 @@ def read_field(path: str | os.PathLike) -> ShadowField:
         self_visibility=asset.data.get("self_visibility"),
         reduction_error=asset.data.get("reduction_error"),
         level_error=asset.data.get("level_error"),
-        attrs={k: v for k, v in asset.attrs.items() if k not in skip},
+        attrs={k: v for k, v in asset.attrs.items() if k not in READ_ATTRS},
     )

@@ -29,9 +29,11 @@ from shtools.data_formats._base import (
     register,
     write_asset,
 )
-from shtools.data_formats.field import LAYOUT_ATTRS, shell_resolution, stack_shells
+from shtools.data_formats.field import LAYOUT_ATTRS, check_shells, shell_geometry, stack_shells
 from shtools.errors import AssetError
 
+#: Largest map side: the kept coefficients' indices into the M x M map are uint16.
+MAX_MAP_SIZE = 256
 #: How a Haar map is parameterised and coded (recorded on every asset).
 HAAR_ATTRS = {
     **LAYOUT_ATTRS,
@@ -47,17 +49,12 @@ def _check(f, ctx) -> None:
     path = ctx["path"]
     M = int(f.attrs["map_size"])
     K = int(f.attrs["kept"])
-    if M < 2 or M & (M - 1) or M > 256:
-        raise AssetError(f"map_size {M} is not a power of two in 2..256; resample the field",
-                         path)
+    if M < 2 or M & (M - 1) or M > MAX_MAP_SIZE:
+        raise AssetError(f"map_size {M} is not a power of two in 2..{MAX_MAP_SIZE}; resample "
+                         "the field", path)
     if not 1 <= K <= M * M:
         raise AssetError(f"kept {K} is outside 1..{M * M}; resample the field", path)
-    radii = f["shell_radii"][()]
-    res = f["shell_resolution"][()]
-    if radii.shape[0] < 1 or np.any(radii <= 0) or np.any(np.diff(radii) <= 0):
-        raise AssetError("shell_radii must be positive and increasing; resample the field", path)
-    if np.any(res < 1) or np.any(res & (res - 1)):
-        raise AssetError("shell_resolution must be powers of two; resample the field", path)
+    res = check_shells(f, path)
     for c, r in enumerate(res):
         for name, dtype in (("index", np.uint16), ("value", np.uint8)):
             key = f"shells/{c}/{name}"
@@ -157,13 +154,10 @@ def read_haar_asset(path: str | os.PathLike) -> dict:
         (or None), ``attrs``.
     """
     asset = read_asset(path, "haar")
-    res = shell_resolution(asset, path)
-    C = res.shape[0]
+    shells = shell_geometry(asset, path)
+    C = shells["resolution"].shape[0]
     return {
-        "center": np.asarray(asset["center"], np.float64),
-        "bounding_radius": float(asset.attrs["bounding_radius"]),
-        "shell_radii": np.asarray(asset["shell_radii"], np.float64),
-        "resolution": res,
+        **shells,
         "index": [np.asarray(asset[f"shells/{c}/index"]) for c in range(C)],
         "q": [np.asarray(asset[f"shells/{c}/value"]) for c in range(C)],
         "offset": stack_shells(asset, C, "offset"),

@@ -21,13 +21,20 @@ Version-1 files (no lamp mesh) still read; only the product-space shadow
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from shtools.data_formats._base import DatasetSpec, Schema, read_asset, register, write_asset
-from shtools.data_formats.field import LAYOUT_ATTRS, shell_resolution, stack_shells
+from shtools.data_formats.field import (
+    LAYOUT_ATTRS,
+    READ_ATTRS,
+    check_shells,
+    shell_geometry,
+    stack_shells,
+)
 from shtools.errors import AssetError
 
 #: Colour channels of an RCV.
@@ -104,15 +111,11 @@ class RadianceField:
 def _check(f, ctx) -> None:
     path = ctx["path"]
     n2 = int(ctx["attrs"]["sh_order"]) ** 2
-    radii = f["shell_radii"][()]
-    res = f["shell_resolution"][()]
-    if radii.shape[0] < 1 or res.shape != radii.shape:
+    shells = f["shell_radii"].shape
+    if shells[0] < 1 or f["shell_resolution"].shape != shells:
         raise AssetError("the radiance field has no shells, or shell_radii and "
                          "shell_resolution disagree; resample it", path)
-    if np.any(radii <= 0) or np.any(np.diff(radii) <= 0):
-        raise AssetError("shell_radii must be positive and increasing; resample the field", path)
-    if np.any(res < 1) or np.any(res & (res - 1)):
-        raise AssetError("shell_resolution must be powers of two; resample the field", path)
+    res = check_shells(f, path)
     rad = f["radiance"][()]
     if not (np.all(np.isfinite(rad)) and np.all(rad >= 0) and rad.max() > 0):
         raise AssetError("radiance must be finite, >= 0 and not all zero", path)
@@ -221,23 +224,16 @@ def read_radiance_field(path: str | os.PathLike) -> RadianceField:
     RadianceField
     """
     asset = read_asset(path, "srf")
-    res = shell_resolution(asset, path)
-    C = res.shape[0]
-
-    def stack(name):
-        return stack_shells(asset, C, name)
-
-    skip = {"format", "format_version", "sh_order", "sh_convention", "bounding_radius",
-            "emitter_radius", "emitter_area"}
+    shells = shell_geometry(asset, path)
+    C = shells["resolution"].shape[0]
+    stack = functools.partial(stack_shells, asset, C)
+    skip = READ_ATTRS | {"emitter_radius", "emitter_area"}
     rcv = []
     for c in range(C):
         q = np.asarray(asset[f"shells/{c}/rcv"])
         rcv.append(q.reshape(q.shape[0], q.shape[1], -1))
     return RadianceField(
-        center=np.asarray(asset["center"], np.float64),
-        bounding_radius=float(asset.attrs["bounding_radius"]),
-        shell_radii=np.asarray(asset["shell_radii"], np.float64),
-        resolution=res, rcv=rcv, offset=stack("offset"), step=stack("step"),
+        **shells, rcv=rcv, offset=stack("offset"), step=stack("step"),
         order=int(asset.sh_order),
         radiance=np.asarray(asset["radiance"], np.float64),
         emitter_center=np.asarray(asset["emitter_center"], np.float64),

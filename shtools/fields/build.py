@@ -39,8 +39,8 @@ from shtools.fields.sampling import (
 from shtools.runtime.settings import MAX_ACC_ORDER, MAX_ORDER, ShadowSettings
 from shtools.sh import LOG_EPS
 from shtools.sh import log as sh_log
+from shtools.sh.basis import SQRT_4PI
 
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 #: Lowest mean visibility given to the log (samples inside the object).
 LOG_FLOOR = 0.02
 

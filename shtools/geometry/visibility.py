@@ -42,18 +42,20 @@ import numpy as np
 
 from shtools.sh import basis, sphere_quadrature
 from shtools.sh import log as sh_log
+from shtools.sh.basis import SQRT_4PI
 
 #: Default number of quadrature directions (the issue's reference uses >= 3,200).
 DEFAULT_DIRECTIONS = 3200
 #: Ray origin offset along the normal, relative to the mesh's bounding-box diagonal
 #: (against self-hits of the receiver's own triangles; the reference uses the same).
 RAY_OFFSET = 1e-5
+#: A shadow ray towards a point of a light stops this fraction of its length short of
+#: it, so the light's own surface does not block it.
+END_FRACTION = 1e-4
 #: Rays cast per progress step (bounds the (V', Q) boolean block to ~16 MB).
 RAYS_PER_STEP = 1 << 24
 #: Default visibility floor of :func:`self_visibility_log`.
 LOG_FLOOR = 0.01
-
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 
 
 def receivers(points, normals) -> tuple[np.ndarray, np.ndarray]:
@@ -282,7 +284,8 @@ def _subtract_blocked(g, vertex, dirs, weight, order: int) -> None:
 CONE_DIRECTIONS = 96
 #: Fewest rays per receiver of :func:`cone_visibility` (distant receivers, small cones).
 CONE_MIN_RAYS = 4
-_GOLDEN = math.pi * (3.0 - math.sqrt(5.0))
+#: The golden angle (radians): the azimuth step of the spiral direction sets.
+GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
 def bounding_cones(points, normals, center, radius) -> tuple[np.ndarray, np.ndarray]:
@@ -394,7 +397,7 @@ def cone_visibility(points, normals, caster, center, radius, order: int, *,
             i += np.float32(0.5)
             z = 1.0 - depth[v_of] * (i * inv_count[v_of])
             r = np.sqrt(np.maximum(np.float32(0.0), 1.0 - z * z))
-            phi = i * np.float32(_GOLDEN)
+            phi = i * np.float32(GOLDEN_ANGLE)
             x, y = r * np.cos(phi), r * np.sin(phi)
             # world direction x t1 + y t2 + z axis (gathers of (V, 3) rows: no (R, 3, 3))
             dirs = frame[0].take(v_of, axis=0)

@@ -20,10 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shtools.geometry.visibility import RAY_OFFSET
-
-#: Shadow rays stop this fraction of their length short of the emitter sample.
-END_FRACTION = 1e-4
+from shtools.geometry.visibility import END_FRACTION, RAY_OFFSET
 
 
 def area_samples(vertices, faces, n_samples: int, seed: int = 0
@@ -113,6 +110,33 @@ def emitter_radiance(points, normals, emitter_vertices, emitter_faces, emissive,
         out[s:s + step] = contrib.sum(axis=1)
     return (out * area / (n_samples * np.pi))[:, None] * np.asarray(radiance, float)[None, :]
 
+
+
+def shadowed_and_free(points, normals, emitter, emitter_vertices, occluders, *,
+                      n_samples: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`emitter_radiance` of a lamp with the occluders and without them.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (V, 3)
+    emitter
+        The lamp: its ``faces``, ``emissive`` flags and ``radiance``.
+    emitter_vertices : array_like, shape (P, 3)
+        The lamp's vertices in the world.
+    occluders : list of (vertices (Pb, 3), faces (Fb, 3))
+    n_samples : int
+
+    Returns
+    -------
+    shadowed, free : ndarray, shape (V, 3)
+        The same area samples (the default seed) light both.
+    """
+    shadowed = emitter_radiance(points, normals, emitter_vertices, emitter.faces,
+                                emitter.emissive, emitter.radiance, occluders,
+                                n_samples=n_samples)
+    free = emitter_radiance(points, normals, emitter_vertices, emitter.faces, emitter.emissive,
+                            emitter.radiance, [], n_samples=n_samples)
+    return shadowed, free
 
 def shaded_lamp(bulb_radius: float = 0.13, shade_radii=(0.32, 0.14), shade_z=(-0.2, 0.15),
                 sections: int = 48, subdivisions: int = 2):

@@ -53,9 +53,6 @@ from shtools.runtime.static_pairs import StaticPairs
 from shtools.runtime.tiling import accumulate_clusters
 from shtools.sh import exp as sh_exp
 
-#: Re-exported: these moved beside the evaluator and are still importable from here.
-__all__ = ["DEFORMABLE_RECEIVER_PAIRS", "PART_BLOCKERS", "FrameWork", "ShadowRuntime"]
-
 
 class ShadowRuntime:
     """SHEXP soft shadows per receiver vertex from sphere blockers.

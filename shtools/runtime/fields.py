@@ -47,8 +47,7 @@ import numpy as np
 
 from shtools.errors import InputError
 from shtools.sh import product, rotation_matrix
-
-SQRT_4PI = math.sqrt(4.0 * math.pi)
+from shtools.sh.basis import SQRT_4PI
 
 #: Receiver points per lookup pass (bounds the (P, 8, n*n) gather to ~20 MiB).
 LOOKUP_CHUNK = 1 << 15

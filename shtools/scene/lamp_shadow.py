@@ -32,10 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Receiver origin offset along its normal, relative to the blockers' bounding-box diagonal.
-RAY_OFFSET = 1e-5
-#: A shadow ray stops this fraction of its length short of the lamp.
-END_FRACTION = 1e-4
+from shtools.geometry.visibility import END_FRACTION, RAY_OFFSET
+
 #: Widening of the emitter's bounding cone (the sphere is fitted to its vertices).
 CONE_MARGIN = 1e-3
 #: Receivers per batch (bounds the (B, k*k, 3) direction arrays).

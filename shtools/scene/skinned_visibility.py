@@ -31,6 +31,9 @@ import math
 
 import numpy as np
 
+from shtools.geometry.visibility import GOLDEN_ANGLE
+from shtools.sh.basis import SQRT_4PI
+
 #: Rays per vertex of a skinned object's posed mesh where it is self-shadowed (the
 #: ``self_visibility_directions`` default): the fewest that keep the error over
 #: CesiumMan's own shadowed vertices under 4 % (``benchmarks/bench_look.py``).
@@ -40,8 +43,6 @@ FIRST_FRACTION = 1.0 / 9.0
 FIRST_MIN = 4
 #: Mesh rings around the vertices the first rays find blocked that cast the rest too.
 DILATE_RINGS = 1
-_GOLDEN = math.pi * (3.0 - math.sqrt(5.0))
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 
 
 def turned_frames(normals) -> np.ndarray:
@@ -51,7 +52,7 @@ def turned_frames(normals) -> np.ndarray:
 
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     t1, t2 = tangent_frames(n)
-    phi = (np.arange(len(n)) * _GOLDEN)[:, None]
+    phi = (np.arange(len(n)) * GOLDEN_ANGLE)[:, None]
     c, s = np.cos(phi), np.sin(phi)
     return np.stack([c * t1 + s * t2, c * t2 - s * t1, n], axis=1)
 
@@ -147,7 +148,7 @@ def adaptive_self_visibility(points, normals, faces, caster, order: int,
     if not n_rest:
         return g
     rest = hemisphere_directions(n_rest).astype(np.float32)
-    c, s = math.cos(0.5 * _GOLDEN), math.sin(0.5 * _GOLDEN)
+    c, s = math.cos(0.5 * GOLDEN_ANGLE), math.sin(0.5 * GOLDEN_ANGLE)
     rest = rest @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]], dtype=np.float32)
     step = max(1, (1 << 20) // rest.shape[0])  # rays per Embree call: bounded memory
     for start in range(0, rows.size, step):

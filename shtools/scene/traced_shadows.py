@@ -56,6 +56,9 @@ import weakref
 
 import numpy as np
 
+from shtools.geometry.visibility import RAY_OFFSET
+from shtools.sh.basis import SQRT_4PI
+
 #: Ray counts (at the hemisphere density ``n_dirs``) of a receiver's cone where the
 #: hand-over from the object's spheres to its traced mesh starts and ends: 2 (about 5
 #: bounding radii) and 4 (about 3.5 radii, the reach of the former per-cluster rule,
@@ -70,13 +73,10 @@ LIGHT_MARGIN = 0.5
 FILTER_SPACING = 1.0
 #: Receivers whose normals differ by more than this cosine are not filtered together.
 FILTER_MIN_COS = 0.9
-#: Ray origin offset along the normal, relative to the caster's bounding-box diagonal.
-RAY_OFFSET = 1e-5
 #: Receivers per block of :func:`set_visibility` (neighbours in the receivers' order
 #: see nearby runs of the set: the block tests only the run its cones span).
 SET_CHUNK = 256
 
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 _CUT = math.exp(-2.0)  # the filter's Gaussian at its cut, 2 widths
 
 

@@ -34,6 +34,9 @@ import numpy as np
 SH_CONVENTION = "real-orthonormal-xyz"
 """Name of the convention, recorded in every asset that stores SH data."""
 
+SQRT_4PI = math.sqrt(4.0 * math.pi)
+"""The only coefficient of the constant function 1: ``(SQRT_4PI, 0, ...)``."""
+
 
 def n_coeffs(order: int) -> int:
     """Number of coefficients ``order**2`` of an order-``order`` SH vector."""

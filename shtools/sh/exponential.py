@@ -50,11 +50,9 @@ from typing import Protocol
 import numpy as np
 
 from shtools.sh._kernels import run_product
-from shtools.sh.basis import basis, check_order, order_from_size
+from shtools.sh.basis import SQRT_4PI, basis, check_order, order_from_size
 from shtools.sh.quadrature import sphere_quadrature
 from shtools.sh.triple import CHUNK_BYTES, _pad, product, product_matrix
-
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 
 
 class ExpMethod(StrEnum):

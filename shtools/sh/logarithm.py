@@ -20,18 +20,14 @@ comparison.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from shtools.sh.basis import order_from_size
+from shtools.sh.basis import SQRT_4PI, order_from_size
 from shtools.sh.quadrature import project, reconstruct, sphere_quadrature
 from shtools.sh.triple import CHUNK_BYTES, product_matrix
 
 LOG_EPS = 0.02
 """Default eigenvalue floor relative to the largest eigenvalue (the paper's 0.02)."""
-
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 
 
 def _q_prime(x: np.ndarray) -> np.ndarray:

@@ -19,15 +19,12 @@ coefficients are :math:`a = \hat g_0/\sqrt{4\pi}` and
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 
-from shtools.sh.basis import check_order
+from shtools.sh.basis import SQRT_4PI, check_order
 from shtools.sh.logarithm import LOG_EPS, log
 from shtools.sh.zonal import cap_zh, zonal_to_sh
-
-SQRT_4PI = math.sqrt(4.0 * math.pi)
 
 
 def _zonal_scale(order: int) -> np.ndarray:

@@ -1,12 +1,19 @@
 """Child processes of a test, read from /proc (Linux): what a stopped or refused
-command may have left running."""
+command may have left running; and what a fresh interpreter imports."""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
+
+#: Packages a pipeline embedding shtools.runtime must not need (docs/architecture.md,
+#: "Layers").
+RUNTIME_FORBIDDEN = ("trimesh", "pymeshlab", "igl", "scipy", "embreex", "matplotlib", "click")
 
 
 def alive(pid: int) -> bool:
@@ -50,3 +57,13 @@ def unprivileged_prefix() -> list[str]:
         pytest.skip("root without setpriv: cannot run as an unprivileged user, and root "
                     "may write any read-only file")
     return ["setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups"]
+
+
+def forbidden_imports(code: str, forbidden=RUNTIME_FORBIDDEN) -> list[str]:
+    """The ``forbidden`` top-level packages a fresh interpreter has imported once it has
+    run ``code`` (Python source), sorted."""
+    done = subprocess.run([sys.executable, "-c", code + "\nimport json, sys\n"
+                           "print(json.dumps(sorted(sys.modules)))\n"],
+                          capture_output=True, text=True, check=True, timeout=120)
+    loaded = json.loads(done.stdout.strip().splitlines()[-1])
+    return sorted({m.split(".")[0] for m in loaded} & set(forbidden))

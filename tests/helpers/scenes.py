@@ -67,3 +67,14 @@ def torus_and_ring(folder: Path, *, major: float, minor: float, sphere_radius: f
     centers = major * np.stack(circle, axis=1)
     write_spheres(folder / name,
                   SphereSet(centers, np.full(spheres, sphere_radius), 0.0, 1.0, "ring"))
+
+
+def bounded_torus(folder: Path) -> None:
+    """Write ``torus.obj`` (major radius 0.6, tube 0.25, 32 x 16 sections) and its ring
+    of 12 spheres ``torus_spheres.h5`` bounding the tube: radius hypot(0.25, 0.16), so
+    they bulge about 0.05 out of it between the sections (spacing 2 * 0.6 sin(pi/12) =
+    0.31), where a linked torus passes through."""
+    import math
+
+    torus_and_ring(folder, major=0.6, minor=0.25, sphere_radius=math.hypot(0.25, 0.16),
+                   sections=(32, 16), spheres=12, name="torus_spheres.h5")

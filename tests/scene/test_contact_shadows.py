@@ -4,14 +4,13 @@ project's ray tracer of the real meshes, and who is traced on whom."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-import trimesh
+from helpers.bakes import baked_radiance
 from helpers.rig import ground_scene_head
+from helpers.scenes import bounded_torus
 
 from shtools.reference import relative_rmse
-from shtools.scene.bake import bake_scene, prepare_scene
+from shtools.scene.bake import prepare_scene
 from shtools.scene.scene import load_scene
 
 GROUND = 25 * 25  # vertices of the ground grid below
@@ -34,20 +33,6 @@ rotate = [{rx2}, 0.0, 0.0]
 """
 
 
-def _write_torus(folder):
-    trimesh.creation.torus(major_radius=0.6, minor_radius=0.25, major_sections=32,
-                           minor_sections=16).export(folder / "torus.obj")
-    # a ring of spheres bounding the tube: they bulge 0.05 out of it between the
-    # sections, where the other link passes through
-    from shtools.data_formats.spheres import write_spheres
-    from shtools.geometry.sphere_set import SphereSet
-
-    phi = np.linspace(0.0, 2 * math.pi, 12, endpoint=False)
-    centers = 0.6 * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
-    write_spheres(folder / "torus_spheres.h5",
-                  SphereSet(centers, np.full(12, math.hypot(0.25, 0.16)), 0.0, 1.0, "ring"))
-
-
 def _scene(folder, settings="", second_x=0.3):
     """Two links of a chain over the ground, the second moving and turning."""
     text = (ground_scene_head(settings, size=4, subdivisions=24)
@@ -57,19 +42,14 @@ def _scene(folder, settings="", second_x=0.3):
     return load_scene(folder / "scene.toml")
 
 
-def _bake(scene, **kwargs):
-    prepared = prepare_scene(scene)
-    return np.stack([f.radiance for f in bake_scene(scene, prepared=prepared, processes=1,
-                                                    scheduler="inline", **kwargs)])
-
-
 def test_linked_objects_shadow_each_other_by_their_real_meshes(tmp_path):
     """Each link's real mesh is traced on the other's vertices (its spheres skipped
     there), not its ring of spheres, which pokes out of the tube where the links touch."""
-    _write_torus(tmp_path)
-    ref = _bake(_scene(tmp_path), method="raytrace", raytrace_dirs=3200)
-    traced = _bake(_scene(tmp_path))
-    spheres = _bake(_scene(tmp_path, "traced_shadows = false"))
+    bounded_torus(tmp_path)
+    ref = baked_radiance(_scene(tmp_path), method="raytrace", raytrace_dirs=3200,
+                         scheduler="inline")
+    traced = baked_radiance(_scene(tmp_path), scheduler="inline")
+    spheres = baked_radiance(_scene(tmp_path, "traced_shadows = false"), scheduler="inline")
     objects = slice(GROUND, GROUND + 2 * TORUS)
     err = relative_rmse(traced[:, objects], ref[:, objects])
     err_spheres = relative_rmse(spheres[:, objects], ref[:, objects])
@@ -93,7 +73,7 @@ def test_a_ball_through_a_link_shadows_the_vertices_buried_in_it(tmp_path):
     """A sphere primitive through the link's tube (interpenetrating): its exact sphere
     shades the receivers outside it exactly but leaves those buried in it lit; its
     mesh is traced on the link instead."""
-    _write_torus(tmp_path)
+    bounded_torus(tmp_path)
 
     def scene(settings=""):
         text = (ground_scene_head(settings, size=4, subdivisions=24)
@@ -101,10 +81,11 @@ def test_a_ball_through_a_link_shadows_the_vertices_buried_in_it(tmp_path):
         (tmp_path / "scene.toml").write_text(text)
         return load_scene(tmp_path / "scene.toml")
 
-    ref = _bake(scene(), method="raytrace", raytrace_dirs=3200)
+    ref = baked_radiance(scene(), method="raytrace", raytrace_dirs=3200, scheduler="inline")
     link = slice(GROUND, GROUND + TORUS)
-    err = relative_rmse(_bake(scene())[:, link], ref[:, link])
-    err_sphere = relative_rmse(_bake(scene("traced_shadows = false"))[:, link], ref[:, link])
+    err = relative_rmse(baked_radiance(scene(), scheduler="inline")[:, link], ref[:, link])
+    err_sphere = relative_rmse(baked_radiance(scene("traced_shadows = false"),
+                                              scheduler="inline")[:, link], ref[:, link])
     # the ball's mesh (642 vertices) at 48 rays per hemisphere, filtered, against 3,200
     # directions over the sphere: measured 1.7 %; the exact sphere leaves the buried
     # vertices lit: 30 %
@@ -117,7 +98,7 @@ def test_a_receiver_is_traced_against_the_others_near_it_not_itself(tmp_path):
     moved apart (bounding spheres 4 radii apart), each keeps the other's spheres."""
     from shtools.scene.pose import pose_frame
 
-    _write_torus(tmp_path)
+    bounded_torus(tmp_path)
     for x, want in ((0.3, 2), (5.5, 0)):
         state = pose_frame(prepare_scene(_scene(tmp_path, second_x=x)), 0.5)
         on_links = [sv for sv in state.self_visibility if sv.visibility is not None

@@ -11,7 +11,7 @@ from shtools.fields import FieldParameters
 from shtools.fields.emitter import make_emitter
 from shtools.fields.radiance import sample_radiance_field
 from shtools.reference import relative_rmse
-from shtools.reference.emitter import emitter_radiance, shaded_lamp
+from shtools.reference.emitter import shaded_lamp, shadowed_and_free
 from shtools.scene.bake import bake_scene
 from shtools.scene.pose import pose_frame
 from shtools.scene.prepare import prepare_scene
@@ -93,10 +93,8 @@ def _against_ray_tracing(lamp_dir, light_extra=""):
         m = st.lights[0].matrix
         lamp_v = em.vertices @ m[:3, :3].T + m[:3, 3]
         pts, nrm = st.vertices[:n], st.normals[:n]
-        ref = emitter_radiance(pts, nrm, lamp_v, em.faces, em.emissive, em.radiance,
-                               st.blocker_meshes, n_samples=4096)
-        free = emitter_radiance(pts, nrm, lamp_v, em.faces, em.emissive, em.radiance, [],
-                                n_samples=4096)
+        ref, free = shadowed_and_free(pts, nrm, em, lamp_v, st.blocker_meshes,
+                                      n_samples=4096)
         yield result.radiance[:n], alone[frame].radiance[:n], ref, free
 
 

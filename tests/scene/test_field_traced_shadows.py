@@ -7,11 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from helpers.bakes import baked_radiance
 from helpers.rig import ground_scene_head
 
 from shtools.reference import relative_rmse
 from shtools.reference.look import bounding_sphere, near_blockers, smoothness_ratio
-from shtools.scene.bake import bake_scene, prepare_scene
+from shtools.scene.bake import prepare_scene
 from shtools.scene.scene import load_scene
 
 SUBDIVISIONS = 40
@@ -55,12 +56,6 @@ def _scene(folder, settings="", y=0.55, size=6.0, role="both"):
     return load_scene(folder / "scene.toml")
 
 
-def _bake(scene, **kwargs):
-    prepared = prepare_scene(scene)
-    return np.stack([f.radiance for f in bake_scene(scene, prepared=prepared, processes=1,
-                                                    **kwargs)])
-
-
 def _ground_faces() -> np.ndarray:
     n = SUBDIVISIONS + 1
     idx = np.arange(n * n).reshape(n, n)
@@ -77,9 +72,9 @@ def test_field_blocker_traces_its_near_shadow_and_hands_over_to_its_field(torus_
 
     scene = _scene(torus_dir)
     prepared = prepare_scene(scene)
-    ref = _bake(scene, method="raytrace", raytrace_dirs=3200)
-    traced = _bake(scene)
-    field = _bake(_scene(torus_dir, "traced_shadows = false"))
+    ref = baked_radiance(scene, method="raytrace", raytrace_dirs=3200)
+    traced = baked_radiance(scene)
+    field = baked_radiance(_scene(torus_dir, "traced_shadows = false"))
     near_err, near_field, smooth, smooth_field = [], [], [], []
     for k, t in enumerate((0.0, 0.5)):
         state = pose_frame(prepared, t, trace=False)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from helpers.scenes import torus_and_ring
+from helpers.scenes import bounded_torus
 
 from shtools.reference.look import bounding_sphere, look_metrics
 from shtools.runtime import ShadowRuntime
@@ -40,8 +40,7 @@ rotate = [60.0, 0.0, 0.0]
 
 
 def _scene(folder):
-    torus_and_ring(folder, major=0.6, minor=0.25, sphere_radius=math.hypot(0.25, 0.16),
-                   sections=(32, 16), spheres=12, name="torus_spheres.h5")
+    bounded_torus(folder)
     (folder / "scene.toml").write_text(SCENE)
     return load_scene(folder / "scene.toml")
 

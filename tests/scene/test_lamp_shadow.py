@@ -8,7 +8,7 @@ import trimesh
 
 from shtools.fields.emitter import make_emitter
 from shtools.fields.radiance import emitter_sphere
-from shtools.reference.emitter import emitter_radiance, shaded_lamp
+from shtools.reference.emitter import emitter_radiance, shaded_lamp, shadowed_and_free
 from shtools.scene.lamp_shadow import Blockers, LampCaster, emission_visible_fraction
 
 RADIANCE = (10.0, 9.0, 8.0)
@@ -45,10 +45,8 @@ def test_fraction_matches_the_area_sampled_emitter_behind_a_ball(lamp):
     blockers = Blockers([(ball.vertices, ball.faces)])
     frac = emission_visible_fraction(caster, R, t, 1.0, blockers, pts, nrm, n_samples=1024)
     world = em.vertices @ R.T + t
-    shadowed = emitter_radiance(pts, nrm, world, em.faces, em.emissive, em.radiance,
-                                [(ball.vertices, ball.faces)], n_samples=8192)[:, 0]
-    free = emitter_radiance(pts, nrm, world, em.faces, em.emissive, em.radiance, [],
-                            n_samples=8192)[:, 0]
+    shadowed, free = (r[:, 0] for r in shadowed_and_free(
+        pts, nrm, em, world, [(ball.vertices, ball.faces)], n_samples=8192))
     lit = free > 0.05 * free.max()
     want = shadowed[lit] / free[lit]
     assert (want < 0.3).sum() >= 3 and (want > 0.999).sum() >= 30  # an umbra and open ground
@@ -93,10 +91,8 @@ def test_a_scaled_lamp_casts_the_scaled_shadow(lamp):
     frac = emission_visible_fraction(caster, R, t, s, Blockers([(ball.vertices, ball.faces)]),
                                      pts, nrm, n_samples=1024)
     world = (em.vertices * s) @ R.T + t
-    shadowed = emitter_radiance(pts, nrm, world, em.faces, em.emissive, em.radiance,
-                                [(ball.vertices, ball.faces)], n_samples=8192)[:, 0]
-    free = emitter_radiance(pts, nrm, world, em.faces, em.emissive, em.radiance, [],
-                            n_samples=8192)[:, 0]
+    shadowed, free = (r[:, 0] for r in shadowed_and_free(
+        pts, nrm, em, world, [(ball.vertices, ball.faces)], n_samples=8192))
     lit = free > 0.05 * free.max()
     err = frac[lit] - shadowed[lit] / free[lit]
     assert (shadowed[lit] / free[lit] < 0.5).sum() >= 5  # the ball's shadow is on the grid

@@ -4,32 +4,18 @@ objects over one row (the runtime skips each one's spheres there)."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
-import trimesh
+from helpers.bakes import baked_radiance
 from helpers.rig import ground_scene_head
+from helpers.scenes import bounded_torus
 
 from shtools.reference import relative_rmse
 from shtools.runtime import SelfVisibility, ShadowRuntime, ShadowSettings, SphereBlocker
-from shtools.scene.bake import bake_scene, prepare_scene
+from shtools.scene.bake import prepare_scene
 from shtools.scene.scene import load_scene
 
 GROUND = 25 * 25  # vertices of the ground grid below
-
-
-def _write_torus(folder):
-    trimesh.creation.torus(major_radius=0.6, minor_radius=0.25, major_sections=32,
-                           minor_sections=16).export(folder / "torus.obj")
-    # a ring of spheres bounding the tube (spacing 2 * 0.6 sin(pi/12) = 0.31)
-    from shtools.data_formats.spheres import write_spheres
-    from shtools.geometry.sphere_set import SphereSet
-
-    phi = np.linspace(0.0, 2 * math.pi, 12, endpoint=False)
-    centers = 0.6 * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
-    write_spheres(folder / "torus_spheres.h5",
-                  SphereSet(centers, np.full(12, math.hypot(0.25, 0.16)), 0.0, 1.0, "ring"))
 
 
 TORUS = """
@@ -58,21 +44,15 @@ def _scene(folder, settings="", second: str | None = None, second_x: float = 0.9
     return load_scene(folder / "scene.toml")
 
 
-def _bake(scene, **kwargs):
-    prepared = prepare_scene(scene)
-    return np.stack([f.radiance for f in bake_scene(scene, prepared=prepared, processes=1,
-                                                    **kwargs)])
-
-
 def test_rigid_object_traces_its_shadow_on_the_ground(tmp_path):
     """A moving torus over the ground: by default its real mesh is traced on the ground
     (at each frame's transform; the Embree scene is rebuilt only when the transform
     changes) instead of its 12 spheres; its own rows keep their transfer."""
-    _write_torus(tmp_path)
-    ref = _bake(_scene(tmp_path), method="raytrace", raytrace_dirs=3200)
-    traced = _bake(_scene(tmp_path))
-    spheres = _bake(_scene(tmp_path, "traced_shadows = false"))
-    fine = _bake(_scene(tmp_path, "traced_shadow_directions = 512"))
+    bounded_torus(tmp_path)
+    ref = baked_radiance(_scene(tmp_path), method="raytrace", raytrace_dirs=3200)
+    traced = baked_radiance(_scene(tmp_path))
+    spheres = baked_radiance(_scene(tmp_path, "traced_shadows = false"))
+    fine = baked_radiance(_scene(tmp_path, "traced_shadow_directions = 512"))
     err = relative_rmse(traced[:, :GROUND], ref[:, :GROUND])
     err_spheres = relative_rmse(spheres[:, :GROUND], ref[:, :GROUND])
     err_fine = relative_rmse(fine[:, :GROUND], ref[:, :GROUND])
@@ -99,15 +79,15 @@ def test_two_traced_rigid_objects_both_skip_their_spheres_on_the_ground(tmp_path
     skipped on the ground (a row skips several blockers)."""
     from shtools.scene.pose import pose_frame
 
-    _write_torus(tmp_path)
+    bounded_torus(tmp_path)
     scene = _scene(tmp_path, second=role, second_x=x)
     state = pose_frame(prepare_scene(scene), 0.5)
     on_ground = [sv.skipped for sv in state.self_visibility
                  if np.arange(len(state.vertices))[sv.rows][0] < GROUND]
     assert on_ground == skipped
-    ref = _bake(scene, method="raytrace", raytrace_dirs=3200)
-    traced = _bake(scene)
-    spheres = _bake(_scene(tmp_path, "traced_shadows = false", second=role, second_x=x))
+    ref = baked_radiance(scene, method="raytrace", raytrace_dirs=3200)
+    traced = baked_radiance(scene)
+    spheres = baked_radiance(_scene(tmp_path, "traced_shadows = false", second=role, second_x=x))
     err = relative_rmse(traced[:, :GROUND], ref[:, :GROUND])
     err_spheres = relative_rmse(spheres[:, :GROUND], ref[:, :GROUND])
     # measured 1.1 % (x = 0.9, one joint trace) against 6.4 % by the spheres; apart
