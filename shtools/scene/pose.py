@@ -60,6 +60,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         posed_local_log,
         rotation_of,
         traced_self_visibility,
+        world_transfer,
     )
 
     st = prepared.scene.settings
@@ -95,7 +96,13 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         world_n = transform_normals(m, local_n) if o.spec.receives else None
         own = slice(n_rows, n_rows + len(world_v))
         rotation = rotation_of(m) if o.self_log is not None else None
-        if rotation is not None:
+        if rotation is not None and o.self_transfer is not None:
+            # exact self-shadowing, the transfer itself multiplied in after the exp
+            # (its log's round trip would not give it back); its own spheres skipped
+            selfs.append(SelfVisibility(None, own, blocker=len(blockers),
+                                        visibility=world_transfer(o.self_transfer, rotation,
+                                                                  st.order)))
+        elif rotation is not None:
             # exact self-shadowing: its own spheres (appended next) are skipped on its rows
             selfs.append(SelfVisibility(o.self_log, own, rotation=rotation,
                                         blocker=len(blockers)))

@@ -47,6 +47,11 @@ class PreparedObject:
     self_log : ndarray, shape (V, n_acc^2) or None
         Self-visibility log in the object's frame (exact self-shadowing,
         :mod:`shtools.scene.transfer`); None when the object uses its spheres.
+    self_transfer : ndarray, shape (V, m*m) or None
+        The projected self-visibility ``self_log`` is the log of (a ``transfer``
+        asset's or traced), in the object's frame: multiplied into its rows after
+        the exp (:func:`shtools.scene.pose.pose_frame`) instead of adding
+        ``self_log`` before it, whose eigen-log and exp do not give it back.
     local_log : ndarray, shape (V, n_acc^2) or None
         Rest-pose local visibility log of a skinned object (``local_visibility``).
     traced : bool
@@ -66,6 +71,7 @@ class PreparedObject:
     bone_vectors: np.ndarray | None = None
     blocker_data: Any = None
     self_log: np.ndarray | None = None
+    self_transfer: np.ndarray | None = None
     local_log: np.ndarray | None = None
     traced: bool = False
 
@@ -291,7 +297,8 @@ def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, 
     acc = st.resolved_acc_order()
     for prep in objects:
         if uses_self_visibility(prep, st.self_visibility):
-            prep.self_log, path = object_self_log(prep, acc, log=log, cache=cache)
+            prep.self_log, prep.self_transfer, path = object_self_log(prep, acc, log=log,
+                                                                      cache=cache)
             if path is not None:
                 inputs[f"{prep.spec.name}.transfer"] = path
         elif uses_traced_visibility(prep, st.self_visibility):

@@ -57,12 +57,13 @@ def uses_self_visibility(obj, default: bool = True) -> bool:
 #: Algorithm version of the cached self-visibility log (:mod:`shtools.cache`): raise it
 #: when :func:`object_self_log`'s traced result changes, even by rounding (a bake is the
 #: same bytes with or without the cache).
-SELF_LOG_VERSION = 3
+SELF_LOG_VERSION = 4
 
 
 def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None,
-                    cache=None) -> tuple[np.ndarray, Path | None]:
-    """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32.
+                    cache=None) -> tuple[np.ndarray, np.ndarray | None, Path | None]:
+    """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32,
+    and the ray-traced visibility it is the log of, when there is one.
 
     From the first source that applies: the ``transfer`` asset the scene names
     (``self_visibility = "x.transfer.h5"``); the O_v stored in the object's
@@ -78,43 +79,56 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
     log : callable, optional
         Progress messages.
     cache : shtools.cache.SetupCache, optional
-        Where the traced log (and a convex mesh's zero) is read from when its
-        mesh, normals and order were traced before, and stored otherwise.
+        Where the traced log and visibility (and a convex mesh's zero) are read from
+        when its mesh, normals and order were traced before, and stored otherwise.
 
     Returns
     -------
     log : ndarray, shape (V, acc_order^2) float32
+    visibility : ndarray, shape (V, m*m) float32, or None
+        The projected visibility of a transfer asset or of the tracing (the
+        runtime multiplies it in exactly: the eigen-log's exp does not give it
+        back where the mesh shadows itself deeply); None for a field's O_v and a
+        convex mesh.
     path : Path or None
         The ``transfer`` asset read (for the bake's inputs), None otherwise.
     """
     source = getattr(obj.spec, "self_visibility", None)
     if isinstance(source, str | Path):
-        return _from_asset(obj, Path(source), acc_order), Path(source)
+        return *_from_asset(obj, Path(source), acc_order), Path(source)
     stored = getattr(obj.blocker_data, "self_log", None)
     if stored is not None and getattr(obj.blocker_data, "self_order", 0) >= acc_order:
         # the O_v of the object's field asset (already an input); an O_v below the
         # accumulation order (fields sampled before it was stored there) would cost
         # accuracy (dragon: 3.5 % instead of 2.4 %), so such an object is traced
-        return stored, None
+        return stored, None, None
     if cache is None:
-        return _traced_self_log(obj, acc_order, log), None
+        return *_traced_self_log(obj, acc_order, log), None
     from shtools.geometry.transfer import TRANSFER_DIRECTIONS
     from shtools.geometry.visibility import LOG_FLOOR
 
     parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
              "faces": np.asarray(obj.faces), "order": int(acc_order),
              "estimator": "hemisphere", "n_dirs": TRANSFER_DIRECTIONS, "floor": LOG_FLOOR}
-    got = cache.fetch("self_log", SELF_LOG_VERSION, parts,
-                      lambda: {"log": _traced_self_log(obj, acc_order, log)})
-    return got["log"], None
+
+    def compute():
+        f, g = _traced_self_log(obj, acc_order, log)
+        # a convex mesh's "no visibility" is stored as an empty array
+        return {"log": f, "visibility": np.zeros((0, f.shape[1]), np.float32) if g is None
+                else g}
+
+    got = cache.fetch("self_log", SELF_LOG_VERSION, parts, compute)
+    g = got["visibility"]
+    return got["log"], (g if len(g) else None), None
 
 
-def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
-    """The self-visibility log ``(V, acc_order^2)`` float32 ray traced now (zero if convex)."""
+def _traced_self_log(obj, acc_order: int, log) -> tuple[np.ndarray, np.ndarray | None]:
+    """The self-visibility log and visibility ``(V, acc_order^2)`` float32 ray traced now
+    (a zero log and no visibility if convex)."""
     import trimesh
 
     if is_convex(obj.vertices, obj.faces):
-        return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
+        return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32), None
     from shtools.geometry.transfer import hemisphere_transfer
 
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
@@ -123,8 +137,8 @@ def _traced_self_log(obj, acc_order: int, log) -> np.ndarray:
             "the set-up cache keeps it for the next bake)")
     # rays over each vertex's own hemisphere only: fewer than the product rule of
     # `shtools transfer` casts, at no larger error (geometry.transfer.TRANSFER_DIRECTIONS)
-    _, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
-    return f.astype(np.float32)
+    g, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
+    return f.astype(np.float32), g.astype(np.float32)
 
 
 #: A closed mesh whose volume is within this fraction of its convex hull's is convex.
@@ -147,7 +161,7 @@ def is_convex(vertices, faces) -> bool:
     return hull > 0 and abs(hull - mesh.volume) <= CONVEX_RTOL * hull
 
 
-def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
+def _from_asset(obj, path: Path, acc_order: int) -> tuple[np.ndarray, np.ndarray]:
     from shtools.data_formats.transfer import read_transfer
     from shtools.geometry.visibility import self_visibility_log_at
 
@@ -166,9 +180,9 @@ def _from_asset(obj, path: Path, acc_order: int) -> np.ndarray:
                          f"{acc_order}; rebuild it with 'shtools transfer --order {acc_order}'",
                          path)
     if t.order == acc_order:
-        return t.log_visibility
+        return t.log_visibility, t.visibility
     return self_visibility_log_at(t.visibility, acc_order,
-                                  floor=float(t.parameters.get("floor", 0.0)))
+                                  floor=float(t.parameters.get("floor", 0.0))), t.visibility
 
 
 #: Ray length of the local visibility of skinned objects, relative to the rest mesh's
@@ -302,6 +316,19 @@ def posed_local_log(local_log: np.ndarray, blend: np.ndarray, world: np.ndarray)
     out = np.zeros((local_log.shape[0], size), dtype=np.float32)
     out[:, :order * order] = values @ (w[:, None] * basis(dirs, order)).astype(np.float32)
     return out
+
+
+def world_transfer(visibility: np.ndarray, rotation: np.ndarray, order: int) -> np.ndarray:
+    """An object's self-visibility ``(V, m*m)`` (own frame) turned to world, ``(V, order^2)``.
+
+    Truncated to the shading ``order`` first: the runtime multiplies it in at that
+    order (:class:`shtools.runtime.SelfVisibility`), and rotation keeps each band.
+    """
+    from shtools.sh import rotation_matrix
+
+    m = min(math.isqrt(visibility.shape[1]), order)
+    d = rotation_matrix(rotation, m).astype(np.float32)
+    return np.ascontiguousarray(visibility[:, :m * m] @ d.T, dtype=np.float32)
 
 
 def rotation_of(matrix: np.ndarray) -> np.ndarray | None:
