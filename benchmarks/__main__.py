@@ -90,7 +90,9 @@ def _commit() -> str:
                               timeout=30).stdout.strip()
     try:
         head = git("rev-parse", "--short", "HEAD")
-        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+        # the results file itself is this run's output, not a change to what is measured
+        dirty = any(not line.endswith(RESULTS.name) for line in
+                    git("status", "--porcelain", "--untracked-files=no").splitlines())
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return f"{head}{' (uncommitted changes)' if dirty else ''}" if head else "unknown"
