@@ -267,11 +267,9 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
     """True when ``a`` and ``b`` name one file (hard links and symlinks included), so
     that writing one would destroy the other."""
     a, b = Path(a), Path(b)
-    try:
+    with contextlib.suppress(OSError):  # unreadable: compare the resolved names instead
         if a.exists() and b.exists():
             return os.path.samefile(a, b)
-    except OSError:
-        pass
     return os.path.realpath(a) == os.path.realpath(b)
 
 

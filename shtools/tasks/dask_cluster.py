@@ -9,6 +9,7 @@ are imported only on a worker, never here.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from pathlib import Path
@@ -62,15 +63,13 @@ def _undo_dask_malloc_trim() -> None:
     _MALLOC_TUNED = True
     if "MALLOC_TRIM_THRESHOLD_" not in os.environ:
         return
-    try:
-        import ctypes
+    import ctypes
 
+    with contextlib.suppress(OSError, AttributeError):  # not glibc: its defaults stay
         libc = ctypes.CDLL(None)
         M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's <malloc.h>
         libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
         libc.mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD)
-    except (OSError, AttributeError):  # not glibc
-        pass
 
 
 def _setup_dask(setup, shared) -> None:

@@ -177,12 +177,10 @@ def _worker_init(parent_pid: int, shared, setup=None, blas: int | None = None) -
     use_blas_threads(blas)
     _SHARED = shared
     if setup is not None:
-        try:
+        # An exception here would only break the pool ("a worker died"); the first
+        # task repeats the same cached set-up and raises the real error.
+        with contextlib.suppress(Exception):
             setup(_SHARED)
-        except Exception:
-            # An exception here would only break the pool ("a worker died"); the
-            # first task repeats the same cached set-up and raises the real error.
-            pass
 
 
 def die_with_parent(parent_pid: int) -> None:
@@ -210,8 +208,7 @@ def die_with_parent(parent_pid: int) -> None:
         if pidfd is not None:
             poller = select.poll()
             poller.register(pidfd, select.POLLIN)  # readable once the process has ended
-            while not poller.poll():
-                pass
+            poller.poll()  # no timeout: returns once the process has ended
         else:
             while _exists(parent_pid):
                 time.sleep(0.5)

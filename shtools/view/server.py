@@ -46,7 +46,7 @@ class _Handler(BaseHTTPRequestHandler):
     server_version = "shtools-view"
 
     def log_message(self, format, *args):
-        pass  # a request log would drown the URL line; errors answer the page
+        """No request log: it would drown the URL line; errors answer the page."""
 
     def do_GET(self):
         url = urlparse(self.path)
@@ -73,7 +73,7 @@ class _Handler(BaseHTTPRequestHandler):
         except (InputError, ValueError) as exc:
             self._send(str(exc).encode(), "text/plain", HTTPStatus.BAD_REQUEST)
         except (BrokenPipeError, ConnectionResetError):
-            pass  # the page went away mid-answer (a reload)
+            return  # the page went away mid-answer (a reload): nobody to answer
 
     def _send(self, body: bytes, content_type="application/octet-stream",
               status=HTTPStatus.OK):
@@ -142,9 +142,8 @@ def serve(view: BakeView, port: int = 0, *, on_ready=None) -> None:
         try:
             if on_ready is not None:
                 on_ready(server.url)
-            with contextlib.suppress(KeyboardInterrupt):
-                while not stop.wait(0.5):
-                    pass
+            with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C; SIGTERM sets stop
+                stop.wait()
         finally:
             server.shutdown()
             thread.join()
