@@ -243,6 +243,26 @@ def stack_shells(asset, n_shells: int, name: str) -> np.ndarray:
                      for c in range(n_shells)]).astype(np.float32)
 
 
+def read_shell_asset(path: str | os.PathLike, kind: str):
+    """Read and validate a shell-field asset of ``kind`` (``field``, ``srf``, ``haar``).
+
+    Returns
+    -------
+    asset
+        The read asset (:func:`shtools.data_formats._base.read_asset`).
+    shells : dict
+        Its :func:`shell_geometry`.
+    n_shells : int
+        C, the number of shells.
+    stack : callable
+        ``stack(name) -> (C, k) float32``, :func:`stack_shells` of this asset.
+    """
+    asset = read_asset(path, kind)
+    shells = shell_geometry(asset, path)
+    n_shells = shells["resolution"].shape[0]
+    return asset, shells, n_shells, functools.partial(stack_shells, asset, n_shells)
+
+
 def read_field(path: str | os.PathLike) -> ShadowField:
     """Read and validate a ``field`` asset.
 
@@ -250,10 +270,7 @@ def read_field(path: str | os.PathLike) -> ShadowField:
     -------
     ShadowField
     """
-    asset = read_asset(path, "field")
-    shells = shell_geometry(asset, path)
-    C = shells["resolution"].shape[0]
-    stack = functools.partial(stack_shells, asset, C)
+    asset, shells, C, stack = read_shell_asset(path, "field")
     return ShadowField(
         **shells,
         ocv=[asset[f"shells/{c}/ocv"] for c in range(C)],

@@ -25,11 +25,10 @@ from shtools.data_formats._base import (
     FORMAT_PREFIX,
     DatasetSpec,
     Schema,
-    read_asset,
     register,
     write_asset,
 )
-from shtools.data_formats.field import LAYOUT_ATTRS, check_shells, shell_geometry, stack_shells
+from shtools.data_formats.field import LAYOUT_ATTRS, check_shells, read_shell_asset
 from shtools.errors import AssetError
 
 #: Largest map side: the kept coefficients' indices into the M x M map are uint16.
@@ -153,15 +152,13 @@ def read_haar_asset(path: str | os.PathLike) -> dict:
         ``offset (C, 2)``, ``step (C, 2)``, ``map_size``) and ``reduction_error``
         (or None), ``attrs``.
     """
-    asset = read_asset(path, "haar")
-    shells = shell_geometry(asset, path)
-    C = shells["resolution"].shape[0]
+    asset, shells, C, stack = read_shell_asset(path, "haar")
     return {
         **shells,
         "index": [np.asarray(asset[f"shells/{c}/index"]) for c in range(C)],
         "q": [np.asarray(asset[f"shells/{c}/value"]) for c in range(C)],
-        "offset": stack_shells(asset, C, "offset"),
-        "step": stack_shells(asset, C, "step"),
+        "offset": stack("offset"),
+        "step": stack("step"),
         "map_size": int(asset.attrs["map_size"]),
         "reduction_error": asset.data.get("reduction_error"),
         "attrs": dict(asset.attrs),

@@ -21,19 +21,17 @@ Version-1 files (no lamp mesh) still read; only the product-space shadow
 
 from __future__ import annotations
 
-import functools
 import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from shtools.data_formats._base import DatasetSpec, Schema, read_asset, register, write_asset
+from shtools.data_formats._base import DatasetSpec, Schema, register, write_asset
 from shtools.data_formats.field import (
     LAYOUT_ATTRS,
     READ_ATTRS,
     check_shells,
-    shell_geometry,
-    stack_shells,
+    read_shell_asset,
 )
 from shtools.errors import AssetError
 
@@ -223,10 +221,7 @@ def read_radiance_field(path: str | os.PathLike) -> RadianceField:
     -------
     RadianceField
     """
-    asset = read_asset(path, "srf")
-    shells = shell_geometry(asset, path)
-    C = shells["resolution"].shape[0]
-    stack = functools.partial(stack_shells, asset, C)
+    asset, shells, C, stack = read_shell_asset(path, "srf")
     skip = READ_ATTRS | {"emitter_radius", "emitter_area"}
     rcv = []
     for c in range(C):
