@@ -255,7 +255,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     path = bake.path
 
     def linear_part(rows):
-        return shaders.linear(_state(bake, range(1), rows, lights[0]), bake.sh_order ** 2)
+        return shaders.linear(_state(bake, range(1), rows, lights[0]))
 
     def frames_of(frames, K):
         """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
@@ -279,7 +279,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             flat[neg] = desaturate_negative(flat[neg])
         return out.astype(np.float32)
 
-    with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
+    with ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
         K = None
         if fixed.size:  # parts of at most BATCH_ROWS rows: bounded shading scratch
             parts = np.array_split(fixed, max(threads, -(-fixed.size // BATCH_ROWS)))
@@ -328,65 +328,62 @@ def frame_lights(bake, scene=None) -> list:
 
 
 class _Shaders:
-    """One runtime per thread, without de-ringing (applied to each whole frame after) and
-    with the accumulation order of the shading (nothing is accumulated)."""
+    """The baker's shading of stored visibility, without de-ringing (applied to each
+    whole frame after): :func:`~shtools.runtime.shading.shade` with the lit transfer of
+    the environment, the call :meth:`~shtools.runtime.ShadowRuntime.shade` makes, and
+    its linear map :func:`~shtools.runtime.shading.shading_matrix`.  Thread-safe: the
+    mid-range sphere, which caches the last vertices' radiance SH, is one per thread."""
 
     def __init__(self, env_sh, settings, midrange=None):
         import threading
 
-        self.env_sh, self.midrange = env_sh, midrange
-        # no blockers are accumulated here, so the runtime's log tables (built when
-        # it starts) need only the shading order: the smallest and quickest to build
-        self.settings = replace(settings, deringing="none", acc_order=settings.order)
+        from shtools.runtime.shading import environment_matrices
+
+        self.env_sh, self.midrange, self.order = env_sh, midrange, settings.order
+        self.window = {"window_kind": settings.resolved_window(),
+                       "window_h": settings.window_h}
+        # the environment's product matrices once (the runtime keeps them while the
+        # light does not change); a finite sphere's light is per vertex
+        self.mats = (environment_matrices(env_sh, self.order, **self.window)
+                     if env_sh is not None and midrange is None else None)
         self.local = threading.local()
-        self.runtimes: list = []
-        self.lock = threading.Lock()
 
-    def _runtime(self):
-        runtime = getattr(self.local, "runtime", None)
-        if runtime is None:
-            from shtools.runtime import ShadowRuntime
+    def _receivers(self, state):
+        """Checked float64 positions and unit normals, and the environment at them."""
+        from shtools.runtime.blockers import check_receivers
 
-            with self.lock:  # one at a time: the second reuses the first's cached log tables
-                runtime = self.local.runtime = ShadowRuntime(self.settings)
-                self.runtimes.append(runtime)
-            # a sphere of its own per thread: it caches the last vertices' radiance SH
-            self.local.sphere = (None if self.midrange is None
-                                 else replace(self.midrange, _cache={}))
-        return runtime
+        pts, nrm = check_receivers(state.vertices, state.normals)
+        if self.midrange is None:
+            return pts, nrm, self.env_sh
+        sphere = getattr(self.local, "sphere", None)
+        if sphere is None:
+            sphere = self.local.sphere = replace(self.midrange, _cache={})
+        return pts, nrm, sphere.radiance_sh(pts)
 
     def shade(self, state, visibility) -> np.ndarray:
         """Radiance ``(R, 3)`` of ``state``'s rows (before de-ringing).
 
         What :func:`~shtools.scene.shadows.shade_frame` computes for a frame
-        without blockers whose lights are all ``shexp``: one runtime
-        :meth:`~shtools.runtime.ShadowRuntime.shade` of the environment (per
+        without blockers whose lights are all ``shexp``: the environment (per
         vertex on a finite sphere) and the lights through the visibility.
         """
-        runtime = self._runtime()
-        env = (self.env_sh if self.local.sphere is None
-               else self.local.sphere.radiance_sh(state.vertices))
-        return runtime.shade(visibility, state.vertices, state.normals, env,
-                             sphere_lights=state.lights)
+        from shtools.runtime.shading import cosine_transfer, lit_transfer, shade
 
-    def linear(self, state, size: int) -> np.ndarray:
-        """``K (R, 3, n*n)`` float32: the radiance of each unit visibility vector, before
-        de-ringing."""
-        rows = len(state.vertices)
-        K = np.empty((rows, 3, size), np.float32)
-        unit = np.zeros((rows, size), np.float32)
-        for j in range(size):
-            unit[:, j] = 1.0
-            K[:, :, j] = self.shade(state, unit)
-            unit[:, j] = 0.0
-        return K
+        pts, nrm, env = self._receivers(state)
+        transfer = cosine_transfer(nrm, self.order)
+        return shade(visibility, pts, nrm, env, tuple(state.lights), order=self.order,
+                     transfer=transfer,
+                     env_transfer=None if self.mats is None else lit_transfer(transfer,
+                                                                              self.mats),
+                     **self.window)
 
-    def __enter__(self):
-        return self
+    def linear(self, state) -> np.ndarray:
+        """``K (R, 3, n*n)`` float32: :meth:`shade` of ``state``'s rows is ``K g``."""
+        from shtools.runtime.shading import shading_matrix
 
-    def __exit__(self, *exc):
-        for runtime in self.runtimes:
-            runtime.close()
+        pts, nrm, env = self._receivers(state)
+        return shading_matrix(pts, nrm, env, tuple(state.lights), order=self.order,
+                              **self.window)
 
 
 def _state(bake, frames: range, rows, lights) -> SimpleNamespace:
