@@ -160,37 +160,6 @@ def relight_midrange(bake, env_sh: np.ndarray):
                                np.asarray(env_sh, dtype=float), bake.sh_order, bake.path)
 
 
-def scene_lights(scene) -> object:
-    """The parsed scene whose ``[[lights]]`` a relight adds (each must use ``shexp``).
-
-    Parameters
-    ----------
-    scene : path-like or shtools.scene.scene.Scene
-
-    Raises
-    ------
-    InputError
-        A light shadowed another way than ``shexp``.
-    """
-    from shtools.scene.scene import Scene, load_scene
-    from shtools.scene.shadows import ShexpLight
-
-    scene = scene if isinstance(scene, Scene) else load_scene(scene)
-    for spec in scene.lights:
-        if spec.srf is not None:
-            raise InputError(f"light '{spec.name}' is a field light (field = "
-                             f"\"{spec.srf.name}\"); relighting adds spherical lights "
-                             "(shadows = \"shexp\") only: bake the scene for it", scene.path)
-        if spec.shadows != ShexpLight.name:
-            raise InputError(f"light '{spec.name}' uses shadows = \"{spec.shadows}\", which "
-                             "needs the posed blocker meshes a bake does not keep; relighting "
-                             "shades spherical lights through the stored visibility (shadows = "
-                             "\"shexp\") only", scene.path)
-    if not scene.lights:
-        raise InputError("has no [[lights]] to add; leave the scene out", scene.path)
-    return scene
-
-
 def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None = None,
                    midrange=None):
     """Radiance of every frame of ``bake`` under ``env_sh`` (and ``scene``'s lights).
@@ -217,9 +186,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
         or the open datasets of :func:`~shtools.data_formats.bake_stream.open_bake`.
     env_sh : ndarray, shape (n*n, 3) or None
         Distant environment (:func:`relight_environment`).
-    scene : shtools.scene.scene.Scene, optional
-        Its spherical lights are posed at each frame's time and shaded through
-        the stored visibility (:func:`scene_lights`).
+    scene : shtools.scene.scene.Scene or shtools.scene.light_record.PosedLights, optional
+        Its spherical lights, posed at each frame's time, are shaded through the
+        stored visibility (:func:`~shtools.scene.light_record.frame_lights`).
     settings : shtools.runtime.ShadowSettings, optional
         Default :func:`relight_settings` of the bake.
     threads : int, optional
@@ -238,6 +207,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
 
     from shtools.data_formats.bake_stream import check_finite
     from shtools.runtime.shading import desaturate_negative
+    from shtools.scene.light_record import frame_lights
     from shtools.tasks import default_workers
 
     check_relightable(bake)
@@ -316,15 +286,6 @@ def relight_bytes(n_frames: int, n_vertices: int, size: int, threads: int) -> in
     per_row = 4 * size * 6 + 8 * 3 * 3 + 8 * 6
     K = n_vertices * 3 * size * 4  # float32
     return int(K + GEOMETRY_BYTES + 2 * threads * batch * per_row + 2 * batch * (4 * 3 + 4 * 6))
-
-
-def frame_lights(bake, scene=None) -> list:
-    """The posed spherical lights of each frame: ``scene``'s at the bake's times."""
-    if scene is None:
-        return [[] for _ in range(bake.n_frames)]
-    from shtools.scene.pose import pose_lights
-
-    return [pose_lights(scene, float(t)) for t in bake.times]
 
 
 class _Shaders:
@@ -499,8 +460,10 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         The relit bake asset.
     rotate : float
         Turn the light this many degrees about +Y (SH rotation).
-    scene : path-like or Scene, optional
-        Add this scene's ``[[lights]]`` (``shexp`` shadows from the stored visibility).
+    scene : path-like, Scene or shtools.scene.light_record.PosedLights, optional
+        Add this scene's ``[[lights]]`` (``shexp`` shadows from the stored visibility):
+        read from the bake when it is the scene file the bake recorded them from,
+        else parsed (:func:`~shtools.scene.light_record.scene_lights`).
     compression : str or None
         h5py filter of the output's radiance: None (the default) stores it
         plain, so writing costs no more than the shading; ``"gzip"`` as a bake
@@ -531,10 +494,11 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     from shtools.data_formats.bake import BakeWriter
     from shtools.data_formats.bake_stream import open_bake
     from shtools.progress import silent
+    from shtools.scene.light_record import PosedLights, pose_table, posed
 
     start = time.perf_counter()
-    for src in (bake, light) + (() if scene is None or not isinstance(scene, str | os.PathLike)
-                                 else (scene,)):
+    named = scene.path if isinstance(scene, PosedLights) else scene
+    for src in (bake, light) + (() if not isinstance(named, str | os.PathLike) else (named,)):
         if same_file(output, src):
             raise InputError(f"is also an input ({src}); choose another output", output)
     with open_bake(bake) as b:
@@ -545,7 +509,7 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                                   b.parameters.get("window", settings.window), rotate, inputs)
         sphere = relight_midrange(b, env)
         if scene is not None:
-            scene = scene_lights(scene)
+            scene = posed(b, scene)
             inputs["scene"] = scene.path
         parameters = dict(b.parameters)
         parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
@@ -564,7 +528,8 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                 times=b.times,
                 frame_index=b.frame_index, albedo=b.albedo, object_offsets=b.object_offsets,
                 object_names=b.object_names, parameters=parameters, inputs=inputs,
-                fps=b.attrs.get("fps"), compression=compression, copy=copy)
+                fps=b.attrs.get("fps"), compression=compression, copy=copy,
+                light_poses=None if scene is None else pose_table(scene.frames))
             frames = relight_frames(b, env, scene, settings, threads, midrange=sphere)
             first = next(frames)
             writer = made.result()
