@@ -6,18 +6,20 @@ cosine, the light and ``g`` (SHEXP Sec. 7; Sloan et al. 2002, "Precomputed
 Radiance Transfer", Sec. 4 — keeping visibility in SH is what makes a new
 light cheap), so a new environment, optionally turned about +Y by an SH
 rotation, needs no posing, no blockers and no exponential.  Frames are shaded
-by the runtime's :meth:`~shtools.runtime.ShadowRuntime.shade`, the call the
-baker's :func:`~shtools.scene.shadows.shade_frame` makes for the environment
-and the ``shexp`` lights (for vertices that never move, once per unit
-visibility vector: shading is linear in ``g``; :func:`relight_frames`), so the
-result is the radiance a fresh bake of the same scene under that light gives,
-to float32 rounding.  Without ``[[lights]]`` nothing here reads the scene, so
-the scene parser is not imported.
+by :func:`~shtools.runtime.shading.shade`, the call the runtime's
+:meth:`~shtools.runtime.ShadowRuntime.shade` makes for the baker's
+:func:`~shtools.scene.shadows.shade_frame` (the environment and the ``shexp``
+lights; for vertices that never move, through its linear map in ``g``,
+:func:`~shtools.runtime.shading.shading_matrix`; :func:`relight_frames`), so
+the result is the radiance a fresh bake of the same scene under that light
+gives, to float32 rounding.
 
 Spherical lights (a scene's ``[[lights]]``, posed at each frame's time) are
 shaded through the same stored visibility, the baker's ``shexp`` way; the
 other ways (SSOC, ray tracing) need the posed blocker meshes, which a bake
-does not keep.  A bake lit from a finite environment sphere (mid-range
+does not keep.  A bake records its lights, so the lights of the scene it was
+baked from are read from it, and the scene parser is imported only for
+another scene or an older bake (:mod:`shtools.scene.light_record`).  A bake lit from a finite environment sphere (mid-range
 lighting, Wang et al. 2005, Sec. 3.2) records it, and the new light is put on
 that sphere (:func:`relight_midrange`).
 
@@ -168,10 +170,10 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     position, normal and lights do not change over the bake has radiance
     ``K g`` with a fixed ``K (3, n*n)`` -- for the environment ``K = M(L) H``,
     the light's product matrix applied to the cosine lobe (Sloan et al. 2002,
-    Sec. 4), plus the spherical lights' lobes.  ``K`` is made once by the
-    runtime shading the baker uses (without de-ringing) of the unit
-    visibility vectors, so these vertices cost one float32 product per batch
-    of frames; the others are shaded as the baker shades them (a batch of
+    Sec. 4), plus the spherical lights' lobes.  ``K`` is made once, the linear
+    map of the runtime shading the baker uses
+    (:func:`~shtools.runtime.shading.shading_matrix`), so these vertices cost
+    one float32 product per batch of frames; the others are shaded as the baker shades them (a batch of
     frames in one call while the lights do not change).  Frames are read
     from the bake a batch at a time: a batch holds at most
     :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads`` batches
@@ -220,6 +222,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     batch = max(1, BATCH_ROWS // bake.n_vertices) if same else 1
     still, held = _fixed_rows(bake, batch) if same else (np.zeros(bake.n_vertices, bool), None)
     fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
+    # the still rows as runs (whole still objects): slices, not gathers, when they are few
+    runs = _runs(still)
+    runs = runs if len(runs) <= MAX_RUNS else [(fixed, 0, fixed.size)]
     batches = [range(a, min(a + batch, bake.n_frames)) for a in range(0, bake.n_frames, batch)]
     shaders = _Shaders(env_sh, settings, midrange)
     path = bake.path
@@ -240,7 +245,10 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
         if K is not None:  # every frame of the batch in one float32 product, as the
             # baker dots its float32 lit transfer with the visibility
-            out[:, fixed] = np.einsum("vcj,tvj->tvc", K, vis[:, fixed], optimize=True)
+            # (F, T, n*n) @ (F, n*n, 3): one small product per vertex, batched
+            for rows, k, z in runs:
+                out[:, rows] = np.matmul(vis[:, rows].transpose(1, 0, 2),
+                                         K[k:z]).transpose(1, 0, 2)
         if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
             # colours without a negative channel are left as they are by it
             flat = out.reshape(-1, 3)
@@ -254,6 +262,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
         if fixed.size:  # parts of at most BATCH_ROWS rows: bounded shading scratch
             parts = np.array_split(fixed, max(threads, -(-fixed.size // BATCH_ROWS)))
             K = np.concatenate(list(pool.map(linear_part, [p for p in parts if p.size])))
+            K = np.ascontiguousarray(K.transpose(0, 2, 1))  # (F, n*n, 3) for the product
         window = 2 * threads  # batches in flight: bounded memory, every thread busy
         pending = [pool.submit(frames_of, frames, K) for frames in batches[:window]]
         for i in range(len(batches)):
@@ -262,6 +271,20 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
                 pending.append(pool.submit(frames_of, batches[i + window], K))
             yield from done
 
+
+def _runs(mask: np.ndarray) -> list[tuple[slice, int, int]]:
+    """The runs of True in ``mask (V,)``: ``(rows, k, z)``, the rows as a slice and their
+    positions ``k:z`` among the True rows."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    runs, k = [], 0
+    for a, z in zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True):
+        runs.append((slice(a, z), k, k + z - a))
+        k += z - a
+    return runs
+
+
+#: Most runs of still rows taken as slices; more are gathered by index at once.
+MAX_RUNS = 64
 
 #: Most receiver rows (vertices x frames) of one batch of frames under unchanging
 #: lights; its visibility, shading scratch and radiance grow with it.
@@ -394,23 +417,28 @@ def _fixed_rows(bake, batch: int):
         return np.ones(bake.n_vertices, bool), None
     T, V = bake.n_frames, bake.n_vertices
     names = ("vertices", "normals")
-    held = ({name: np.empty((T, V, 3), np.float32) for name in names}
-            if T * V * 3 * 4 * len(names) <= GEOMETRY_BYTES else None)
-    first = {name: np.asarray(getattr(bake, name)[0]) for name in names}
     still = np.ones(V, bool)
-    for a in range(0, T, batch):
-        for name, ref in first.items():
-            values = check_finite(np.asarray(getattr(bake, name)[a:a + batch]), name,
-                                  bake.path)
-            # any() over the frame axis first: a contiguous reduction, far faster
-            # than all() over the frame and coordinate axes together
-            still &= ~(values != ref).any(axis=0).any(axis=1)
-            if held is not None:
-                held[name][a:a + batch] = values
-    if held is not None:
-        moving = np.flatnonzero(~still)
-        held = SimpleNamespace(**{name: values[:, moving] for name, values in held.items()})
-    return still, held
+
+    def compare(values, ref):
+        nonlocal still
+        # any() over the frame axis first: a contiguous reduction, far faster than
+        # all() over the frame and coordinate axes together
+        still &= ~(values != ref).any(axis=0).any(axis=1)
+
+    if T * V * 3 * 4 * len(names) > GEOMETRY_BYTES:  # a batch at a time, read again later
+        first = {name: np.asarray(getattr(bake, name)[0]) for name in names}
+        for a in range(0, T, batch):
+            for name, ref in first.items():
+                compare(check_finite(np.asarray(getattr(bake, name)[a:a + batch]), name,
+                                     bake.path), ref)
+        return still, None
+    # each dataset in one read (no copy into a buffer), the moving rows kept
+    held = {name: check_finite(np.asarray(getattr(bake, name)[()]), name, bake.path)
+            for name in names}
+    for values in held.values():
+        compare(values, values[0])
+    moving = np.flatnonzero(~still)
+    return still, SimpleNamespace(**{name: values[:, moving] for name, values in held.items()})
 
 
 #: Most bytes of per-frame geometry relighting keeps in memory to read it once.
