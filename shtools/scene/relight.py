@@ -19,9 +19,10 @@ shaded through the same stored visibility, the baker's ``shexp`` way; the
 other ways (SSOC, ray tracing) need the posed blocker meshes, which a bake
 does not keep.  A bake records its lights, so the lights of the scene it was
 baked from are read from it, and the scene parser is imported only for
-another scene or an older bake (:mod:`shtools.scene.light_record`).  A bake lit from a finite environment sphere (mid-range
-lighting, Wang et al. 2005, Sec. 3.2) records it, and the new light is put on
-that sphere (:func:`relight_midrange`).
+another scene or an older bake (:mod:`shtools.scene.light_record`).  A bake lit
+from a finite environment sphere (mid-range lighting, Wang et al. 2005, Sec.
+3.2) records it, and the new light is put on that sphere
+(:func:`relight_midrange`).
 
 Frames stream from the open bake a batch at a time
 (:func:`~shtools.data_formats.bake_stream.open_bake`), so memory is set by the
@@ -173,8 +174,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     Sec. 4), plus the spherical lights' lobes.  ``K`` is made once, the linear
     map of the runtime shading the baker uses
     (:func:`~shtools.runtime.shading.shading_matrix`), so these vertices cost
-    one float32 product per batch of frames; the others are shaded as the baker shades them (a batch of
-    frames in one call while the lights do not change).  Frames are read
+    one float32 product per batch of frames; the others are shaded as the
+    baker shades them (a batch of frames in one call while the lights do not
+    change).  Frames are read
     from the bake a batch at a time: a batch holds at most
     :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads`` batches
     are in flight, so memory does not grow with the frame count
