@@ -176,10 +176,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     (:func:`~shtools.runtime.shading.shading_matrix`), so these vertices cost
     one float32 product per batch of frames; the others are shaded as the
     baker shades them (a batch of frames in one call while the lights do not
-    change).  Frames are read
-    from the bake a batch at a time: a batch holds at most
-    :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads`` batches
-    are in flight, so memory does not grow with the frame count
+    change).  Frames are read from the bake a batch at a time: a batch holds
+    at most :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads``
+    batches are in flight, so memory does not grow with the frame count
     (:func:`relight_bytes`).  De-ringing (``settings.deringing``) follows, as
     in the runtime's ``shade``.
 
