@@ -174,6 +174,7 @@ def references(scene: dict, n_dirs: int) -> dict:
     from shtools.reference import raytrace_visibility
     from shtools.reference.look import bounding_sphere
     from shtools.runtime import ShadowRuntime, ShadowSettings
+    from shtools.runtime.shading import desaturate_negative
     from shtools.scene.bake import prepare_scene
     from shtools.scene.pose import pose_frame
     from shtools.scene.scene import load_scene
@@ -186,7 +187,7 @@ def references(scene: dict, n_dirs: int) -> dict:
     stored = dict(np.load(cache)) if cache.exists() else {}
     shader = ShadowRuntime(ShadowSettings(order=order, processes=1, deringing="none"))
     blocking = [o.spec.name for o in prepared.objects if o.spec.blocks]
-    ref, free, spheres = [], [], []
+    ref, shown, free, spheres = [], [], [], []
     for k in scene["frames"]:
         state = pose_frame(prepared, k / sc.settings.fps, with_meshes=True, trace=False)
         if f"g{k}" not in stored:
@@ -202,6 +203,10 @@ def references(scene: dict, n_dirs: int) -> dict:
         one[:, 0] = math.sqrt(4 * math.pi)
         ref.append(shader.shade(stored[f"g{k}"], state.vertices, state.normals,
                                 prepared.env_sh, state.lights))
+        # what a viewer is shown of it: the bake's own de-ringing (negative radiance,
+        # the order-n truncation's ringing, cannot be displayed)
+        shown.append(desaturate_negative(ref[-1]) if sc.settings.deringing == "desaturate"
+                     else ref[-1])
         free.append(shader.shade(one, state.vertices, state.normals, prepared.env_sh,
                                  state.lights))
         spheres.append({name: bounding_sphere(v)
@@ -210,7 +215,8 @@ def references(scene: dict, n_dirs: int) -> dict:
     offsets = np.cumsum([0] + [len(o.vertices) for o in prepared.receivers])
     receivers = [(o.spec.name, o.faces, slice(offsets[i], offsets[i + 1]))
                  for i, o in enumerate(prepared.receivers)]
-    return {"ref": np.stack(ref), "free": np.stack(free), "spheres": spheres,
+    return {"ref": np.stack(ref), "shown": np.stack(shown), "free": np.stack(free),
+            "spheres": spheres,
             "receivers": receivers, "points": last.vertices}
 
 
@@ -227,7 +233,8 @@ def score(radiance: np.ndarray, refs: dict) -> list[dict]:
 
     rows = []
     for name, faces, rows_of in refs["receivers"]:
-        x, ref, free = (a[:, rows_of] for a in (radiance, refs["ref"], refs["free"]))
+        x, raw, ref, free = (a[:, rows_of] for a in (radiance, refs["ref"], refs["shown"],
+                                                     refs["free"]))
         smooth = float(np.mean([smoothness_ratio(luminance(x[k]), luminance(ref[k]), faces)
                                 for k in range(len(x))]))
         dark = np.stack([shadowed(ref[k], free[k]) for k in range(len(x))])
@@ -237,6 +244,7 @@ def score(radiance: np.ndarray, refs: dict) -> list[dict]:
         rows.append({"receiver": name, "smoothness": smooth,
                      "error": relative_rmse(x, ref),
                      "shadowed": relative_rmse(x[dark], ref[dark]) if dark.any() else None,
+                     "shadowed raw": relative_rmse(x[dark], raw[dark]) if dark.any() else None,
                      "near": relative_rmse(x[near], ref[near]) if near.any() else None})
     return rows
 
@@ -263,7 +271,7 @@ def main(argv=None) -> int:
     n_dirs = 800 if args.quick else 3200
     print(f"\n### Look at the default settings vs a {n_dirs}-direction ray tracer of the real "
           "meshes (smoothness target 0.85-1.15; errors relative RMSE of radiance)\n")
-    keys = ["scene", "receiver", "code", "smoothness", "error", "shadowed", "near",
+    keys = ["scene", "receiver", "code", "smoothness", "error", "shadowed", "shadowed raw", "near",
             "CPU ms/frame", "CPU ratio", "set-up ms"]
     print("| " + " | ".join(keys) + " |\n|" + "---|" * len(keys))
     wanted = None if not args.scenes else set(args.scenes.split(","))
@@ -287,7 +295,7 @@ def main(argv=None) -> int:
                 cells = [name, row["receiver"], tag] + [
                     "-" if row[k] is None else f"{row[k]:.3f}" if k == "smoothness"
                     else f"{100 * row[k]:.2f} %" for k in ("smoothness", "error", "shadowed",
-                                                           "near")] + [
+                                                           "shadowed raw", "near")] + [
                     f"{1e3 * baked[tag]['cpu']:.0f}",
                     f"{baked[tag]['cpu'] / baked[first]['cpu']:.2f}",
                     f"{1e3 * baked[tag]['setup']:.0f}"]
