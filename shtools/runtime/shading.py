@@ -386,6 +386,68 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
     return out
 
 
+def shading_matrix(points, normals, env_sh=None, sphere_lights=(), *, order: int,
+                   window_kind: str | None = "cosine", window_h: float | None = None,
+                   transfer=None) -> np.ndarray:
+    r"""The linear map of :func:`shade` in the visibility: ``K`` with ``shade(g) = K g``.
+
+    :func:`shade` is linear in ``g`` (de-ringing, outside it, is not), so for
+    receivers whose position, normal and lights stay fixed a new visibility
+    costs one small product.  Every term is ``g_w`` dotted with a vector of
+    the vertex: the environment's lit transfer :math:`\mathbf L_H(N)`
+    (:func:`lit_transfer`); for a spherical light and a per-vertex environment,
+    the dot of the shadowed transfer :math:`\mathbf H * \mathbf g_w` with a
+    radiance vector :math:`\mathbf w`, which is :math:`\mathbf g_w\cdot(\mathbf
+    H * \mathbf w)` because the exact triple product :math:`\int y_i y_j y_k`
+    is symmetric in its three indices (SHEXP Sec. 3; the product runs on the
+    same exact quadrature as :func:`shade`'s).  The window of ``g_w`` is folded
+    into ``K``.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (V, 3)
+    env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+        As :func:`shade`.
+    sphere_lights : sequence of SphereLight
+    order : int
+    window_kind, window_h
+        As :func:`shade`.
+    transfer : ndarray, shape (V, n*n), optional
+        :func:`cosine_transfer` of ``normals`` (a cache).
+
+    Returns
+    -------
+    ndarray, shape (V, 3, n*n) float32
+        ``K[v] @ g[v]`` is ``shade(g, ...)[v]`` before de-ringing, to float32
+        rounding.
+    """
+    size = order * order
+    win = band_window(order, window_kind, window_h)
+    win32 = win.astype(np.float32)
+    transfer = np.asarray(cosine_transfer(normals, order) if transfer is None else transfer,
+                          dtype=np.float32)
+    K = np.zeros((transfer.shape[0], 3, size), np.float32)
+    ops = QuadratureProducts(order, np.float32)
+    if env_sh is not None and np.ndim(env_sh) == 3:  # per vertex: (H * g_w) . (win L_v)
+        env = np.asarray(env_sh, dtype=np.float32)
+        env_n = np.zeros((env.shape[0], size, 3), np.float32)
+        env_n[:, :min(size, env.shape[1])] = env[:, :size]
+        for c in range(3):
+            K[:, c] = ops.product(transfer, env_n[:, :, c] * win32)
+    elif env_sh is not None:
+        K += lit_transfer(transfer, environment_matrices(env_sh, order, window_kind, window_h))
+    if sphere_lights:  # per light (H * g_w) . w with w = y(axis) x the windowed zonal cap
+        scale = np.sqrt(4.0 * np.pi / (2.0 * np.arange(order) + 1.0))
+        zonal_win = (scale * win[np.arange(order) ** 2 + np.arange(order)]).astype(np.float32)
+        points = np.asarray(points)
+        for light in sphere_lights:
+            zh, y = sphere_light_terms(light, points, order)
+            shadowed = ops.product(transfer, y * (zh * zonal_win)[:, band_of(order)])
+            K += shadowed[:, None, :] * np.asarray(light.color, np.float32)[None, :, None]
+    K *= win32
+    return K
+
+
 def per_vertex_environment_radiance(transfer, env_sh, visibility, win) -> np.ndarray:
     """Radiance under a per-vertex environment: ``(H(N) * g) . L_v``, shape ``(V, 3)``.
 
