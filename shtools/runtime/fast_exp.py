@@ -222,7 +222,8 @@ class QuadratureProducts:
         mats = self.proj_sq if square else self.proj
         sizes = sizes or [p.shape[1] for p in mats]
         if out is None:
-            return [row_matmul(v[rows], p[:, :s]) for v, p, s in zip(vals, mats, sizes, strict=True)]
+            return [row_matmul(v[rows], p[:, :s])
+                    for v, p, s in zip(vals, mats, sizes, strict=True)]
         for v, p, s, o in zip(vals, mats, sizes, out, strict=True):
             row_matmul(v[rows], p[:, :s], out=o)
         return out

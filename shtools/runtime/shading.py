@@ -197,8 +197,10 @@ def sphere_light_terms(light: SphereLight, points, order: int
 
 def sphere_light_transfer(lights, points, transfer, order: int, win, terms=None
                           ) -> np.ndarray:
-    """The spherical lights' lit transfer :math:`\\sum_k \\mathbf c_k\\,(\\mathbf H * \\mathbf L_k)`,
-    shape ``(V, 3, n*n)`` float32: dotted with the windowed visibility it gives their radiance.
+    """The spherical lights' lit transfer, shape ``(V, 3, n*n)`` float32.
+
+    :math:`\\sum_k \\mathbf c_k\\,(\\mathbf H * \\mathbf L_k)`: dotted with the
+    windowed visibility it gives their radiance.
 
     The triple product is symmetric, :math:`(\\mathbf H * \\mathbf g)\\cdot\\mathbf L =
     \\mathbf g\\cdot(\\mathbf H * \\mathbf L)` (both are :math:`\\int H g L` for order-``n``

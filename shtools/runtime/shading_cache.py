@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from shtools.runtime.shading import (
+    band_window,
     cosine_transfer,
     environment_matrices,
-    band_window,
     lit_transfer,
     sphere_light_terms,
     sphere_light_transfer,
