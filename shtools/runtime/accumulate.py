@@ -180,6 +180,7 @@ class BlockKernel:
         self.order = table.order
         self.table = table
         self.norm = normalisation(self.order).astype(np.float32)
+        self._gammas, self._coef = _recurrence_constants(self.order, self.norm)
         self._scratch = np.empty((_N_SCRATCH + self.order, 0), np.float32)
         # intp indices: np.take of 8-byte items with int32 indices spread over
         # the table takes a slow path (NumPy 2)
@@ -278,11 +279,15 @@ class BlockKernel:
             for l in range(self.order):
                 bands[l] *= w[:, :, l].T[:, :, None]
         flat = (n_s, n_k * n_t)
-        out = np.empty((n_k * n_t, self.order * self.order), np.float32)
-        self._accumulate([b.reshape(flat) for b in bands], x.reshape(flat), y.reshape(flat),
-                         z.reshape(flat), [a.reshape(flat) for a in (t0, t1, t2, t3, *extra)],
-                         out)
-        return out.reshape(n_k, n_t, -1)
+        # (cos, sin) pairs of (x + i y)^m in adjacent scratch rows, reduced by one
+        # einsum each: x, y; the recurrence's pair; its next pair
+        size = n_s * n_k * n_t
+        pairs = [self._scratch[i:i + 2, :size].reshape(2, *flat) for i in (0, 4, 10)]
+        sums = np.empty((self.order * self.order, n_k * n_t), np.float32)
+        self._accumulate([b.reshape(flat) for b in bands], z.reshape(flat), pairs,
+                         t2.reshape(flat), [a.reshape(flat) for a in (t3, *extra[:2])], sums)
+        sums *= self._coef[:, None]
+        return sums.T.reshape(n_k, n_t, -1)
 
     def _lookup(self, u, bands, cell, idx):
         """``bands[l] = u * G_l(cell of u)`` (the ratio table; no interpolation)."""
@@ -295,18 +300,22 @@ class BlockKernel:
             np.take(tbl.ratios[l], idx, out=bands[l], mode="clip")
             bands[l] *= u
 
-    def _accumulate(self, bands, x, y, z, scratch, out):
-        """out[:, lm] = K_lm * sum_s bands[l] * Q_lm(z) * Re/Im (x + i y)^m."""
+    def _accumulate(self, bands, z, pairs, prod, q_buf, sums):
+        """sums[lm] = sum_s bands[l] * R_lm(z) * Re/Im (x + i y)^m (unscaled: see _coef).
+
+        ``pairs``: ``(2, S, R)`` views holding (x, y) and the two scratch pairs of
+        the complex power recurrence; ``sums``: ``(n*n, R)``.
+        """
         order = self.order
-        k = self.norm
-        c_m, s_m, prod = scratch[0], scratch[1], scratch[2]
-        q_buf = (scratch[3], scratch[4], scratch[5])
-        c_new, s_new = scratch[6], scratch[7]
+        xy, cs, cs_new = pairs
+        x, y = xy
         for m in range(order):
             if m == 1:
-                c_m, s_m = x, y  # read only: m = 2 writes into the scratch pair
+                cs = xy  # read only: m = 2 writes into the scratch pairs
             elif m > 1:
                 # (c + i s) * (x + i y)
+                c_m, s_m = cs
+                c_new, s_new = cs_new
                 np.multiply(c_m, x, out=c_new)
                 np.multiply(s_m, y, out=prod)
                 c_new -= prod
@@ -314,29 +323,21 @@ class BlockKernel:
                 np.multiply(s_m, x, out=prod)
                 s_new += prod
                 if m == 2:
-                    c_m, c_new = c_new, scratch[0]
-                    s_m, s_new = s_new, scratch[1]
+                    cs, cs_new = cs_new, pairs[1]
                 else:
-                    c_m, c_new = c_new, c_m
-                    s_m, s_new = s_new, s_m
+                    cs, cs_new = cs_new, cs
             # Q_lm = sigma_l R_l with sigma_l = a_l sigma_{l-1}, so the recurrence
             # Q_l = a_l z Q_{l-1} - c_l Q_{l-2} becomes R_l = z R_{l-1} - gamma_l
             # R_{l-2} (one pass fewer) and sigma_l joins the per-coefficient scale
-            sigma_prev2 = sigma = float(double_factorial(2 * m - 1))  # Q_mm
             q_prev2 = q_prev1 = None
-            for l, (a_num, c_num, den) in legendre_recurrence(m, order):
+            for l, gamma in self._gammas[m]:
                 if l == m:
                     q = None  # R_m = 1
                     term = bands[l]
                 elif l == m + 1:
-                    sigma_prev2, sigma = sigma, sigma * a_num
                     q = z  # R_{m+1} = z (read only)
                     term = self._term(bands[l], q, prod, m)
                 else:
-                    a = a_num / den
-                    c = c_num / den
-                    gamma = c * sigma_prev2 / (a * sigma)
-                    sigma_prev2, sigma = sigma, sigma * a
                     q = q_buf[l % 3]
                     np.multiply(z, q_prev1, out=q)
                     if q_prev2 is None:  # R_m = 1
@@ -345,17 +346,17 @@ class BlockKernel:
                         np.multiply(q_prev2, gamma, out=prod)
                         q -= prod
                     term = self._term(bands[l], q, prod, m)
-                scale = sigma
                 base = l * l + l
                 # reductions over the spheres (axis 0)
                 if m == 0:
                     # zonal: sum_s bands * Q without forming the product
-                    summed = (np.einsum("sr->r", term) if l == 0
-                              else np.einsum("sr,sr->r", *term))
-                    out[:, base] = summed * (scale * k[l, 0])
+                    if l == 0:
+                        np.einsum("sr->r", term, out=sums[base])
+                    else:
+                        np.einsum("sr,sr->r", *term, out=sums[base])
                 else:
-                    out[:, base + m] = np.einsum("sr,sr->r", term, c_m) * (scale * k[l, m])
-                    out[:, base - m] = np.einsum("sr,sr->r", term, s_m) * (scale * k[l, m])
+                    # rows base + m (cos) and base - m (sin) at once
+                    np.einsum("sr,tsr->tr", term, cs, out=sums[base + m:base - m - 1:-2 * m])
                 if l > m:
                     q_prev2, q_prev1 = q_prev1, q
 
@@ -366,3 +367,31 @@ class BlockKernel:
             return band, q
         np.multiply(band, q, out=prod)
         return prod
+
+
+def _recurrence_constants(order: int, norm: np.ndarray) -> tuple[list, np.ndarray]:
+    """The kernel's Legendre recurrence constants and per-coefficient scales.
+
+    Returns ``gammas[m] = [(l, gamma_l), ...]`` for ``l = m .. n-1`` (``gamma`` of
+    :meth:`BlockKernel._accumulate`'s scaled recurrence, None where unused) and
+    ``coef (n*n,)`` float32: ``sigma_l K_lm`` per coefficient.
+    """
+    gammas = []
+    coef = np.empty(order * order, np.float32)
+    for m in range(order):
+        sigma_prev2 = sigma = float(double_factorial(2 * m - 1))  # Q_mm
+        rows = []
+        for l, (a_num, c_num, den) in legendre_recurrence(m, order):
+            gamma = None
+            if l == m + 1:
+                sigma_prev2, sigma = sigma, sigma * a_num
+            elif l > m + 1:
+                a = a_num / den
+                c = c_num / den
+                gamma = c * sigma_prev2 / (a * sigma)
+                sigma_prev2, sigma = sigma, sigma * a
+            rows.append((l, gamma))
+            base = l * l + l
+            coef[base + m] = coef[base - m] = sigma * norm[l, m]
+        gammas.append(rows)
+    return gammas, coef
