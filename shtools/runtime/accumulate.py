@@ -214,18 +214,19 @@ class BlockKernel:
         dx, dy, dz, r, t0, t1, t2, t3 = views[:8]
         extra = views[8:_N_SCRATCH]
         bands = views[_N_SCRATCH:]
-        cen_t = cen.transpose(1, 0, 2)[:, :, None, :]  # (S, K, 1, 3)
-        np.subtract(cen_t[..., 0], pts[None, :, :, 0], out=dx)
-        np.subtract(cen_t[..., 1], pts[None, :, :, 1], out=dy)
-        np.subtract(cen_t[..., 2], pts[None, :, :, 2], out=dz)
-        r[...] = rad.T[:, :, None]
+        # contiguous components: NumPy broadcasts them in far fewer, longer inner
+        # loops than strided views of the (..., 3) arrays
+        for out, k in ((dx, 0), (dy, 1), (dz, 2)):
+            np.subtract(np.ascontiguousarray(cen[:, :, k].T)[:, :, None],
+                        np.ascontiguousarray(pts[:, :, k])[None], out=out)
+        r[...] = np.ascontiguousarray(rad.T)[:, :, None]
         n_r = n_s if rule_rows is None else min(n_s, int(rule_rows))
         if self_shadow and n_r:
             # the rules on the sphere rows that may be behind or straddle (a
             # contiguous prefix of the (S, K, T) layout)
             pdx, pdy, pdz, pr = dx[:n_r], dy[:n_r], dz[:n_r], r[:n_r]
             h, a1, a2, a3 = t0[:n_r], t1[:n_r], t2[:n_r], t3[:n_r]
-            nx, ny, nz = nrm[None, :, :, 0], nrm[None, :, :, 1], nrm[None, :, :, 2]
+            nx, ny, nz = (np.ascontiguousarray(nrm[:, :, k])[None] for k in range(3))
             # h = (P - p) . N
             np.multiply(pdx, nx, out=h)
             np.multiply(pdy, ny, out=a1)
