@@ -289,8 +289,12 @@ class BlockKernel:
         sums = np.empty((self.order * self.order, n_k * n_t), np.float32)
         self._accumulate([b.reshape(flat) for b in bands], z.reshape(flat), pairs,
                          t2.reshape(flat), [a.reshape(flat) for a in (t3, *extra[:2])], sums)
-        sums *= self._coef[:, None]
-        return sums.T.reshape(n_k, n_t, -1)
+        # scaled column by column into receiver-major rows: several times faster
+        # than NumPy's copy of the transposed (n*n, R) array
+        out = np.empty((n_k * n_t, self.order * self.order), np.float32)
+        for k, c in enumerate(self._coef):
+            np.multiply(sums[k], c, out=out[:, k])
+        return out.reshape(n_k, n_t, -1)
 
     def _lookup(self, u, bands, cell, idx):
         """``bands[l] = u * G_l(cell of u)`` (the ratio table; no interpolation)."""
