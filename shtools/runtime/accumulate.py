@@ -186,6 +186,7 @@ class BlockKernel:
         # the table takes a slow path (NumPy 2)
         self._idx = np.empty(0, np.intp)
         self._idx32 = np.empty(0, np.int32)
+        self._sums = np.empty((self.order * self.order, 0), np.float32)
         self._masks = np.empty((2, 0), np.bool_)
 
     def _buffers(self, shape):
@@ -286,7 +287,9 @@ class BlockKernel:
         # einsum each: x, y; the recurrence's pair; its next pair
         size = n_s * n_k * n_t
         pairs = [self._scratch[i:i + 2, :size].reshape(2, *flat) for i in (0, 4, 10)]
-        sums = np.empty((self.order * self.order, n_k * n_t), np.float32)
+        if self._sums.shape[1] < n_k * n_t:
+            self._sums = np.empty((self.order * self.order, n_k * n_t), np.float32)
+        sums = self._sums[:, :n_k * n_t]
         self._accumulate([b.reshape(flat) for b in bands], z.reshape(flat), pairs,
                          t2.reshape(flat), [a.reshape(flat) for a in (t3, *extra[:2])], sums)
         # scaled column by column into receiver-major rows: several times faster
