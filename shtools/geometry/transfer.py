@@ -275,13 +275,23 @@ def refined_transfer_visibility(points, normals, caster, order: int, *,
         hit = caster.occluded_embree(np.repeat(origins, first.shape[0], axis=0),
                                      np.ascontiguousarray(dirs.reshape(-1, 3)))
         hit = hit.reshape(rows.size, first.shape[0])
-        vi, qi = np.nonzero((hit[:, neighbours] != hit[:, :, None]).any(axis=2))
+        edge = np.zeros_like(hit)  # (v, N): differs from a neighbour (one gather per slot)
+        for k in range(neighbours.shape[1]):
+            edge |= hit != hit[:, neighbours[:, k]]
+        vi, qi = np.nonzero(edge)
         n_rays = counts[qi]
         rv = np.repeat(vi, n_rays)
         di = members[np.repeat(starts[qi], n_rays) + np.arange(rv.size)
                      - np.repeat(np.cumsum(n_rays) - n_rays, n_rays)]
-        refined = caster.occluded_embree(origins[rv], np.einsum("rk,rkj->rj", dense32[di],
-                                                                 f32[rv]))
+        # world direction l_x t1 + l_y t2 + l_z N, gathered by rows (no (R, 3, 3) gather)
+        local = dense32.take(di, axis=0)
+        world = np.ascontiguousarray(f32[:, 0]).take(rv, axis=0)
+        world *= local[:, :1]
+        for k in (1, 2):
+            part = np.ascontiguousarray(f32[:, k]).take(rv, axis=0)
+            part *= local[:, k:k + 1]
+            world += part
+        refined = caster.occluded_embree(origins.take(rv, axis=0), world)
         b_local = hit.astype(np.float64) @ y_cell  # (v, n*n): every cell at its first result
         change = refined != hit[rv, cell[di]]
         if change.any():  # the refined cells' dense results replace their first one's
