@@ -69,6 +69,7 @@ def test_refinement_gives_the_dense_estimate_where_boundaries_are_found():
         refined_transfer_visibility,
         refinement_cells,
     )
+    from shtools.geometry.visibility import hemisphere_directions
 
     torus = _torus()
     v, n = np.asarray(torus.vertices), np.asarray(torus.vertex_normals)
@@ -77,11 +78,17 @@ def test_refinement_gives_the_dense_estimate_where_boundaries_are_found():
     refined = refined_transfer_visibility(v, n, caster, 4)
     assert np.abs(dense[:, 1:]).max() > 0.1  # the comparison sees shadows
     assert np.linalg.norm(refined - dense) / np.linalg.norm(dense) < 1e-3
-    # every dense direction lies in one cell; each first direction has neighbours
+    # every dense direction lies in the cell of its nearest first direction (by angle,
+    # checked against arccos), listed once; each first direction has neighbours
     first, neighbours, cell, members, starts, counts = refinement_cells(FIRST_DIRECTIONS,
                                                                         TRANSFER_DIRECTIONS)
+    dense_dirs = hemisphere_directions(TRANSFER_DIRECTIONS)
+    angle = np.arccos(np.clip(dense_dirs @ first.T, -1.0, 1.0))
+    np.testing.assert_allclose(angle[np.arange(len(cell)), cell], angle.min(axis=1), atol=1e-12)
     assert counts.sum() == TRANSFER_DIRECTIONS and (counts > 0).all()
     np.testing.assert_array_equal(np.sort(members), np.arange(TRANSFER_DIRECTIONS))
+    for q in range(len(first)):
+        assert (cell[members[starts[q]:starts[q] + counts[q]]] == q).all()
     assert ((neighbours != np.arange(len(first))[:, None]).sum(axis=1) >= 5).all()
 
 
