@@ -70,11 +70,11 @@ def mesh_transfer(mesh, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
 
 #: Directions per vertex of :func:`hemisphere_transfer`, the exact self-transfer of rigid
 #: objects in bakes: the dense set its two passes refine to (:func:`refined_transfer_visibility`).
-#: With :data:`FIRST_DIRECTIONS` it casts ~760 rays a vertex on the dragon and the
-#: armadillo, at a lower error against a 20,480-ray reference than one pass of 1,280
-#: rays (0.43 / 0.37 % of the coefficients against 0.48 / 0.45 %,
-#: ``benchmarks/bench_transfer.py``).
-TRANSFER_DIRECTIONS = 1920
+#: With :data:`FIRST_DIRECTIONS` it casts ~675 rays a vertex on the dragon and the
+#: armadillo, at a lower error against a 51,200-direction product rule than one pass
+#: of 1,280 rays (coefficients 0.69 / 0.62 % against 0.74 / 0.68 %, shading 0.31 / 0.20 %
+#: against 0.32 / 0.24 %; ``benchmarks/bench_transfer.py``).
+TRANSFER_DIRECTIONS = 1600
 #: Rays every vertex casts first (:func:`refined_transfer_visibility`); the directions
 #: where they disagree with a neighbouring one are refined to the dense set.
 FIRST_DIRECTIONS = 256
@@ -222,7 +222,7 @@ def refined_transfer_visibility(points, normals, caster, order: int, *,
     taking its first direction's result: exact wherever no shadow boundary passes
     between first directions that agree, which a blocker narrower than their spacing
     (~9 degrees at 256) can.  On the dragon and the armadillo about a quarter of the
-    cells are refined.  The blocked flags are projected in the tangent frame and
+    cells are refined (~420 dense rays a vertex at 1,600).  The blocked flags are projected in the tangent frame and
     turned into the world frame by an exact product rule, as in
     :func:`hemisphere_transfer_visibility`; vertices are traced in
     :func:`spatial_order`.
