@@ -222,8 +222,9 @@ def refined_transfer_visibility(points, normals, caster, order: int, *,
     taking its first direction's result: exact wherever no shadow boundary passes
     between first directions that agree, which a blocker narrower than their spacing
     (~9 degrees at 256) can.  On the dragon and the armadillo about a quarter of the
-    cells are refined (~420 dense rays a vertex at 1,600).  The blocked flags are projected in the tangent frame and
-    turned into the world frame by an exact product rule, as in
+    cells are refined (~420 dense rays a vertex at 1,600).  The blocked flags are
+    projected in the tangent frame and turned into the world frame by an exact
+    product rule, as in
     :func:`hemisphere_transfer_visibility`; vertices are traced in
     :func:`spatial_order`.
 
