@@ -33,6 +33,14 @@ smooths the steps and leaves the order-``n`` visibility: where the mesh touches
 the receiver (``d -> 0``) nothing is filtered, so contact shadows stay sharp.
 The filter is linear in the SH vector, so it holds for any light.
 
+**A denser set where the receivers are sparse.**  Where the receivers are
+farther apart than the filter is wide (a coarse ground near its object) the
+filter finds no neighbour and the steps stay; there the receiver is traced with a
+set ``REFINE_FACTOR`` times denser (:func:`refine_weights`: blended in as the
+filter's width falls from one receiver spacing to half of it, so no seam where the
+density changes).  Only receivers in the shadow near the object qualify, a few
+hundred on a coarse ground, none on most of a dense one.
+
 **A per-vertex hand-over to the spheres** (:func:`handover_weights`).  The
 cone's expected ray count ``k = n_dirs (1 - cos θ)`` decides: beyond
 ``HANDOVER_RAYS[0]`` rays (about 5 bounding radii) the object's spheres
@@ -71,6 +79,11 @@ LIGHT_MARGIN = 0.5
 #: the nearest point of the mesh: one spacing (a step per width) smooths the steps
 #: and keeps the order-n visibility, whose angular scale is several spacings.
 FILTER_SPACING = 1.0
+#: Rays of the denser direction set a receiver traces where its neighbours are too far
+#: for the surface filter (:func:`refine_weights`), in multiples of the shared set's.
+REFINE_FACTOR = 4
+#: The neighbour (by rank, self excluded) whose distance is a receiver's spacing.
+SPACING_NEIGHBOUR = 4
 #: Receivers whose normals differ by more than this cosine are not filtered together.
 FILTER_MIN_COS = 0.9
 #: Receivers per block of :func:`set_visibility` (neighbours in the receivers' order
@@ -385,9 +398,51 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         else:
             near = nearest_distance(p[at], v, faces, caster)
         width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
+        fine = refine_weights(width, receiver_spacing(idx[at], dist[at]))
+        sparse = np.flatnonzero(fine > 0)
+        if sparse.size:  # too few neighbours inside the filter: the denser set there
+            rs = rows[busy[sparse]]
+            dense = set_visibility(p[rs], nrm[rs], caster, axis[rs], cos_half[rs], order,
+                                   REFINE_FACTOR * int(n_dirs))
+            w = fine[sparse, None]
+            g[busy[sparse]] = w * dense + (1.0 - w) * g[busy[sparse]]
         around = local[busy]
         g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
     return _keep_ground(key, (rows, weight, g))
+
+
+def receiver_spacing(idx, dist) -> np.ndarray:
+    """Each receiver's spacing ``(R,)``: the distance to its ``SPACING_NEIGHBOUR``-th
+    nearest neighbour facing the same way (a grid's edge neighbours; robust to a
+    coincident duplicate vertex), infinite when it has none.
+
+    Parameters
+    ----------
+    idx, dist : ndarray, shape (R, K)
+        Neighbours and their distances, self first (:func:`neighbours`).
+    """
+    d = np.where((idx >= 0) & (dist > 0), dist, np.inf)
+    d.sort(axis=1)
+    k = min(SPACING_NEIGHBOUR, d.shape[1]) - 1
+    return d[:, k] if k >= 0 else np.full(len(d), np.inf)
+
+
+def refine_weights(width, spacing) -> np.ndarray:
+    """Weight ``(R,)`` of the ``REFINE_FACTOR`` times denser direction set per receiver.
+
+    The surface filter averages a receiver's estimate with the neighbours within
+    two widths; where the receivers are sparser than the filter is wide (a coarse
+    ground near its object) it finds none and the per-direction steps stay.
+    There the denser set replaces the shared one: 0 where the width is at least
+    the spacing, 1 where it is at most half of it, a smoothstep of
+    ``spacing / width`` between (so a receiver mixes the two estimates, each
+    unbiased, and the shadow has no seam where the density changes).
+    """
+    s = np.asarray(spacing, dtype=np.float64)
+    w = np.asarray(width, dtype=np.float64)
+    ratio = np.where(w > 0, s / np.where(w > 0, w, 1.0), np.inf)
+    t = np.clip(ratio - 1.0, 0.0, 1.0)
+    return np.where(np.isfinite(s), t * t * (3.0 - 2.0 * t), 0.0)
 
 
 #: Per process: the last results of :func:`traced_ground`, by caster (a weak reference
