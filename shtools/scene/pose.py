@@ -95,7 +95,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                              prepared.scene.path)
         world_n = transform_normals(m, local_n) if o.spec.receives else None
         own = slice(n_rows, n_rows + len(world_v))
-        rotation = rotation_of(m) if o.self_log is not None else None
+        exact_self = o.self_log is not None or o.self_transfer is not None
+        rotation = rotation_of(m) if exact_self else None
         if rotation is not None and o.self_transfer is not None:
             # exact self-shadowing, the transfer itself multiplied in after the exp
             # (its log's round trip would not give it back); its own spheres skipped
@@ -387,6 +388,6 @@ def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:
         if sv.blocker == index:
             selfs[k] = dataclasses.replace(sv, blocker=None)
     own_log = getattr(o.blocker_data, "self_log", None)
-    if o.self_log is None and own_log is not None:
+    if o.self_log is None and o.self_transfer is None and own_log is not None:
         selfs.append(SelfVisibility(own_log, slice(int(rows[0]), int(rows[-1]) + 1),
                                     rotation=rotation_of(world)))
