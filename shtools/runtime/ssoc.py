@@ -99,6 +99,10 @@ RESOLUTION_RANGE = (16, 8192)
 NEAR_REL = 1e-6
 
 FALLOFFS = ("smoothstep", "disk")
+OVERLAPS = ("union", "product")
+#: Points of the light disk (unit radius) that :func:`_union_fraction` counts: a Fibonacci
+#: spiral, equal area per point, so ``1/DISK_POINTS`` of the light per point.
+DISK_POINTS = 256
 CAMERAS = ("cube", "frustum", "auto")
 CORNERS = ("quads", "caps")
 
@@ -135,6 +139,18 @@ class SSOCSettings:
         silhouette corners (zig-zag contours of tessellated curved occluders);
         ``"caps"``: capsules (quads plus round caps at the endpoints, records
         there point radially from the corner) -- beyond the paper.
+    overlap : {"union", "product"}
+        How the edges met in successive lookups combine (Sec. 3.2.3): ``"product"``
+        multiplies their visible fractions (the paper); ``"union"`` (default)
+        counts the part of the light disk outside every edge's shadow, each edge
+        blocking a half-plane of the disk -- exact for two straight edges of
+        separate occluders or of a concave corner, and ``min`` of the fractions
+        for nested edges, where the product is too dark.
+    drop_covered : bool
+        Do not record silhouette points that are no depth discontinuity in the
+        shadow map (hidden behind a nearer surface, or a contour's backward
+        piece whose normal points into the occluder;
+        :func:`shtools.runtime.ssoc_maps.distortion_maps`).
     """
 
     resolution: int = 1024
@@ -148,6 +164,8 @@ class SSOCSettings:
     cos_same: float = 0.9
     max_width: float | None = None
     corners: str = "caps"
+    overlap: str = "union"
+    drop_covered: bool = True
 
     def __post_init__(self):
         lo, hi = RESOLUTION_RANGE
@@ -161,6 +179,9 @@ class SSOCSettings:
         if self.falloff not in FALLOFFS:
             raise InputError(f"SSOC falloff must be one of {', '.join(FALLOFFS)}, "
                              f"got {self.falloff!r}")
+        if self.overlap not in OVERLAPS:
+            raise InputError(f"SSOC overlap must be one of {', '.join(OVERLAPS)}, "
+                             f"got {self.overlap!r}")
         if self.corners not in CORNERS:
             raise InputError(f"SSOC corners must be one of {', '.join(CORNERS)}, "
                              f"got {self.corners!r}")
@@ -443,6 +464,8 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
     px, py = ux_.copy(), uy_.copy()
     seen = [edge]
     alive = np.ones(act.size, dtype=bool)
+    union = st.overlap == "union"
+    taus, normals = [], []  # per lookup (union): tau = s/d_max of the edge, nan if none
     for step in range(int(st.max_steps)):
         dmax = (f * radius * np.maximum(1.0 / zn - 1.0 / np.minimum(zz, zf), 0.0)
                 * obliquity(ux_ - 0.5 * R, uy_ - 0.5 * R, n[:, 0], n[:, 1], f))
@@ -450,6 +473,13 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
         pos_d = dmax > 0
         umbra = alive & pos_d & (s <= -dmax)
         pen = alive & pos_d & (s < dmax) & ~umbra
+        if union:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tau = np.where(pos_d, np.clip(s / dmax, -1.0, 1.0), 1.0)
+            taus.append(np.where(alive, tau, np.nan))
+            normals.append(n)
+            if step > 0:  # an edge met later blocks its half-plane of the disk, no more
+                umbra = np.zeros_like(umbra)
         if step == 0:
             # the edge does not shadow this receiver: plain shadow map for hidden points
             irrelevant = alive & ~pen & ~umbra & h
@@ -460,7 +490,8 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
         d = np.where(pen, (dmax - s) / 2.0, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             lin = np.where(pen, 1.0 - d / dmax, 1.0)
-        s_val = np.where(pen, s_val * _falloff(lin, st.falloff), s_val)
+        if step == 0 or not union:
+            s_val = np.where(pen, s_val * _falloff(lin, st.falloff), s_val)
         px = px + d * n[:, 0]
         py = py + d * n[:, 1]
         if step == 0 and st.visibility_check:
@@ -492,5 +523,34 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
         n = np.where(new[:, None], n2, n)
         zn, zf = np.where(new, zn2, zn), np.where(new, zf2, zf)
         seen.append(edge)
+    if union and len(taus) > 1:
+        multi = np.flatnonzero(~np.isnan(taus[1]) & (s_val > 0))
+        s_val[multi] = _union_fraction([t[multi] for t in taus], [m[multi] for m in normals])
     S[act] = s_val
     return S
+
+
+def _disk_points() -> np.ndarray:
+    """``DISK_POINTS`` points of the unit disk, equal area each (Fibonacci spiral), ``(M, 2)``."""
+    i = np.arange(DISK_POINTS) + 0.5
+    rho, phi = np.sqrt(i / DISK_POINTS), i * np.pi * (3.0 - np.sqrt(5.0))
+    return np.stack([rho * np.cos(phi), rho * np.sin(phi)], axis=1)
+
+
+_DISK = _disk_points()
+
+
+def _union_fraction(taus, normals) -> np.ndarray:
+    """Visible fraction of the light behind several straight edges, shape ``(k,)``.
+
+    The light disk seen from the receiver, scaled to unit radius: a light point ``y``
+    is hidden by an edge of normal ``n`` and ``tau = s/d_max`` where ``y.n >= tau`` (one
+    edge alone leaves the disk-segment fraction, the ``"disk"`` falloff).  Every point of
+    :data:`_DISK` hidden by any edge counts as hidden; ``taus[j]`` is nan where the
+    ``j``-th lookup found no edge.
+    """
+    hidden = np.zeros((len(taus[0]), len(_DISK)), dtype=bool)
+    for tau, n in zip(taus, normals, strict=True):
+        ok = ~np.isnan(tau)
+        hidden |= ok[:, None] & (n @ _DISK.T >= np.where(ok, tau, 1.0)[:, None])
+    return 1.0 - hidden.mean(axis=1)
