@@ -43,7 +43,11 @@ still hidden is fully shadowed (the cow's light leak, Fig. 6).  Overlapping
 penumbrae (Sec. 3.2.3): the record at the distorted position is read; if it
 belongs to another edge (normals differ, ``n.n' < cos_same``) with an
 overlapping ``[z_near, z_far]``, the *original* receiver's intensity against that
-edge multiplies ``S`` -- up to ``max_steps`` lookups.  The 4-tap filter
+edge multiplies ``S`` (``overlap="product"``, the paper) -- up to ``max_steps``
+lookups.  By default (``overlap="union"``, beyond the paper; the spec's Sec. 7.2)
+each edge met hides a half-plane of the light disk and ``S`` is the part of the
+disk outside all of them (:func:`_union_fraction`): light that passes two edges is
+not counted as blocked twice.  The 4-tap filter
 (Sec. 5): ``S`` is evaluated with the records and shadow-map depths of the 4
 texels around the receiver's projection and blended bilinearly.
 
@@ -67,7 +71,10 @@ to the guard band; the post-distortion test looks at least 1.5 px outside the ed
 closer than that would find the edge's own rasterised pixels); silhouette
 corners get round caps (``corners="caps"``, default; the paper's bare quads
 leave wedge gaps at the convex corners of tessellated contours, as
-``tests/runtime/test_ssoc.py`` shows).
+``tests/runtime/test_ssoc.py`` shows); silhouette points that are no depth
+discontinuity of the shadow map -- covered by a nearer surface, or the backward
+pieces of a contour folding on itself in the image -- get no record
+(``drop_covered``, default; :func:`~shtools.runtime.ssoc_maps.distortion_maps`).
 
 This module is numpy-only and lives in the runtime (rasterisation is a NumPy
 z-buffer, so no ray tracer is needed; the paper's method is raster-based): a
