@@ -245,6 +245,10 @@ class OcclusionCamera:
         self.last_stats = SSOCStats()
         #: Shadow and distortion maps of the last call, by cube face (for inspection).
         self.maps: dict[int, FaceMaps] = {}
+        #: Receivers of the last call whose lookups met a silhouette record, ``(V,)`` bool:
+        #: inside a penumbra band of the maps, whatever ``S`` came out (a scene's hybrid
+        #: traces the ones called umbra too, :mod:`shtools.scene.light_shadows`).
+        self.last_near_silhouette = np.zeros(0, dtype=bool)
         self._camera: LightCamera | None = None
 
     # ------------------------------------------------------------------ public
@@ -292,6 +296,7 @@ class OcclusionCamera:
         stats.camera = cam.mode
         face_of = cam.assign(pts)
         out = np.ones(len(pts))
+        near_sil = np.zeros(len(pts), dtype=bool)
         scale = max(float(np.ptp(np.concatenate([pts, tris.reshape(-1, 3)]), axis=0).max())
                     if len(tris) else 1.0, 1e-12)
         near = NEAR_REL * scale
@@ -306,13 +311,14 @@ class OcclusionCamera:
             t3 = time.process_time()
             maps = FaceMaps(depth.reshape(-1), outer, inner)
             self.maps[int(k)] = maps
-            out[idx] = _receivers(cam, int(k), maps, pts[idx], nrm[idx], r, st)
+            out[idx], near_sil[idx] = _receivers(cam, int(k), maps, pts[idx], nrm[idx], r, st)
             t4 = time.process_time()
             stats.shadow_map += t2 - t1
             stats.ssoc += t3 - t2
             stats.receivers += t4 - t3
             stats.faces += 1
         self.last_stats = stats
+        self.last_near_silhouette = near_sil
         return out
 
     @property
@@ -417,8 +423,9 @@ def _falloff(t: np.ndarray, kind: str) -> np.ndarray:
 
 
 def _receivers(cam: LightCamera, face: int, maps: FaceMaps, pts, nrm, radius: float,
-               st: SSOCSettings) -> np.ndarray:
-    """SSOC intensity of receivers assigned to ``face``, shape ``(V,)``."""
+               st: SSOCSettings) -> tuple[np.ndarray, np.ndarray]:
+    """SSOC intensity of receivers assigned to ``face``, shape ``(V,)``, and whether any
+    tap met a silhouette record, ``(V,)`` bool."""
     R, f = cam.resolution, cam.focal
     q = cam.to_camera(face, pts)
     z = q[:, 2]
@@ -439,21 +446,26 @@ def _receivers(cam: LightCamera, face: int, maps: FaceMaps, pts, nrm, radius: fl
         taps = [(np.floor(ux).astype(np.int64), np.floor(uy).astype(np.int64),
                  np.ones(len(z)))]
     out = np.zeros(len(z))
+    near = np.zeros(len(z), dtype=bool)
     for ti, tj, w in taps:
         tid = np.clip(tj, 0, R - 1) * R + np.clip(ti, 0, R - 1)
-        out += w * _intensity(maps, tid, ux, uy, z, slope, radius, f, R, st)
-    return out
+        S, recorded = _intensity(maps, tid, ux, uy, z, slope, radius, f, R, st)
+        out += w * S
+        near |= recorded
+    return out, near
 
 
-def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.ndarray:
-    """One tap: the per-fragment SSOC rules (module docstring) at texels ``tid``."""
+def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """One tap: the per-fragment SSOC rules (module docstring) at texels ``tid``; ``S`` and
+    whether the tap met a record."""
     eps = st.bias_rel * z
     hidden = z > maps.depth[tid] + eps + 1.5 * slope
     S = np.where(hidden, 0.0, 1.0)
     rec = np.where(hidden, maps.inner.edge[tid], maps.outer.edge[tid])
     act = np.flatnonzero(rec >= 0)
     if not act.size:
-        return S
+        return S, rec >= 0
     # records of the active receivers: (edge, e, n, zn, zf) from INNER or OUTER
     h = hidden[act]
     t = tid[act]
@@ -534,7 +546,7 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
         multi = np.flatnonzero(~np.isnan(taus[1]) & (s_val > 0))
         s_val[multi] = _union_fraction([t[multi] for t in taus], [m[multi] for m in normals])
     S[act] = s_val
-    return S
+    return S, rec >= 0
 
 
 def _disk_points() -> np.ndarray:
