@@ -104,6 +104,7 @@ def accuracy(mesh, quick: bool):
     from shtools.runtime import ShadowRuntime, ShadowSettings, SphereBlocker, SphereLight
     from shtools.runtime.shading import sphere_light_unshadowed
     from shtools.runtime.ssoc import OcclusionCamera, SSOCSettings
+    from shtools.scene.light_shadows import ssoc_radiance
 
     pts, nrm, ng = _scene(mesh, 96 if quick else 256)
     fit = fit_spheres(mesh, 16 if quick else 48, seed=0)
@@ -134,6 +135,11 @@ def accuracy(mesh, quick: bool):
         S, t = _timed(oc.visible_fraction, [meshes[0][0]], center, r, pts, nrm)
         rows.append({"alpha": alpha, "method": "SSOC", **_metrics(S, S * free, ref, above, ng),
                      "ms/light/frame": 1e3 * (t + t_free)})
+        for rays in HYBRID_RAYS:  # the scene's "ssoc" light: rays where the camera sees penumbra
+            lit, t = _timed(ssoc_radiance, oc, [meshes[0][0]], caster, light, pts, nrm, rays)
+            S_h = np.where(free > 1e-12, lit / np.maximum(free, 1e-12), 1.0)
+            rows.append({"alpha": alpha, "method": f"SSOC + {rays} rays",
+                         **_metrics(S_h, lit, ref, above, ng), "ms/light/frame": 1e3 * t})
         for n, rt in runtimes.items():
             (g, t_vis) = vis[n]
             rad, t_sh = _timed(rt.shade, g, pts, nrm, None, sphere_lights=[light])
@@ -154,6 +160,10 @@ def accuracy(mesh, quick: bool):
                               ("steps 2", SSOCSettings(max_steps=2)),
                               ("smoothstep falloff (paper)", SSOCSettings(falloff="smoothstep")),
                               ("quads (seed corners)", SSOCSettings(corners="quads")),
+                              ("product overlap (paper)", SSOCSettings(overlap="product")),
+                              ("covered silhouettes kept", SSOCSettings(drop_covered=False)),
+                              ("both (98bedba-0b3d1da rules)",
+                               SSOCSettings(overlap="product", drop_covered=False)),
                               ("resolution 512", SSOCSettings(resolution=512)),
                               ("resolution 2048", SSOCSettings(resolution=2048)),
                               ("frustum camera", SSOCSettings(camera="frustum"))):
@@ -167,6 +177,8 @@ def accuracy(mesh, quick: bool):
     return rows, extra, len(pts)
 
 
+#: Rays per penumbra receiver of the hybrid rows (the scene's ``ssoc.rays``).
+HYBRID_RAYS = (64, 256)
 #: Light centres of the small-light penumbra scenes (bunny of unit height at the origin).
 PENUMBRA_LIGHTS = ((0.35, 2.5, 0.25), (1.5, 1.6, 0.8), (-0.8, 1.2, -1.0))
 
@@ -175,12 +187,14 @@ def penumbra(mesh, quick: bool) -> list[dict]:
     """The bunny on a 3 x 3 ground under one light of angular radius 0.05 rad (from the
     origin), per light of :data:`PENUMBRA_LIGHTS`: relative RMSE of the light's radiance
     over the ground vertices that see less than 98 % of it (penumbra and umbra) and over
-    the whole ground, SSOC (defaults) and 64-ray tracing against 1,024 rays."""
+    the whole ground, SSOC (defaults; alone, and with :data:`HYBRID_RAYS` rays on the
+    receivers it finds in penumbra) and 64-ray tracing against 1,024 rays."""
     from shtools.geometry.raycast import RayCaster
     from shtools.reference.light_fraction import light_visible_fraction
     from shtools.runtime import SphereLight
     from shtools.runtime.shading import sphere_light_unshadowed
     from shtools.runtime.ssoc import OcclusionCamera
+    from shtools.scene.light_shadows import ssoc_radiance
 
     pts, nrm, ng = _scene(mesh, 49 if quick else 97)
     pts, nrm = pts[:ng], nrm[:ng]
@@ -201,9 +215,16 @@ def penumbra(mesh, quick: bool) -> list[dict]:
         S, t = _timed(oc.visible_fraction, [np.asarray(mesh.vertices)], center, r, pts, nrm)
         rt, t_rt = _timed(light_visible_fraction, pts, nrm, caster, center, r, n_samples=64,
                           seed=7)
+        hyb = {}
+        for rays in HYBRID_RAYS:
+            lit, t_h = _timed(ssoc_radiance, oc, [np.asarray(mesh.vertices)], caster,
+                              SphereLight(center, r, (1.0, 1.0, 1.0)), pts, nrm, rays)
+            hyb.update({f"+{rays} rays dark %": rel(lit[dark], ref.radiance[dark]),
+                        f"+{rays} rays ground %": rel(lit, ref.radiance),
+                        f"+{rays} rays ms": 1e3 * t_h})
         rows.append({"light": str(pos), "dark vertices": int(dark.sum()),
                      "SSOC dark %": rel(S[dark] * free[dark], ref.radiance[dark]),
-                     "SSOC ground %": rel(S * free, ref.radiance),
+                     "SSOC ground %": rel(S * free, ref.radiance), **hyb,
                      "RT64 dark %": rel(rt.radiance[dark], ref.radiance[dark]),
                      "RT64 ground %": rel(rt.radiance, ref.radiance),
                      "SSOC ms": 1e3 * t, "RT64 ms": 1e3 * t_rt})

@@ -43,7 +43,11 @@ still hidden is fully shadowed (the cow's light leak, Fig. 6).  Overlapping
 penumbrae (Sec. 3.2.3): the record at the distorted position is read; if it
 belongs to another edge (normals differ, ``n.n' < cos_same``) with an
 overlapping ``[z_near, z_far]``, the *original* receiver's intensity against that
-edge multiplies ``S`` -- up to ``max_steps`` lookups.  The 4-tap filter
+edge multiplies ``S`` (``overlap="product"``, the paper) -- up to ``max_steps``
+lookups.  By default (``overlap="union"``, beyond the paper; the spec's Sec. 7.2)
+each edge met hides a half-plane of the light disk and ``S`` is the part of the
+disk outside all of them (:func:`_union_fraction`): light that passes two edges is
+not counted as blocked twice.  The 4-tap filter
 (Sec. 5): ``S`` is evaluated with the records and shadow-map depths of the 4
 texels around the receiver's projection and blended bilinearly.
 
@@ -67,7 +71,10 @@ to the guard band; the post-distortion test looks at least 1.5 px outside the ed
 closer than that would find the edge's own rasterised pixels); silhouette
 corners get round caps (``corners="caps"``, default; the paper's bare quads
 leave wedge gaps at the convex corners of tessellated contours, as
-``tests/runtime/test_ssoc.py`` shows).
+``tests/runtime/test_ssoc.py`` shows); silhouette points that are no depth
+discontinuity of the shadow map -- covered by a nearer surface, or the backward
+pieces of a contour folding on itself in the image -- get no record
+(``drop_covered``, default; :func:`~shtools.runtime.ssoc_maps.distortion_maps`).
 
 This module is numpy-only and lives in the runtime (rasterisation is a NumPy
 z-buffer, so no ray tracer is needed; the paper's method is raster-based): a
@@ -99,6 +106,10 @@ RESOLUTION_RANGE = (16, 8192)
 NEAR_REL = 1e-6
 
 FALLOFFS = ("smoothstep", "disk")
+OVERLAPS = ("union", "product")
+#: Points of the light disk (unit radius) that :func:`_union_fraction` counts: a Fibonacci
+#: spiral, equal area per point, so ``1/DISK_POINTS`` of the light per point.
+DISK_POINTS = 256
 CAMERAS = ("cube", "frustum", "auto")
 CORNERS = ("quads", "caps")
 
@@ -135,6 +146,18 @@ class SSOCSettings:
         silhouette corners (zig-zag contours of tessellated curved occluders);
         ``"caps"``: capsules (quads plus round caps at the endpoints, records
         there point radially from the corner) -- beyond the paper.
+    overlap : {"union", "product"}
+        How the edges met in successive lookups combine (Sec. 3.2.3): ``"product"``
+        multiplies their visible fractions (the paper); ``"union"`` (default)
+        counts the part of the light disk outside every edge's shadow, each edge
+        blocking a half-plane of the disk -- exact for two straight edges of
+        separate occluders or of a concave corner, and ``min`` of the fractions
+        for nested edges, where the product is too dark.
+    drop_covered : bool
+        Do not record silhouette points that are no depth discontinuity in the
+        shadow map (hidden behind a nearer surface, or a contour's backward
+        piece whose normal points into the occluder;
+        :func:`shtools.runtime.ssoc_maps.distortion_maps`).
     """
 
     resolution: int = 1024
@@ -148,6 +171,8 @@ class SSOCSettings:
     cos_same: float = 0.9
     max_width: float | None = None
     corners: str = "caps"
+    overlap: str = "union"
+    drop_covered: bool = True
 
     def __post_init__(self):
         lo, hi = RESOLUTION_RANGE
@@ -161,6 +186,9 @@ class SSOCSettings:
         if self.falloff not in FALLOFFS:
             raise InputError(f"SSOC falloff must be one of {', '.join(FALLOFFS)}, "
                              f"got {self.falloff!r}")
+        if self.overlap not in OVERLAPS:
+            raise InputError(f"SSOC overlap must be one of {', '.join(OVERLAPS)}, "
+                             f"got {self.overlap!r}")
         if self.corners not in CORNERS:
             raise InputError(f"SSOC corners must be one of {', '.join(CORNERS)}, "
                              f"got {self.corners!r}")
@@ -217,6 +245,10 @@ class OcclusionCamera:
         self.last_stats = SSOCStats()
         #: Shadow and distortion maps of the last call, by cube face (for inspection).
         self.maps: dict[int, FaceMaps] = {}
+        #: Receivers of the last call whose lookups met a silhouette record, ``(V,)`` bool:
+        #: inside a penumbra band of the maps, whatever ``S`` came out (a scene's hybrid
+        #: traces the ones called umbra too, :mod:`shtools.scene.light_shadows`).
+        self.last_near_silhouette = np.zeros(0, dtype=bool)
         self._camera: LightCamera | None = None
 
     # ------------------------------------------------------------------ public
@@ -264,6 +296,7 @@ class OcclusionCamera:
         stats.camera = cam.mode
         face_of = cam.assign(pts)
         out = np.ones(len(pts))
+        near_sil = np.zeros(len(pts), dtype=bool)
         scale = max(float(np.ptp(np.concatenate([pts, tris.reshape(-1, 3)]), axis=0).max())
                     if len(tris) else 1.0, 1e-12)
         near = NEAR_REL * scale
@@ -278,13 +311,14 @@ class OcclusionCamera:
             t3 = time.process_time()
             maps = FaceMaps(depth.reshape(-1), outer, inner)
             self.maps[int(k)] = maps
-            out[idx] = _receivers(cam, int(k), maps, pts[idx], nrm[idx], r, st)
+            out[idx], near_sil[idx] = _receivers(cam, int(k), maps, pts[idx], nrm[idx], r, st)
             t4 = time.process_time()
             stats.shadow_map += t2 - t1
             stats.ssoc += t3 - t2
             stats.receivers += t4 - t3
             stats.faces += 1
         self.last_stats = stats
+        self.last_near_silhouette = near_sil
         return out
 
     @property
@@ -389,8 +423,9 @@ def _falloff(t: np.ndarray, kind: str) -> np.ndarray:
 
 
 def _receivers(cam: LightCamera, face: int, maps: FaceMaps, pts, nrm, radius: float,
-               st: SSOCSettings) -> np.ndarray:
-    """SSOC intensity of receivers assigned to ``face``, shape ``(V,)``."""
+               st: SSOCSettings) -> tuple[np.ndarray, np.ndarray]:
+    """SSOC intensity of receivers assigned to ``face``, shape ``(V,)``, and whether any
+    tap met a silhouette record, ``(V,)`` bool."""
     R, f = cam.resolution, cam.focal
     q = cam.to_camera(face, pts)
     z = q[:, 2]
@@ -411,21 +446,26 @@ def _receivers(cam: LightCamera, face: int, maps: FaceMaps, pts, nrm, radius: fl
         taps = [(np.floor(ux).astype(np.int64), np.floor(uy).astype(np.int64),
                  np.ones(len(z)))]
     out = np.zeros(len(z))
+    near = np.zeros(len(z), dtype=bool)
     for ti, tj, w in taps:
         tid = np.clip(tj, 0, R - 1) * R + np.clip(ti, 0, R - 1)
-        out += w * _intensity(maps, tid, ux, uy, z, slope, radius, f, R, st)
-    return out
+        S, recorded = _intensity(maps, tid, ux, uy, z, slope, radius, f, R, st)
+        out += w * S
+        near |= recorded
+    return out, near
 
 
-def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.ndarray:
-    """One tap: the per-fragment SSOC rules (module docstring) at texels ``tid``."""
+def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """One tap: the per-fragment SSOC rules (module docstring) at texels ``tid``; ``S`` and
+    whether the tap met a record."""
     eps = st.bias_rel * z
     hidden = z > maps.depth[tid] + eps + 1.5 * slope
     S = np.where(hidden, 0.0, 1.0)
     rec = np.where(hidden, maps.inner.edge[tid], maps.outer.edge[tid])
     act = np.flatnonzero(rec >= 0)
     if not act.size:
-        return S
+        return S, rec >= 0
     # records of the active receivers: (edge, e, n, zn, zf) from INNER or OUTER
     h = hidden[act]
     t = tid[act]
@@ -443,6 +483,8 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
     px, py = ux_.copy(), uy_.copy()
     seen = [edge]
     alive = np.ones(act.size, dtype=bool)
+    union = st.overlap == "union"
+    taus, normals = [], []  # per lookup (union): tau = s/d_max of the edge, nan if none
     for step in range(int(st.max_steps)):
         dmax = (f * radius * np.maximum(1.0 / zn - 1.0 / np.minimum(zz, zf), 0.0)
                 * obliquity(ux_ - 0.5 * R, uy_ - 0.5 * R, n[:, 0], n[:, 1], f))
@@ -450,6 +492,13 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
         pos_d = dmax > 0
         umbra = alive & pos_d & (s <= -dmax)
         pen = alive & pos_d & (s < dmax) & ~umbra
+        if union:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tau = np.where(pos_d, np.clip(s / dmax, -1.0, 1.0), 1.0)
+            taus.append(np.where(alive, tau, np.nan))
+            normals.append(n)
+            if step > 0:  # an edge met later blocks its half-plane of the disk, no more
+                umbra = np.zeros_like(umbra)
         if step == 0:
             # the edge does not shadow this receiver: plain shadow map for hidden points
             irrelevant = alive & ~pen & ~umbra & h
@@ -460,7 +509,8 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
         d = np.where(pen, (dmax - s) / 2.0, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             lin = np.where(pen, 1.0 - d / dmax, 1.0)
-        s_val = np.where(pen, s_val * _falloff(lin, st.falloff), s_val)
+        if step == 0 or not union:
+            s_val = np.where(pen, s_val * _falloff(lin, st.falloff), s_val)
         px = px + d * n[:, 0]
         py = py + d * n[:, 1]
         if step == 0 and st.visibility_check:
@@ -492,5 +542,34 @@ def _intensity(maps: FaceMaps, tid, ux, uy, z, slope, radius, f, R, st) -> np.nd
         n = np.where(new[:, None], n2, n)
         zn, zf = np.where(new, zn2, zn), np.where(new, zf2, zf)
         seen.append(edge)
+    if union and len(taus) > 1:
+        multi = np.flatnonzero(~np.isnan(taus[1]) & (s_val > 0))
+        s_val[multi] = _union_fraction([t[multi] for t in taus], [m[multi] for m in normals])
     S[act] = s_val
-    return S
+    return S, rec >= 0
+
+
+def _disk_points() -> np.ndarray:
+    """``DISK_POINTS`` points of the unit disk, equal area each (Fibonacci spiral), ``(M, 2)``."""
+    i = np.arange(DISK_POINTS) + 0.5
+    rho, phi = np.sqrt(i / DISK_POINTS), i * np.pi * (3.0 - np.sqrt(5.0))
+    return np.stack([rho * np.cos(phi), rho * np.sin(phi)], axis=1)
+
+
+_DISK = _disk_points()
+
+
+def _union_fraction(taus, normals) -> np.ndarray:
+    """Visible fraction of the light behind several straight edges, shape ``(k,)``.
+
+    The light disk seen from the receiver, scaled to unit radius: a light point ``y``
+    is hidden by an edge of normal ``n`` and ``tau = s/d_max`` where ``y.n >= tau`` (one
+    edge alone leaves the disk-segment fraction, the ``"disk"`` falloff).  Every point of
+    :data:`_DISK` hidden by any edge counts as hidden; ``taus[j]`` is nan where the
+    ``j``-th lookup found no edge.
+    """
+    hidden = np.zeros((len(taus[0]), len(_DISK)), dtype=bool)
+    for tau, n in zip(taus, normals, strict=True):
+        ok = ~np.isnan(tau)
+        hidden |= ok[:, None] & (n @ _DISK.T >= np.where(ok, tau, 1.0)[:, None])
+    return 1.0 - hidden.mean(axis=1)

@@ -20,6 +20,8 @@ from shtools.runtime.raster import FRAGMENT_BUDGET
 SEGMENT_PX = 8.0
 #: Offset (pixels) outside an edge where z_far and the post-distortion test look.
 OUTSIDE_PX = 1.5
+#: Relative depth by which a nearer surface must cover a silhouette point to drop its record.
+COVERED_REL = 1e-3
 
 
 @dataclass
@@ -107,6 +109,7 @@ def distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius:
     if not len(a_w):
         return outer, inner
     w_max = st.max_width if st.max_width is not None else st.guard * f
+    near_max = _max_3x3(depth.reshape(R, R)).reshape(-1) if st.drop_covered else None
     a, b, side = (cam.to_camera(face, x) for x in (a_w, b_w, side_w))
     # occluder side from the plane through the light centre and the edge: its trace in
     # the image is the projected edge, and sign(m . p) is the side for any p with z > 0
@@ -210,6 +213,9 @@ def distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius:
         zn = 1.0 / (inv_za[s_] + tc * (inv_zb[s_] - inv_za[s_]))
         rec = (py * R + px, dist, edge_id[s_], exx, eyy, rnx, rny, zn)
         out_side = sd >= 0
+        if near_max is not None:
+            keep = _uncovered(flat, near_max, R, exx, eyy, rnx, rny, zn)
+            rec, out_side = tuple(x[keep] for x in rec), out_side[keep]
         _splat(outer, tuple(x[out_side] for x in rec))
         _splat(inner, tuple(x[~out_side] for x in rec))
     for dm in (outer, inner):  # z_far of the winning records only
@@ -217,6 +223,34 @@ def distortion_maps(cam: LightCamera, face: int, sil, depth: np.ndarray, radius:
         dm.z_far[full] = _z_far(flat, R, dm.e[full, 0], dm.e[full, 1], dm.n[full, 0],
                                 dm.n[full, 1], dm.z_near[full], z_recv)
     return outer, inner
+
+
+def _max_3x3(d: np.ndarray) -> np.ndarray:
+    """Largest depth of each texel's 3 x 3 neighbourhood, shape ``(R, R)`` (edges repeated)."""
+    R0, R1 = d.shape
+    pad = np.pad(d, 1, mode="edge")
+    out = d.copy()
+    for di in range(3):
+        for dj in range(3):
+            np.maximum(out, pad[di:di + R0, dj:dj + R1], out=out)
+    return out
+
+
+def _uncovered(flat, near_max, R, ex, ey, nx, ny, zn) -> np.ndarray:
+    """Records whose silhouette point is a depth discontinuity in the shadow map, ``(k,)`` bool.
+
+    Silhouettes are found on the mesh, not in the image, so some of them cannot bound
+    the shadow: a fold of the far layer of an occluder hidden behind its near layer (no
+    texel within 1 px of the point ``e`` is as deep as the edge: ``near_max < z_near``),
+    and the backward pieces of a tessellated contour that folds on itself in the image,
+    whose normal points into the occluder (the texel ``OUTSIDE_PX`` along the normal is
+    nearer than the edge).  Their quads would win texels as the nearest silhouette over
+    the true outline a few pixels away, and the receivers behind would read umbra
+    (or fail the post-distortion test).  Both tests allow ``COVERED_REL`` of the depth.
+    """
+    lim = zn * (1.0 - COVERED_REL)
+    return ((sample_map(near_max, R, ex, ey) >= lim)
+            & (sample_map(flat, R, ex + OUTSIDE_PX * nx, ey + OUTSIDE_PX * ny) >= lim))
 
 
 def _z_far(flat, R, ex, ey, nx, ny, zn, z_recv) -> np.ndarray:

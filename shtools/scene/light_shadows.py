@@ -8,7 +8,11 @@ keeps existing bakes unchanged):
   gives the visible fraction ``S`` per receiver against the posed blocker
   *meshes*; the light contributes ``color * S * E(N)`` with the closed-form
   unshadowed term :func:`shtools.runtime.shading.sphere_light_unshadowed`.
-  Settings: the light's ``ssoc = { ... }`` table (:class:`SSOCSettings`).
+  Where the camera finds the receiver in penumbra (``0 < S < 1``, or umbra next to
+  a silhouette record), the light is ray-traced instead with ``rays`` strata (:func:`ssoc_radiance`; the spec's
+  Sec. 7.4 hybrid: the camera classifies umbra / lit / penumbra, rays resolve
+  the penumbra, a few per cent of the receivers).  Settings: the light's
+  ``ssoc = { ... }`` table (:class:`SSOCSettings`, plus ``rays``).
 * ``"raytrace"``: the visible, cosine-weighted light ray-traced directly
   (:func:`shtools.reference.light_visible_fraction`, ``samples`` strata per
   receiver) -- the ground truth, and the slow path.
@@ -28,6 +32,7 @@ import numpy as np
 
 from shtools.errors import InputError
 from shtools.scene.shadows import LightShadow, register_light_shadow
+from shtools.scene.specs import PENUMBRA_RAYS
 
 #: Angular radius (radians) below which ``"auto"`` picks the occlusion camera.
 #: ``benchmarks/bench_ssoc.py`` (bunny over a plane): SSOC's radiance error stays
@@ -37,8 +42,11 @@ from shtools.scene.shadows import LightShadow, register_light_shadow
 AUTO_THRESHOLD = 0.3
 #: Strata per receiver of ``shadows = "raytrace"``.
 DEFAULT_SAMPLES = 64
-#: Keys of a light's ``ssoc`` table (fields of SSOCSettings a scene may set).
-SSOC_KEYS = ("resolution", "camera", "guard", "max_steps", "falloff", "filter", "corners")
+#: Keys of a light's ``ssoc`` table (fields of SSOCSettings a scene may set, and ``rays``).
+SSOC_KEYS = ("resolution", "camera", "guard", "max_steps", "falloff", "filter", "corners",
+             "rays")
+#: ``S`` strictly inside (eps, 1 - eps) is penumbra (the 4-tap blend's round-off is far below).
+PENUMBRA_EPS = 1e-6
 
 
 def ssoc_settings(table: dict | None):
@@ -52,12 +60,54 @@ def ssoc_settings(table: dict | None):
     from shtools.runtime.ssoc import SSOCSettings
 
     table = dict(table or {})
+    table.pop("rays", None)  # the scene's (ssoc_rays), not the camera's
     for key in table:
         if key not in SSOC_KEYS:
             close = difflib.get_close_matches(key, SSOC_KEYS, n=1, cutoff=0.6)
             hint = f"did you mean '{close[0]}'?" if close else f"allowed: {', '.join(SSOC_KEYS)}"
             raise InputError(f"unknown key '{key}'; {hint}")
     return SSOCSettings(**table)
+
+
+def ssoc_rays(table: dict | None) -> int:
+    """``rays`` of a light's ``ssoc`` table (:data:`PENUMBRA_RAYS` when unset)."""
+    rays = (table or {}).get("rays")
+    return PENUMBRA_RAYS if rays is None else int(rays)
+
+
+def ssoc_radiance(camera, vertices, meshes, light, points, normals,
+                  rays: int = PENUMBRA_RAYS) -> np.ndarray:
+    """One light's shadowed radiance per unit colour through the occlusion camera, ``(V,)``.
+
+    Parameters
+    ----------
+    camera : shtools.runtime.ssoc.OcclusionCamera
+        Built on the blocker meshes' faces.
+    vertices : list of ndarray, shape (n_i, 3)
+        Posed blocker vertices (the camera's meshes, in order).
+    meshes : list of (vertices, faces), or a RayCaster
+        The same blockers for the rays.
+    light : SphereLight
+    points, normals : ndarray, shape (V, 3)
+    rays : int
+        Strata per receiver the camera finds in penumbra (``0 < S < 1``) or calls umbra
+        next to a silhouette record; 0: the camera alone.
+    """
+    from shtools.runtime.shading import sphere_light_unshadowed
+
+    S = camera.visible_fraction(vertices, light.position, light.radius, points, normals)
+    lit = S * sphere_light_unshadowed(light, points, normals)
+    # penumbra, and umbra inside a penumbra band of the maps: the camera's misread
+    # receivers are mostly umbra next to an edge (a fold just behind, the post-distortion
+    # test); plain shadow-map umbra and lit receivers keep the camera's value
+    pen = np.flatnonzero(((S > PENUMBRA_EPS) & (S < 1.0 - PENUMBRA_EPS))
+                         | ((S <= PENUMBRA_EPS) & camera.last_near_silhouette))
+    if rays and pen.size:
+        from shtools.reference.light_fraction import light_visible_fraction
+
+        lit[pen] = light_visible_fraction(points[pen], normals[pen], meshes, light.position,
+                                          light.radius, n_samples=rays).radiance
+    return lit
 
 
 def angular_radius(position, radius: float, points) -> float:
@@ -95,14 +145,14 @@ class SSOCLight(LightShadow):
             if key not in run.cache:  # adjacency once per topology, per light's settings
                 run.cache[key] = OcclusionCamera([f for _, f in state.blocker_meshes],
                                                  spec.ssoc)
-            S = np.ones(len(state.vertices))
-            if verts:
+            if not verts:
+                lit = sphere_light_unshadowed(light, state.vertices, state.normals)
+            else:
                 try:
-                    S = run.cache[key].visible_fraction(verts, light.position, light.radius,
-                                                        state.vertices, state.normals)
+                    lit = ssoc_radiance(run.cache[key], verts, state.blocker_meshes, light,
+                                        state.vertices, state.normals, spec.ssoc_rays)
                 except InputError as exc:
                     raise _named(index, spec, run, exc) from None
-            lit = S * sphere_light_unshadowed(light, state.vertices, state.normals)
             out += lit[:, None] * light.color[None, :]
         return out
 
@@ -167,5 +217,6 @@ def light_parameters(lights) -> list[dict] | None:
         return None
     return [{"name": spec.name, "shadows": spec.shadows, "samples": spec.samples,
              # a field light has no occlusion-camera settings
-             "ssoc": None if spec.ssoc is None else dataclasses.asdict(spec.ssoc)}
+             "ssoc": None if spec.ssoc is None else dataclasses.asdict(spec.ssoc),
+             "ssoc_rays": spec.ssoc_rays}
             for spec in lights]

@@ -33,7 +33,7 @@ from shtools.runtime.settings import ShadowSettings, Unit, setting
 from shtools.runtime.settings import scene_fields as _scene_fields
 from shtools.scene import schema
 from shtools.scene.kinds import BLOCKER_KINDS, bake_method_names
-from shtools.scene.light_shadows import ssoc_settings
+from shtools.scene.light_shadows import ssoc_rays, ssoc_settings
 from shtools.scene.schema import GLTF_SUFFIXES, IMAGE_SUFFIXES, MESH_SUFFIXES
 from shtools.scene.skinned_visibility import SKINNED_DIRECTIONS
 from shtools.scene.specs import (
@@ -342,11 +342,13 @@ def _light(t: schema.Light, index: int, settings: Settings, ctx: _Ctx,
     if t.keyframes is not None:
         keys = [key_of(_key_time(k, settings.fps), k, first) for k in t.keyframes]
         keys = _sorted_keys(keys, ctx.sub("keyframes"))
+    table = None if t.ssoc is None else t.ssoc.settings()
     try:
-        ssoc = ssoc_settings(None if t.ssoc is None else t.ssoc.settings())
+        ssoc = ssoc_settings(table)
     except InputError as exc:
         raise ctx.sub("ssoc").error(exc.message) from None
-    return SphereLightSpec(str(name), keys, t.loop, t.shadows, t.samples, ssoc)
+    return SphereLightSpec(str(name), keys, t.loop, t.shadows, t.samples, ssoc,
+                           ssoc_rays=ssoc_rays(table))
 
 
 # --------------------------------------------------------------------------- entry points

@@ -411,6 +411,8 @@ class SSOCTable(Table):
     falloff: choice(_ssoc_choices("FALLOFFS")) | None = None
     filter: StrictBool | None = None
     corners: choice(_ssoc_choices("CORNERS")) | None = None
+    #: strata per receiver the camera finds in penumbra (0: the camera alone)
+    rays: Annotated[int, Field(strict=True, ge=0, le=65536)] | None = None
 
     def settings(self) -> dict:
         """The keys the scene set, as :class:`SSOCSettings` keywords."""

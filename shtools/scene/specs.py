@@ -14,6 +14,14 @@ from typing import Any
 
 import numpy as np
 
+#: Strata per receiver that ``shadows = "ssoc"`` traces where the occlusion camera finds
+#: penumbra (0: none; :func:`shtools.scene.light_shadows.ssoc_radiance`).
+#: ``benchmarks/bench_ssoc.py`` (docs/ssoc.md): on the bunny's dark ground 4.7-5.5 %
+#: against 7.3-12.2 % for the camera alone (64-ray tracing of every receiver 3.7-4.3 %),
+#: at 1.1-1.5x the camera's time; 256 rays: 1.6-3.4 %, but 2-3x the camera's time on
+#: 100k receivers (the bunny's own vertices are penumbra too), close to tracing all.
+PENUMBRA_RAYS = 64
+
 
 @dataclass
 class BlockerSpec:
@@ -128,6 +136,8 @@ class SphereLightSpec:
     samples: int = 64
     #: ``SSOCSettings`` of ``shadows = "ssoc"``/``"auto"`` (None: the defaults)
     ssoc: Any = None
+    #: strata per penumbra receiver of ``"ssoc"``/``"auto"`` (``ssoc.rays``; light_shadows)
+    ssoc_rays: int = PENUMBRA_RAYS
     #: a field light: its ``srf`` asset (``shadows`` is then ``"field"`` or
     #: ``"field-shexp"``, :mod:`shtools.scene.field_light`) ...
     srf: Path | None = None

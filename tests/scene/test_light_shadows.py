@@ -74,6 +74,48 @@ def test_ssoc_bake_matches_the_raytraced_light(tmp_path):
     assert ssoc[under, 0] < 1e-6 < truth.max()
 
 
+def test_rays_in_the_cameras_penumbra_approach_ray_tracing():
+    """The ``ssoc`` light's hybrid: the camera classifies, rays resolve its penumbra."""
+    from shtools.runtime.ssoc import OcclusionCamera
+    from shtools.scene.light_shadows import ssoc_radiance
+
+    blob = trimesh.creation.icosphere(4)
+    blob.vertices *= 1.0 + 0.15 * np.sin(4 * blob.vertices[:, :1])
+    blob.apply_translation([0.0, 1.2, 0.0])
+    x = np.linspace(-1.5, 1.5, 73)
+    X, Z = np.meshgrid(x, x, indexing="ij")
+    pts = np.stack([X.ravel(), np.zeros(X.size), Z.ravel()], axis=1)
+    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    light = SphereLight([1.5, 1.6 + 1.2, 0.8], 0.12, [1.0, 1.0, 1.0])
+    ref = light_visible_fraction(pts, nrm, [blob], light.position, light.radius,
+                                 n_samples=1024, seed=1)
+    dark = ref.fraction < 0.98
+    cam = OcclusionCamera([blob.faces])
+    meshes = [(blob.vertices, blob.faces)]
+
+    def rel(lit):
+        return float(np.sqrt(np.mean((lit[dark] - ref.radiance[dark]) ** 2)
+                             / np.mean(ref.radiance[dark] ** 2)))
+
+    camera_alone = rel(ssoc_radiance(cam, [blob.vertices], meshes, light, pts, nrm, 0))
+    rays256 = rel(ssoc_radiance(cam, [blob.vertices], meshes, light, pts, nrm, 256))
+    default = rel(ssoc_radiance(cam, [blob.vertices], meshes, light, pts, nrm))
+    rt64 = rel(light_visible_fraction(pts, nrm, [blob], light.position, light.radius,
+                                      n_samples=64, seed=7).radiance)
+    # over the receivers that see < 98 % of the light (relative radiance RMSE): rays
+    # replace the camera's structured error where it finds penumbra, so the hybrid
+    # carries the rays' stratification noise there and the camera's error on the
+    # receivers it calls umbra or lit.  256 strata have about a third of 64 strata's
+    # noise on a smooth-edged penumbra (stratified error ~ N^-3/4): better than both
+    # (measured 1.8 % camera alone, 1.4 % with 256 rays, 3.7 % 64-ray tracing).  The
+    # default 64 rays sit at 64-ray tracing's noise, worse than the camera on this
+    # smooth blob (measured 5.0 %); bound: 1.5x 64-ray tracing, whose one jitter
+    # pattern shared by all receivers (another seed here) makes its error vary by pattern
+    assert rays256 < 0.85 * camera_alone, (rays256, camera_alone)
+    assert rays256 < 0.6 * rt64, (rays256, rt64)
+    assert default <= 1.5 * rt64, (default, rt64)
+
+
 def test_auto_picks_by_angular_radius(tmp_path):
     from shtools.scene.bake import pose_frame, prepare_scene
     from shtools.scene.shadows import LIGHT_SHADOWS, BakeRun
