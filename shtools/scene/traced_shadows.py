@@ -188,13 +188,16 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
         d = dirs[lo:hi]
         # directions of the set inside the cone and above the tangent plane
         take = (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
-        vi, qi = np.nonzero(take)
-        if not vi.size:
+        flat = np.flatnonzero(take)
+        if not flat.size:
             continue
-        blocked = caster.occluded_embree(origins[start + vi], d[qi])
-        hits = np.zeros(take.shape, dtype=np.float32)
-        hits[vi[blocked], qi[blocked]] = 1.0
-        g[start:stop] -= hits @ proj[lo:hi]
+        vi, qi = np.divmod(flat, take.shape[1])
+        # np.take gathers rows several times faster than fancy indexing
+        blocked = caster.occluded_embree(np.take(origins, start + vi, axis=0),
+                                         np.take(d, qi, axis=0))
+        hits = np.zeros(take.size, dtype=np.float32)
+        hits[flat[blocked]] = 1.0
+        g[start:stop] -= hits.reshape(take.shape) @ proj[lo:hi]
     return g
 
 
