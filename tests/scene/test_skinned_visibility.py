@@ -73,3 +73,50 @@ def test_strata_cut_the_set():
     _, first4, cell4, _ = strata(4)  # too few to cut: every point is cast first
     np.testing.assert_array_equal(first4, np.arange(4))
     np.testing.assert_array_equal(cell4, np.arange(4))
+
+
+class _Counting:
+    """A caster that counts the rays cast through it."""
+
+    def __init__(self, caster):
+        self.caster, self.rays = caster, 0
+        self.diagonal = caster.diagonal
+
+    def embree_points(self, points):
+        return self.caster.embree_points(points)
+
+    def occluded_embree(self, origins, directions):
+        self.rays += len(origins)
+        return self.caster.occluded_embree(origins, directions)
+
+
+def test_legs_side_by_side_and_buried_in_a_hip():
+    """One mesh of two capsules 3 cm apart with their tops inside a third (a posed
+    character's legs and hip, interpenetrating as skinned parts do): the shadows
+    between the legs and the buried vertices, against the ray tracer of that mesh.
+    The strata cast only where the first rays (or a neighbour's) found the mesh: less
+    than half the rays of the whole set on every vertex, at about its error."""
+    parts = []
+    for z in (-0.1, 0.1):
+        leg = trimesh.creation.capsule(height=0.55, radius=0.085, count=[16, 16])
+        leg.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
+        leg.apply_translation([0.0, -0.36, z])
+        parts.append(leg)
+    hip = trimesh.creation.capsule(height=0.3, radius=0.17, count=[20, 20])
+    hip.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
+    mesh = trimesh.util.concatenate([*parts, hip])
+    v, f, n = (np.asarray(a) for a in (mesh.vertices, mesh.faces, mesh.vertex_normals))
+    ref = raytrace_visibility(v, n, [mesh], 4, 3200)
+    shadowed = ref[:, 0] < 0.98 * math.sqrt(4 * math.pi)
+    assert shadowed.mean() > 0.2  # between the legs, under the hip, and inside it
+    caster = _Counting(posed_caster(v, f))
+    g = adaptive_self_visibility(v, n, f, caster, 4, SKINNED_DIRECTIONS)
+    whole = hemisphere_visibility(v, n, caster.caster, 4, n_dirs=SKINNED_DIRECTIONS)
+    # quadrature against 3,200 directions: measured 2.1 % of the SH vector, 2.1 % with
+    # the 112 rays on every vertex
+    err, err_whole = _error(g, ref, shadowed), _error(whole, ref, shadowed)
+    assert err < 0.03, err
+    assert err < 1.2 * err_whole, (err, err_whole)
+    # measured 53 rays a vertex (the two passes of two sets that cast the whole second
+    # set on every vertex of the second pass: 70)
+    assert caster.rays < 0.55 * SKINNED_DIRECTIONS * len(v), caster.rays / len(v)
