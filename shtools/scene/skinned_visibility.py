@@ -45,9 +45,9 @@ from shtools.sh.basis import SQRT_4PI
 #: Rays per vertex of a skinned object's posed mesh where it shadows itself in every
 #: direction (the ``self_visibility_directions`` default; a vertex casts those of the
 #: strata the mesh may be in): the error over CesiumMan's own shadowed vertices is
-#: 3.1 % (``benchmarks/bench_look.py``).
-SKINNED_DIRECTIONS = 128
-#: Every this-th point of a vertex's set is cast first, one per stratum (15 of 128; at
+#: 3.3 % (``benchmarks/bench_look.py``).
+SKINNED_DIRECTIONS = 120
+#: Every this-th point of a vertex's set is cast first, one per stratum (14 of 120; at
 #: least :data:`FIRST_MIN` points, when the set has that many).
 FIRST_STRIDE = 9
 FIRST_MIN = 4
