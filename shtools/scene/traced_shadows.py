@@ -22,6 +22,12 @@ direction enters the cone where it grazes the bounding sphere, unblocked, and
 neighbouring receivers sample the same directions, so their estimates differ
 only as the mesh's silhouette crosses them (no per-vertex pattern, no frame
 that flips over the ground).  The basis is evaluated once per set, not per ray.
+Object receivers (:mod:`shtools.scene.contact_shadows`), whose cones the meshes
+touching them fill, cast the set in strata: every :data:`COARSE_STRIDE`-th direction
+first, the rest only in the strata where a first ray of the receiver or of a
+neighbouring receiver was blocked, and next to them (on the ground, where the
+silhouette is thin in a wide cone, the strata missed it: 2.0 % instead of 1.5 % over
+CesiumMan's shadow, and no faster).
 
 **A surface filter of the traced visibility** (:func:`surface_filter`).  A
 silhouette crossing a direction is still a step of ``4π / 2n`` in the
