@@ -169,7 +169,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         # the other objects' real meshes on each object receiver near them (contact)
         n_contact = contact_directions(st.traced_shadow_directions)
         selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
-                                                lights, n_dirs=n_contact)
+                                                lights, n_dirs=n_contact, strata=True)
                                  for receivers, c in contact_casters(parts, n_contact))
                      if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
@@ -211,7 +211,7 @@ def pose_lights(scene, t: float) -> list:
 
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
-                   lights=(), n_dirs: int | None = None):
+                   lights=(), n_dirs: int | None = None, strata: bool = False):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -238,7 +238,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                       n_dirs or st.traced_shadow_directions,
                                       spheres=_bounding_spheres(own),
                                       lights=[(x.position, x.radius) for x in lights
-                                              if isinstance(x, SphereLight)])
+                                              if isinstance(x, SphereLight)], strata=strata)
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)
