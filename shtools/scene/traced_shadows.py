@@ -45,7 +45,10 @@ filter finds no neighbour and the steps stay; there the receiver is traced with 
 set ``REFINE_FACTOR`` times denser (:func:`refine_weights`: blended in as the
 filter's width falls from one receiver spacing to half of it, so no seam where the
 density changes).  Only receivers in the shadow near the object qualify, a few
-hundred on a coarse ground, none on most of a dense one.
+hundred on a coarse ground, none on most of a dense one.  A still object over
+still receivers, traced once per bake (the kept result, :data:`_GROUND`), gets
+the denser set on its whole shadow: every receiver with a blocked ray of the
+shared set at or around it, which costs the set-up frame only.
 
 **A per-vertex hand-over to the spheres** (:func:`handover_weights`).  The
 cone's expected ray count ``k = n_dirs (1 - cos θ)`` decides: beyond
@@ -398,7 +401,7 @@ def surface_filter(values, width, idx, dist) -> np.ndarray:
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  spheres=None, lights=(), strata: bool = False
+                  spheres=None, lights=(), strata: bool = False, still: bool = False
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
@@ -425,6 +428,10 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     strata : bool
         Cast the set in strata (``around`` of :func:`set_visibility`: the receivers'
         neighbours share what their first rays found).
+    still : bool
+        The object and the receivers never move (traced once per bake, the result
+        kept): the whole shadow is traced with the denser set (:func:`refine_weights`
+        gives weight 1 to every receiver with a blocked ray around it).
 
     Returns
     -------
@@ -438,7 +445,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     from shtools.geometry.visibility import bounding_cones
 
     key = (caster, points, normals, vertices, faces, order, n_dirs, spheres, tuple(lights),
-           strata)
+           strata, bool(still))
     kept = _kept_ground(key)
     if kept is not None:  # a static object over static receivers: the last frame's result
         return kept
@@ -474,7 +481,8 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         else:
             near = nearest_distance(p[at], v, faces, caster)
         width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
-        fine = refine_weights(width, receiver_spacing(idx[at], dist[at]))
+        fine = (np.ones(len(at)) if still
+                else refine_weights(width, receiver_spacing(idx[at], dist[at])))
         sparse = np.flatnonzero(fine > 0)
         if sparse.size:  # too few neighbours inside the filter: the denser set there
             rs = rows[busy[sparse]]
