@@ -234,7 +234,8 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     ``(R,)``, ``(R, 3)``, ``(R, 3)`` (or of one object receiver, for contact shadows);
     ``n_dirs`` the rays of a cone filling the hemisphere (default
     ``traced_shadow_directions``); ``still`` when the object and the receivers never
-    move (its whole shadow traced with the denser set, once per bake); returns None when none is within the object's reach."""
+    move (its whole shadow traced with the denser set, once per bake); returns None
+    when none is within the object's reach."""
     from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
     from shtools.scene.traced_shadows import traced_ground
 
