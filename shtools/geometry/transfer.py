@@ -101,6 +101,24 @@ def spatial_order(points) -> np.ndarray:
     return np.argsort(code, kind="stable")
 
 
+def _world_projector(order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes ``(K, 3)`` of a product rule of degree ``2(n - 1)`` and their projection
+    ``(K, n*n)``: :func:`_to_world`'s quadrature (exact for products of two order-``n``
+    functions)."""
+    nodes, weights = sphere_quadrature(2 * (order - 1))
+    return nodes, basis(nodes, order) * weights[:, None]
+
+
+def _to_world(frames, b_local, nodes, node_proj, order: int) -> np.ndarray:
+    """Tangent-frame SH vectors ``b_local (v, n*n)`` in the world frame, ``(v, n*n)``.
+
+    ``b(F_v s)`` sampled at the world nodes ``s`` (``frames (v, 3, 3)``, rows t1, t2, N:
+    a world node's local coordinates are ``F_v s``) and projected.
+    """
+    at_nodes = basis(np.einsum("vij,kj->vki", frames, nodes), order)  # (v, K, n*n)
+    return np.einsum("vkj,vj->vk", at_nodes, b_local) @ node_proj
+
+
 def hemisphere_transfer_visibility(points, normals, caster, order: int, *,
                                    n_dirs: int = TRANSFER_DIRECTIONS,
                                    offset: float | None = None) -> np.ndarray:
@@ -140,8 +158,7 @@ def hemisphere_transfer_visibility(points, normals, caster, order: int, *,
     local64 = hemisphere_directions(n)
     local = local64.astype(np.float32)
     yw = basis(local64, order) * (2.0 * math.pi / n)  # (Q, n*n)
-    nodes, weights = sphere_quadrature(2 * (order - 1))
-    node_proj = basis(nodes, order) * weights[:, None]  # (K, n*n)
+    nodes, node_proj = _world_projector(order)
     if offset is None:
         offset = RAY_OFFSET * caster.diagonal
     g = np.zeros((p.shape[0], order * order))
@@ -157,9 +174,7 @@ def hemisphere_transfer_visibility(points, normals, caster, order: int, *,
         blocked = caster.occluded_embree(np.repeat(origins, n, axis=0),
                                          np.ascontiguousarray(dirs.reshape(-1, 3)))
         b_local = blocked.reshape(rows.size, n).astype(np.float64) @ yw  # (v, n*n)
-        # world node s has local coordinates F_v s (rows of F_v: t1, t2, N)
-        at_nodes = basis(np.einsum("vij,kj->vki", frames, nodes), order)  # (v, K, n*n)
-        g[rows] -= np.einsum("vkj,vj->vk", at_nodes, b_local) @ node_proj
+        g[rows] -= _to_world(frames, b_local, nodes, node_proj, order)
     return g
 
 
@@ -258,8 +273,7 @@ def refined_transfer_visibility(points, normals, caster, order: int, *,
     y_dense = basis(dense, order) * (2.0 * math.pi / dense.shape[0])  # (M, n*n)
     y_cell = np.zeros((first.shape[0], order * order))
     np.add.at(y_cell, cell, y_dense)  # each first direction stands for its cell
-    nodes, weights = sphere_quadrature(2 * (order - 1))
-    node_proj = basis(nodes, order) * weights[:, None]  # (K, n*n)
+    nodes, node_proj = _world_projector(order)
     if offset is None:
         offset = RAY_OFFSET * caster.diagonal
     g = np.zeros((p.shape[0], order * order))
@@ -299,8 +313,7 @@ def refined_transfer_visibility(points, normals, caster, order: int, *,
             sign = np.where(refined[change], 1.0, -1.0)
             b_local += sp.csr_matrix((sign, (rv[change], di[change])),
                                      shape=(rows.size, dense.shape[0])) @ y_dense
-        at_nodes = basis(np.einsum("vij,kj->vki", frames, nodes), order)  # (v, K, n*n)
-        g[rows] -= np.einsum("vkj,vj->vk", at_nodes, b_local) @ node_proj
+        g[rows] -= _to_world(frames, b_local, nodes, node_proj, order)
     return g
 
 

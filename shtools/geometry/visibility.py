@@ -179,6 +179,40 @@ def hemisphere_directions(n_dirs: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
+def cut_into_strata(directions, stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A direction set cut into strata about every ``stride``-th direction.
+
+    A direction's **stratum** is the nearest of those (largest cosine, first of ties);
+    two strata **touch** where a direction of one has the other's point second nearest.
+    Rays cast first on the strata's points, then only in the strata (and those
+    touching them) where a first ray was blocked, sample the whole set where a
+    shadow may be (skinned self-visibility, contact shadows).
+
+    Parameters
+    ----------
+    directions : ndarray, shape (n, 3)
+        Unit directions.
+    stride : int
+        Every this-th direction is a stratum's point.
+
+    Returns
+    -------
+    first : ndarray of int, shape (K,)
+        The strata's points (indices into ``directions``).
+    cell : ndarray of int, shape (n,)
+        The stratum of each direction.
+    touching : ndarray, shape (K, K) float32
+        1 where two strata touch or are the same.
+    """
+    first = np.arange(0, len(directions), int(stride))
+    near = np.argsort(-(directions @ directions[first].T), axis=1, kind="stable")
+    cell = near[:, 0].copy()
+    touching = np.eye(len(first), dtype=np.float32)
+    if len(first) > 1:
+        touching[cell, near[:, 1]] = touching[near[:, 1], cell] = 1.0
+    return first, cell, touching
+
+
 def tangent_frames(normals) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents ``(V, 3)`` each completing unit normals to a right-handed frame.
 

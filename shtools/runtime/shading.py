@@ -433,8 +433,8 @@ def shading_matrix(points, normals, env_sh=None, sphere_lights=(), *, order: int
     transfer = np.asarray(cosine_transfer(normals, order) if transfer is None else transfer,
                           dtype=np.float32)
     K = np.zeros((transfer.shape[0], 3, size), np.float32)
-    ops = QuadratureProducts(order, np.float32)
     if env_sh is not None and np.ndim(env_sh) == 3:  # per vertex: (H * g_w) . (win L_v)
+        ops = QuadratureProducts(order, np.float32)
         env = np.asarray(env_sh, dtype=np.float32)
         env_n = np.zeros((env.shape[0], size, 3), np.float32)
         env_n[:, :min(size, env.shape[1])] = env[:, :size]
@@ -442,14 +442,8 @@ def shading_matrix(points, normals, env_sh=None, sphere_lights=(), *, order: int
             K[:, c] = ops.product(transfer, env_n[:, :, c] * win32)
     elif env_sh is not None:
         K += lit_transfer(transfer, environment_matrices(env_sh, order, window_kind, window_h))
-    if sphere_lights:  # per light (H * g_w) . w with w = y(axis) x the windowed zonal cap
-        scale = np.sqrt(4.0 * np.pi / (2.0 * np.arange(order) + 1.0))
-        zonal_win = (scale * win[np.arange(order) ** 2 + np.arange(order)]).astype(np.float32)
-        points = np.asarray(points)
-        for light in sphere_lights:
-            zh, y = sphere_light_terms(light, points, order)
-            shadowed = ops.product(transfer, y * (zh * zonal_win)[:, band_of(order)])
-            K += shadowed[:, None, :] * np.asarray(light.color, np.float32)[None, :, None]
+    if sphere_lights:  # the lights' lit transfer, as shade() dots it with g_w
+        K += sphere_light_transfer(sphere_lights, np.asarray(points), transfer, order, win)
     K *= win32
     return K
 

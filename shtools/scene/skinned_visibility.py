@@ -90,15 +90,10 @@ def strata(n_dirs: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
         1 where two strata touch (a point of one has the other's first point second
         nearest) or are the same.
     """
-    from shtools.geometry.visibility import hemisphere_directions
+    from shtools.geometry.visibility import cut_into_strata, hemisphere_directions
 
     local = hemisphere_directions(int(n_dirs))
-    first = np.arange(0, len(local), first_stride(n_dirs))
-    near = np.argsort(-(local @ local[first].T), axis=1, kind="stable")
-    cell = near[:, 0]
-    touching = np.eye(len(first), dtype=np.float32)
-    if len(first) > 1:
-        touching[cell, near[:, 1]] = touching[near[:, 1], cell] = 1.0
+    first, cell, touching = cut_into_strata(local, first_stride(n_dirs))
     out = (local.astype(np.float32), first, cell, touching)
     for a in out:
         a.setflags(write=False)

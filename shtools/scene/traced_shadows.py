@@ -271,14 +271,12 @@ def set_strata(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     :data:`COARSE_STRIDE`-th: ``(n,)`` bool of those, the stratum ``(n,)`` of each
     direction (its nearest of them) and ``(S, S)`` float32 1 where two strata touch (a
     direction of one has the other's first second nearest) or are the same."""
-    dirs = world_directions(n)
-    first = np.arange(0, n, COARSE_STRIDE)
-    near = np.argsort(-(dirs @ dirs[first].T), axis=1, kind="stable")
+    from shtools.geometry.visibility import cut_into_strata
+
+    first, cell, touching = cut_into_strata(world_directions(n), COARSE_STRIDE)
     coarse = np.zeros(n, dtype=bool)
     coarse[first] = True
-    touching = np.eye(len(first), dtype=np.float32)
-    touching[near[:, 0], near[:, 1]] = touching[near[:, 1], near[:, 0]] = 1.0
-    out = (coarse, near[:, 0].copy(), touching)
+    out = (coarse, cell, touching)
     for x in out:
         x.setflags(write=False)
     return out
