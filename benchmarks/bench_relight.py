@@ -10,10 +10,12 @@ then puts it under a warmer sky turned 90 degrees about +Y, side by side:
 * the same bake with a warm set-up cache (:mod:`shtools.cache`: the first bake
   filled it);
 * a relight of the first bake (the scene's lamp kept, through the stored
-  visibility), from Python and as the whole ``shtools relight`` command (a new
-  process: its start and imports included, its modules' bytecode compiled
-  beforehand as an installed package's is); and the command without
-  ``--lights`` (the environment alone: the scene parser is not imported).
+  visibility, read from the bake: ``--lights`` names the scene it was baked from),
+  from Python and as the whole ``shtools relight`` command (a new process: its
+  start and imports included, its modules' bytecode compiled beforehand as an
+  installed package's is); the command without ``--lights`` (the environment
+  alone); and the command with ``--lights`` of a copy of the scene with one more
+  comment line (other bytes: the scene is parsed, as for an older bake).
 
 Reports the times, the ratios and how far the radiances differ.
 
@@ -101,6 +103,19 @@ def main() -> None:
             subprocess.run(plain, check=True, stdout=subprocess.DEVNULL, env=env)
             env_runs.append(time.perf_counter() - start)
         env_s = float(np.median(env_runs))
+        # the same lamp from a scene of other bytes: parsed (pydantic, every kind)
+        copy = demo / "scene_copy.toml"
+        copy.write_text(scene.read_text() + "\n# a copy: other bytes, the same lights\n")
+        parsed = [*command[:command.index("--lights") + 1], str(copy), "-o",
+                  str(demo / "relit_parsed.h5")]
+        parsed_runs = []
+        for _ in range(RELIGHT_RUNS):
+            start = time.perf_counter()
+            subprocess.run(parsed, check=True, stdout=subprocess.DEVNULL, env=env)
+            parsed_runs.append(time.perf_counter() - start)
+        parsed_s = float(np.median(parsed_runs))
+        same_parsed = np.array_equal(read_bake(demo / "relit_parsed.h5").radiance,
+                                     read_bake(demo / "relit_cli.h5").radiance)
         same_bytes = (demo / "relit_cli.h5").read_bytes() == (demo / "relit.h5").read_bytes()
 
         fresh = read_bake(demo / "b.h5").radiance
@@ -128,12 +143,18 @@ def main() -> None:
         print(f"| `shtools relight` command (process start and imports too; median of "
               f"{RELIGHT_RUNS}: {min(cli_runs):.2f}-{max(cli_runs):.2f} s) | {cli_s:.2f} | "
               f"{1000 * cli_s / frames:.1f} |")
-        print(f"| `shtools relight` command without `--lights` (the environment only: no "
-              f"scene parser; median of {RELIGHT_RUNS}: {min(env_runs):.2f}-"
+        print(f"| `shtools relight` command without `--lights` (the environment only; "
+              f"median of {RELIGHT_RUNS}: {min(env_runs):.2f}-"
               f"{max(env_runs):.2f} s) | {env_s:.2f} | {1000 * env_s / frames:.1f} |")
+        print(f"| `shtools relight` command, the lamp from a copy of the scene (parsed; "
+              f"median of {RELIGHT_RUNS}: {min(parsed_runs):.2f}-{max(parsed_runs):.2f} s) "
+              f"| {parsed_s:.2f} | {1000 * parsed_s / frames:.1f} |")
         print(f"\nthe `shtools relight` command is {bake_s / cli_s:.1f}x faster than the bake "
               f"without a cache (target >= 20x), {warm_s / cli_s:.1f}x the bake with a warm "
-              f"cache; relight() from Python {bake_s / relight_s:.1f}x / "
+              f"cache; without `--lights` {bake_s / env_s:.1f}x / {warm_s / env_s:.1f}x; "
+              f"the lamp parsed {bake_s / parsed_s:.1f}x / {warm_s / parsed_s:.1f}x "
+              f"({'the same' if same_parsed else 'NOT the same'} radiance); "
+              f"relight() from Python {bake_s / relight_s:.1f}x / "
               f"{warm_s / relight_s:.1f}x; load average "
               f"{os.getloadavg()[0]:.1f} at the end; the command's output "
               f"is {'byte-identical to' if same_bytes else 'NOT the same bytes as'} "

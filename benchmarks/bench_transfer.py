@@ -7,8 +7,12 @@ committed), at the default accumulation order 6:
   estimator at :data:`~shtools.geometry.visibility.DEFAULT_DIRECTIONS`
   (3,200 Gauss-Legendre x uniform directions over the sphere, about half of them
   above each vertex's tangent plane and cast);
-* **hemisphere** -- :func:`~shtools.geometry.transfer.hemisphere_transfer`'s,
-  N spherical Fibonacci rays over each vertex's own hemisphere, every one cast;
+* **hemisphere** -- N spherical Fibonacci rays over each vertex's own hemisphere,
+  every one cast (:func:`~shtools.geometry.transfer.hemisphere_transfer_visibility`);
+* **refined** -- :func:`~shtools.geometry.transfer.hemisphere_transfer`'s default:
+  the first rays, then the dense set's directions in the cells where they disagree
+  with a neighbour (:func:`~shtools.geometry.transfer.refined_transfer_visibility`;
+  "rays" is dense / first, the CPU column says what it casts);
 
 both against the product rule at 51,200 directions.  Errors (relative RMSE over
 the subset): the order-6 visibility coefficients, the cosine-weighted visibility
@@ -77,17 +81,25 @@ def evaluate(name: str, rays, subset: int) -> list[dict]:
         lambda: sv.self_visibility(p, n, mesh, ORDER, n_dirs=sv.DEFAULT_DIRECTIONS))
     for k in rays:
         row("hemisphere", k, lambda k=k: _hemisphere_rows(mesh, n, rows, k))
+    from shtools.geometry.transfer import FIRST_DIRECTIONS, TRANSFER_DIRECTIONS
+
+    row("refined", f"{TRANSFER_DIRECTIONS}/{FIRST_DIRECTIONS}",
+        lambda: _hemisphere_rows(mesh, n, rows, TRANSFER_DIRECTIONS, refined=True))
     return out
 
 
-def _hemisphere_rows(mesh, normals, rows, n_rays: int) -> np.ndarray:
-    """:func:`hemisphere_transfer`'s visibility at ``rows`` only (same caster and offset)."""
+def _hemisphere_rows(mesh, normals, rows, n_rays: int, refined: bool = False) -> np.ndarray:
+    """:func:`hemisphere_transfer`'s visibility at ``rows`` only (same caster and offset),
+    in one pass or ``refined`` from the first rays."""
     from shtools.geometry.raycast import RayCaster
-    from shtools.geometry.transfer import hemisphere_transfer_visibility
+    from shtools.geometry.transfer import (
+        hemisphere_transfer_visibility,
+        refined_transfer_visibility,
+    )
 
     caster = RayCaster(np.asarray(mesh.vertices), np.asarray(mesh.faces), robust=False)
-    return hemisphere_transfer_visibility(np.asarray(mesh.vertices)[rows], normals, caster,
-                                          ORDER, n_dirs=n_rays)
+    estimate = refined_transfer_visibility if refined else hemisphere_transfer_visibility
+    return estimate(np.asarray(mesh.vertices)[rows], normals, caster, ORDER, n_dirs=n_rays)
 
 
 def _markdown(rows: list[dict]) -> str:

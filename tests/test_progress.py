@@ -115,3 +115,49 @@ def test_silent_progress_counts_like_tqdm():
     bar.update(min(4, bar.total) - bar.n)  # the sphere fit's idiom
     assert bar.n == 4
     bar.close()
+
+
+def test_deferred_progress_shows_only_stages_longer_than_its_delay():
+    """A stage shorter than the delay never makes the real bar; a longer one makes it at
+    the first update past the delay, with the count, total and postfix so far, and
+    forwards the rest."""
+    from shtools.progress import Deferred
+
+    made = []
+
+    class Bar:
+        def __init__(self, **kwargs):
+            self.kwargs, self.n, self.postfix, self.closed = kwargs, 0, None, False
+            made.append(self)
+
+        def update(self, n=1):
+            self.n += n
+
+        def set_postfix(self, *args, **kwargs):
+            self.postfix = kwargs
+
+        def close(self):
+            self.closed = True
+
+        def __exit__(self, *exc):
+            self.close()
+            return False
+
+    now = [0.0]
+    clock = lambda: now[0]  # noqa: E731  seconds of a stage, set by the test
+    with Deferred(Bar, 1.0, total=10, desc="relight", unit="frames", clock=clock) as short:
+        now[0] = 0.9
+        short.update(10)
+    assert made == [] and short.n == 10
+    now[0] = 0.0
+    with Deferred(Bar, 1.0, total=10, desc="relight", unit="frames", clock=clock) as long:
+        now[0] = 1.0
+        long.update(3)
+        long.set_postfix(E=0.5)
+        now[0] = 1.5
+        long.update(4)
+        assert len(made) == 1  # once only
+        long.update(3)
+    bar, = made
+    assert bar.kwargs == {"total": 10, "desc": "relight", "unit": "frames"}
+    assert bar.n == 10 and bar.postfix == {"E": 0.5} and bar.closed

@@ -14,6 +14,10 @@ from shtools.cli._common import (
 )
 from shtools.cli._limits import force_option
 
+#: Seconds a relight runs before its progress shows: most take less (a bar would only
+#: flicker), and the bar's import (tqdm) costs more than relighting a small bake.
+PROGRESS_AFTER = 1.0
+
 
 @click.command("relight")
 @click.argument("baked", type=click.Path(dir_okay=False))
@@ -47,21 +51,30 @@ def relight(baked, light, rotate, scene, compress, keep_visibility, output, forc
     the output has the environment only.
     """
     from shtools.cli._outputs import guard_outputs
+    from shtools.progress import deferred
     from shtools.scene.relight import relight as relight_bake
-    from shtools.scene.relight import scene_lights
 
     guard_outputs({"-o": output}, [baked, light, scene])
     if scene is not None:  # nor any file the scene names (a mesh, a light's field)
-        from shtools.scene.prepare import scene_files
-        from shtools.scene.scene import load_scene
+        from shtools.scene.light_record import bake_own_lights
 
-        scene = load_scene(scene)
-        guard_outputs({"-o": output}, scene_files(scene))
-        scene = scene_lights(scene)  # lights relighting can add: checked before any work
+        own = bake_own_lights(baked, scene)  # the bake's own scene: no parser
+        if own is not None:
+            own.check_output(output)
+            scene = own
+        else:
+            from shtools.scene.light_record import scene_lights
+            from shtools.scene.prepare import scene_files
+            from shtools.scene.scene import load_scene
+
+            scene = load_scene(scene)
+            guard_outputs({"-o": output}, scene_files(scene))
+            scene = scene_lights(scene)  # lights relighting can add: checked before any work
     _check_memory(baked, force)
     summary = relight_bake(baked, light, output, rotate=rotate, scene=scene,
                            compression="gzip" if compress else None,
-                           keep_visibility=keep_visibility, progress=progress)
+                           keep_visibility=keep_visibility,
+                           progress=deferred(progress, PROGRESS_AFTER))
     lights = f" + {summary['lights']} spherical light(s)" if summary["lights"] else ""
     report(summary, as_json,
            f"relit {summary['frames']} frame(s) x {summary['vertices']} vertices{lights} "

@@ -16,8 +16,6 @@ import hashlib
 import json
 import os
 import re
-import secrets
-import socket
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -182,7 +180,13 @@ def _json_default(o):
 
 def _host() -> str:
     """This machine's name as it appears in temporary names (no dots or slashes)."""
-    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname())[:32] or "host"
+    if hasattr(os, "uname"):  # socket.gethostname()'s answer, without importing socket
+        name = os.uname().nodename
+    else:  # Windows
+        import socket
+
+        name = socket.gethostname()
+    return re.sub(r"[^A-Za-z0-9_-]", "_", name)[:32] or "host"
 
 
 def temporary_prefix(target: str | os.PathLike) -> str:
@@ -254,7 +258,7 @@ def _create_temporary(directory: Path, name: str) -> Path:
     """
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
     for _ in range(100):
-        path = directory / f"{temporary_prefix(name)}{secrets.token_hex(4)}.tmp"
+        path = directory / f"{temporary_prefix(name)}{os.urandom(4).hex()}.tmp"
         try:
             os.close(os.open(path, flags, 0o666))
         except FileExistsError:

@@ -18,6 +18,8 @@ dataset                shape / dtype      meaning
                                           multiplies ``radiance`` at export only
 ``object_offsets``     (O+1,) i8          receiver object ``o`` owns vertices
                                           ``object_offsets[o]:object_offsets[o+1]``
+``light_poses``        (T,S,7) f8         optional: the spherical lights shaded, posed
+                                          (:mod:`shtools.scene.light_record`)
 =====================  =================  ==============================================
 
 Root attributes: the provenance set of every asset plus ``sh_order``,
@@ -52,7 +54,7 @@ from shtools.data_formats._base import (
     reserve_space,
     sha256_file,
 )
-from shtools.errors import AssetError, InputError
+from shtools.errors import AssetError
 
 VERSION = 1
 
@@ -107,6 +109,7 @@ SCHEMA = register(
             DatasetSpec("frame_index", ("T",), dtype_kind="iu", finite=False, optional=True),
             DatasetSpec("albedo", ("V", 3), optional=True),
             DatasetSpec("object_offsets", (None,), dtype_kind="iu", finite=False, optional=True),
+            DatasetSpec("light_poses", ("T", None, 7), optional=True),
         ),
         check=_check,
     )
@@ -130,6 +133,7 @@ class Bake:
     object_offsets : ndarray, shape (O+1,)
     object_names : list of str
     sh_order : int
+    light_poses : ndarray, shape (T, S, 7), or None
     attrs : dict
         Root attributes (``parameters`` and ``inputs`` decoded).
     path : str
@@ -146,6 +150,7 @@ class Bake:
     object_offsets: np.ndarray
     object_names: list[str]
     sh_order: int
+    light_poses: np.ndarray | None = None
     attrs: dict = field(default_factory=dict)
     path: str = ""
 
@@ -229,6 +234,7 @@ def bake_from_data(asset, d: dict, path) -> Bake:
         object_offsets=d.get("object_offsets", np.array([0, V])).astype(np.int64),
         object_names=list(names),
         sh_order=int(asset.sh_order),
+        light_poses=d.get("light_poses"),
         attrs=asset.attrs,
         path=os.fspath(path),
     )
@@ -280,6 +286,8 @@ class BakeWriter:
     compression : str or None
         h5py filter for the per-frame geometry and radiance (deterministic);
         the visibility is stored without one.
+    light_poses : ndarray, shape (T, S, 7), optional
+        The spherical lights the frames were shaded with, posed per frame.
     copy : mapping of str to h5py.Dataset, optional
         Per-frame ``vertices``, ``normals`` or ``visibility`` ``(T, V, k)``
         taken whole from another bake's open file by HDF5's object copy (its
@@ -307,6 +315,7 @@ class BakeWriter:
         inputs=None,
         fps: float | None = None,
         compression: str | None = "gzip",
+        light_poses=None,
         copy=None,
     ):
         self.path = Path(path)
@@ -336,6 +345,7 @@ class BakeWriter:
             else np.asarray(object_offsets, dtype=np.int64)
         )
         self.object_names = list(object_names or ["receivers"])
+        self.light_poses = None if light_poses is None else np.asarray(light_poses, float)
         self.parameters = dict(parameters or {})
         self.inputs = {
             Path(p).name: sha256_file(p) for p in (inputs or {}).values() if p is not None
@@ -352,7 +362,8 @@ class BakeWriter:
         """Bytes the file can take at most (:func:`bake_size_bound`)."""
         return bake_size_bound(self.n_frames, self.n_vertices, static=self.static,
                                visibility_size=self.visibility_size,
-                               fixed=self.faces.nbytes + self.object_offsets.nbytes)
+                               fixed=self.faces.nbytes + self.object_offsets.nbytes
+                               + (0 if self.light_poses is None else self.light_poses.nbytes))
 
     # -- context management -------------------------------------------------
     def __enter__(self) -> BakeWriter:
@@ -393,6 +404,8 @@ class BakeWriter:
         f.create_dataset("object_offsets", data=self.object_offsets, **plain)
         if self.albedo is not None:
             f.create_dataset("albedo", data=self.albedo, **plain)
+        if self.light_poses is not None:
+            f.create_dataset("light_poses", data=self.light_poses, **plain)
         frame = dict(plain, compression=self.compression, shuffle=bool(self.compression))
         for name, source in sorted(self.copy.items()):
             width = (self.visibility_size if name == "visibility" else 3)
@@ -571,29 +584,3 @@ def write_bake(
                 visibility=None if visibility is None else visibility[t],
             )
     return Path(path)
-
-
-def parse_frames(text: str | None, n_frames: int, path=None) -> range:
-    """``"A:B"`` (half-open, like Python), ``"A:"``, ``":B"`` or ``"A"`` -> range of frames.
-
-    Raises
-    ------
-    InputError
-        Not of that form, empty, or outside ``0..n_frames-1``.
-    """
-    if text is None or text == "":
-        return range(n_frames)
-    try:
-        if ":" in text:
-            a, b = text.split(":", 1)
-            start = int(a) if a.strip() else 0
-            stop = int(b) if b.strip() else n_frames
-        else:
-            start = int(text)
-            stop = start + 1
-    except ValueError:
-        raise InputError(f"--frames '{text}' is not A:B, A: or A (frame numbers)", path) from None
-    if not 0 <= start < stop <= n_frames:
-        raise InputError(f"--frames {text} is outside the scene's frames 0..{n_frames - 1} "
-                         "(or empty); A:B is half-open like Python", path)
-    return range(start, stop)

@@ -33,6 +33,7 @@ import numpy as np
 from shtools.errors import InputError
 from shtools.geometry.transforms import (
     decompose_trs,
+    quaternion_matrix,
     slerp,
     trs_matrix,
 )
@@ -192,9 +193,15 @@ class SkinnedModel:
                     trs[ch.node] = {"translation": rest[0], "rotation": rest[1],
                                     "scale": rest[2]}
                 trs[ch.node][ch.path] = ch.sample(float(time))
-            for node, parts in trs.items():
-                local[node] = trs_matrix(parts["translation"], parts["rotation"],
-                                         parts["scale"])
+            if trs:  # every animated node's T @ R @ S at once (one batched rotation)
+                nodes = list(trs)
+                parts = {k: np.array([trs[n][k] for n in nodes], dtype=np.float64)
+                         for k in ("translation", "rotation", "scale")}
+                m = np.zeros((len(nodes), 4, 4))
+                m[:, :3, :3] = quaternion_matrix(parts["rotation"]) * parts["scale"][:, None, :]
+                m[:, :3, 3] = parts["translation"]
+                m[:, 3, 3] = 1.0
+                local[nodes] = m
         return self._global_transforms(local)
 
     def joint_matrices(self, time: float, animation=0) -> np.ndarray:

@@ -108,22 +108,50 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
     ``env_sh`` to ``shade``.
 """
 
-from shtools.runtime.accumulate import accumulate_log
-from shtools.runtime.blockers import LogBlocker, SelfVisibility, SphereBlocker, SphereLight
-from shtools.runtime.clusters import ReceiverClusters, lloyd_clusters
-from shtools.runtime.evaluator import ShadowRuntime
+import importlib
+
+# a function named as its module: bound here, or importing the module (the shading
+# does) would leave the package attribute the module
 from shtools.runtime.fast_exp import fast_exp
-from shtools.runtime.fields import (
-    FieldBlocker,
-    FieldTable,
-    field_log_visibility,
-    field_product_visibility,
-)
-from shtools.runtime.log_table import CapLogTable
-from shtools.runtime.scaling import ScalingTable, midrange_lighting
-from shtools.runtime.self_shadow import apply_self_shadow_rules
-from shtools.runtime.settings import ShadowSettings
-from shtools.runtime.shading import cosine_transfer, shade, sphere_light_sh
+
+#: public name -> module, loaded on first use: a caller of one part (the shading, the
+#: settings: ``shtools relight``) does not pay for importing the evaluator, the
+#: accumulation and the worker processes
+_LAZY = {
+    "accumulate_log": "shtools.runtime.accumulate",
+    "LogBlocker": "shtools.runtime.blockers",
+    "SelfVisibility": "shtools.runtime.blockers",
+    "SphereBlocker": "shtools.runtime.blockers",
+    "SphereLight": "shtools.runtime.blockers",
+    "ReceiverClusters": "shtools.runtime.clusters",
+    "lloyd_clusters": "shtools.runtime.clusters",
+    "ShadowRuntime": "shtools.runtime.evaluator",
+    "FieldBlocker": "shtools.runtime.fields",
+    "FieldTable": "shtools.runtime.fields",
+    "field_log_visibility": "shtools.runtime.fields",
+    "field_product_visibility": "shtools.runtime.fields",
+    "CapLogTable": "shtools.runtime.log_table",
+    "ScalingTable": "shtools.runtime.scaling",
+    "midrange_lighting": "shtools.runtime.scaling",
+    "apply_self_shadow_rules": "shtools.runtime.self_shadow",
+    "ShadowSettings": "shtools.runtime.settings",
+    "cosine_transfer": "shtools.runtime.shading",
+    "shade": "shtools.runtime.shading",
+    "sphere_light_sh": "shtools.runtime.shading",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # looked up once
+        return value
+    raise AttributeError(f"module 'shtools.runtime' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_LAZY])
+
 
 __all__ = [
     "CapLogTable",

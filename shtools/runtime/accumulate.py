@@ -180,10 +180,13 @@ class BlockKernel:
         self.order = table.order
         self.table = table
         self.norm = normalisation(self.order).astype(np.float32)
+        self._gammas, self._coef = _recurrence_constants(self.order, self.norm)
         self._scratch = np.empty((_N_SCRATCH + self.order, 0), np.float32)
         # intp indices: np.take of 8-byte items with int32 indices spread over
         # the table takes a slow path (NumPy 2)
         self._idx = np.empty(0, np.intp)
+        self._idx32 = np.empty(0, np.int32)
+        self._sums = np.empty((self.order * self.order, 0), np.float32)
         self._masks = np.empty((2, 0), np.bool_)
 
     def _buffers(self, shape):
@@ -191,6 +194,7 @@ class BlockKernel:
         if self._scratch.shape[1] < size:
             self._scratch = np.empty((_N_SCRATCH + self.order, size), np.float32)
             self._idx = np.empty(size, np.intp)
+            self._idx32 = np.empty(size, np.int32)
         views = [self._scratch[i, :size].reshape(shape) for i in range(self._scratch.shape[0])]
         return views, self._idx[:size].reshape(shape)
 
@@ -211,18 +215,19 @@ class BlockKernel:
         dx, dy, dz, r, t0, t1, t2, t3 = views[:8]
         extra = views[8:_N_SCRATCH]
         bands = views[_N_SCRATCH:]
-        cen_t = cen.transpose(1, 0, 2)[:, :, None, :]  # (S, K, 1, 3)
-        np.subtract(cen_t[..., 0], pts[None, :, :, 0], out=dx)
-        np.subtract(cen_t[..., 1], pts[None, :, :, 1], out=dy)
-        np.subtract(cen_t[..., 2], pts[None, :, :, 2], out=dz)
-        r[...] = rad.T[:, :, None]
+        # contiguous components: NumPy broadcasts them in far fewer, longer inner
+        # loops than strided views of the (..., 3) arrays
+        for out, k in ((dx, 0), (dy, 1), (dz, 2)):
+            np.subtract(np.ascontiguousarray(cen[:, :, k].T)[:, :, None],
+                        np.ascontiguousarray(pts[:, :, k])[None], out=out)
+        r[...] = np.ascontiguousarray(rad.T)[:, :, None]
         n_r = n_s if rule_rows is None else min(n_s, int(rule_rows))
         if self_shadow and n_r:
             # the rules on the sphere rows that may be behind or straddle (a
             # contiguous prefix of the (S, K, T) layout)
             pdx, pdy, pdz, pr = dx[:n_r], dy[:n_r], dz[:n_r], r[:n_r]
             h, a1, a2, a3 = t0[:n_r], t1[:n_r], t2[:n_r], t3[:n_r]
-            nx, ny, nz = nrm[None, :, :, 0], nrm[None, :, :, 1], nrm[None, :, :, 2]
+            nx, ny, nz = (np.ascontiguousarray(nrm[:, :, k])[None] for k in range(3))
             # h = (P - p) . N
             np.multiply(pdx, nx, out=h)
             np.multiply(pdy, ny, out=a1)
@@ -278,35 +283,54 @@ class BlockKernel:
             for l in range(self.order):
                 bands[l] *= w[:, :, l].T[:, :, None]
         flat = (n_s, n_k * n_t)
+        # (cos, sin) pairs of (x + i y)^m in adjacent scratch rows, reduced by one
+        # einsum each: x, y; the recurrence's pair; its next pair
+        size = n_s * n_k * n_t
+        pairs = [self._scratch[i:i + 2, :size].reshape(2, *flat) for i in (0, 4, 10)]
+        if self._sums.shape[1] < n_k * n_t:
+            self._sums = np.empty((self.order * self.order, n_k * n_t), np.float32)
+        sums = self._sums[:, :n_k * n_t]
+        self._accumulate([b.reshape(flat) for b in bands], z.reshape(flat), pairs,
+                         t2.reshape(flat), [a.reshape(flat) for a in (t3, *extra[:2])], sums)
+        # scaled column by column into receiver-major rows: several times faster
+        # than NumPy's copy of the transposed (n*n, R) array
         out = np.empty((n_k * n_t, self.order * self.order), np.float32)
-        self._accumulate([b.reshape(flat) for b in bands], x.reshape(flat), y.reshape(flat),
-                         z.reshape(flat), [a.reshape(flat) for a in (t0, t1, t2, t3, *extra)],
-                         out)
+        for k, c in enumerate(self._coef):
+            np.multiply(sums[k], c, out=out[:, k])
         return out.reshape(n_k, n_t, -1)
 
     def _lookup(self, u, bands, cell, idx):
         """``bands[l] = u * G_l(cell of u)`` (the ratio table; no interpolation)."""
         tbl = self.table
         np.multiply(u, tbl.ratio_cells, out=cell)
-        np.copyto(idx, cell, casting="unsafe")  # truncation == floor since >= 0
+        # truncation == floor since >= 0; through int32, which NumPy converts to
+        # from float32 several times faster than to intp
+        idx32 = self._idx32[:idx.size].reshape(idx.shape)
+        np.copyto(idx32, cell, casting="unsafe")
+        np.copyto(idx, idx32)
         for l in range(self.order):
-            # 0 <= u <= 1: "clip" takes u = 1 to the last cell, and unlike the
-            # default mode it gathers straight into ``out`` without a buffer copy
-            np.take(tbl.ratios[l], idx, out=bands[l], mode="clip")
+            # 0 <= u <= 1 and the table has a cell for u = 1, so every index is in
+            # range; "wrap" (a no-op here) gathers straight into ``out`` without a
+            # buffer copy, as "clip" does, and faster
+            np.take(tbl.ratios[l], idx, out=bands[l], mode="wrap")
             bands[l] *= u
 
-    def _accumulate(self, bands, x, y, z, scratch, out):
-        """out[:, lm] = K_lm * sum_s bands[l] * Q_lm(z) * Re/Im (x + i y)^m."""
+    def _accumulate(self, bands, z, pairs, prod, q_buf, sums):
+        """sums[lm] = sum_s bands[l] * R_lm(z) * Re/Im (x + i y)^m (unscaled: see _coef).
+
+        ``pairs``: ``(2, S, R)`` views holding (x, y) and the two scratch pairs of
+        the complex power recurrence; ``sums``: ``(n*n, R)``.
+        """
         order = self.order
-        k = self.norm
-        c_m, s_m, prod = scratch[0], scratch[1], scratch[2]
-        q_buf = (scratch[3], scratch[4], scratch[5])
-        c_new, s_new = scratch[6], scratch[7]
+        xy, cs, cs_new = pairs
+        x, y = xy
         for m in range(order):
             if m == 1:
-                c_m, s_m = x, y  # read only: m = 2 writes into the scratch pair
+                cs = xy  # read only: m = 2 writes into the scratch pairs
             elif m > 1:
                 # (c + i s) * (x + i y)
+                c_m, s_m = cs
+                c_new, s_new = cs_new
                 np.multiply(c_m, x, out=c_new)
                 np.multiply(s_m, y, out=prod)
                 c_new -= prod
@@ -314,29 +338,21 @@ class BlockKernel:
                 np.multiply(s_m, x, out=prod)
                 s_new += prod
                 if m == 2:
-                    c_m, c_new = c_new, scratch[0]
-                    s_m, s_new = s_new, scratch[1]
+                    cs, cs_new = cs_new, pairs[1]
                 else:
-                    c_m, c_new = c_new, c_m
-                    s_m, s_new = s_new, s_m
+                    cs, cs_new = cs_new, cs
             # Q_lm = sigma_l R_l with sigma_l = a_l sigma_{l-1}, so the recurrence
             # Q_l = a_l z Q_{l-1} - c_l Q_{l-2} becomes R_l = z R_{l-1} - gamma_l
             # R_{l-2} (one pass fewer) and sigma_l joins the per-coefficient scale
-            sigma_prev2 = sigma = float(double_factorial(2 * m - 1))  # Q_mm
             q_prev2 = q_prev1 = None
-            for l, (a_num, c_num, den) in legendre_recurrence(m, order):
+            for l, gamma in self._gammas[m]:
                 if l == m:
                     q = None  # R_m = 1
                     term = bands[l]
                 elif l == m + 1:
-                    sigma_prev2, sigma = sigma, sigma * a_num
                     q = z  # R_{m+1} = z (read only)
                     term = self._term(bands[l], q, prod, m)
                 else:
-                    a = a_num / den
-                    c = c_num / den
-                    gamma = c * sigma_prev2 / (a * sigma)
-                    sigma_prev2, sigma = sigma, sigma * a
                     q = q_buf[l % 3]
                     np.multiply(z, q_prev1, out=q)
                     if q_prev2 is None:  # R_m = 1
@@ -345,17 +361,17 @@ class BlockKernel:
                         np.multiply(q_prev2, gamma, out=prod)
                         q -= prod
                     term = self._term(bands[l], q, prod, m)
-                scale = sigma
                 base = l * l + l
                 # reductions over the spheres (axis 0)
                 if m == 0:
                     # zonal: sum_s bands * Q without forming the product
-                    summed = (np.einsum("sr->r", term) if l == 0
-                              else np.einsum("sr,sr->r", *term))
-                    out[:, base] = summed * (scale * k[l, 0])
+                    if l == 0:
+                        np.einsum("sr->r", term, out=sums[base])
+                    else:
+                        np.einsum("sr,sr->r", *term, out=sums[base])
                 else:
-                    out[:, base + m] = np.einsum("sr,sr->r", term, c_m) * (scale * k[l, m])
-                    out[:, base - m] = np.einsum("sr,sr->r", term, s_m) * (scale * k[l, m])
+                    # rows base + m (cos) and base - m (sin) at once
+                    np.einsum("sr,tsr->tr", term, cs, out=sums[base + m:base - m - 1:-2 * m])
                 if l > m:
                     q_prev2, q_prev1 = q_prev1, q
 
@@ -366,3 +382,31 @@ class BlockKernel:
             return band, q
         np.multiply(band, q, out=prod)
         return prod
+
+
+def _recurrence_constants(order: int, norm: np.ndarray) -> tuple[list, np.ndarray]:
+    """The kernel's Legendre recurrence constants and per-coefficient scales.
+
+    Returns ``gammas[m] = [(l, gamma_l), ...]`` for ``l = m .. n-1`` (``gamma`` of
+    :meth:`BlockKernel._accumulate`'s scaled recurrence, None where unused) and
+    ``coef (n*n,)`` float32: ``sigma_l K_lm`` per coefficient.
+    """
+    gammas = []
+    coef = np.empty(order * order, np.float32)
+    for m in range(order):
+        sigma_prev2 = sigma = float(double_factorial(2 * m - 1))  # Q_mm
+        rows = []
+        for l, (a_num, c_num, den) in legendre_recurrence(m, order):
+            gamma = None
+            if l == m + 1:
+                sigma_prev2, sigma = sigma, sigma * a_num
+            elif l > m + 1:
+                a = a_num / den
+                c = c_num / den
+                gamma = c * sigma_prev2 / (a * sigma)
+                sigma_prev2, sigma = sigma, sigma * a
+            rows.append((l, gamma))
+            base = l * l + l
+            coef[base + m] = coef[base - m] = sigma * norm[l, m]
+        gammas.append(rows)
+    return gammas, coef

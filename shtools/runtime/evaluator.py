@@ -549,16 +549,16 @@ class ShadowRuntime:
         s = self.settings
         pts, nrm = check_receivers(vertices, normals)
         transfer, changed = self._shading.cosine_transfer(nrm)
-        env_transfer = None
-        if (env_sh is not None and local_visibility is None and form == "tabulated"
-                and np.ndim(env_sh) == 2):  # a per-vertex (V, n*n, 3) light is not cached
-            env_transfer = self._shading.lit_transfer(env_sh, transfer, changed)
-        out = _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights), order=self.order,
-                     window_kind=s.resolved_window(), window_h=s.window_h,
-                     local_visibility=local_visibility, form=form, transfer=transfer,
-                     env_transfer=env_transfer,
-                     light_terms=self._shading.light_terms(sphere_lights, pts)
-                     if sphere_lights else None)
+        kw = {"order": self.order, "window_kind": s.resolved_window(), "window_h": s.window_h}
+        if local_visibility is None and form == "tabulated" and (
+                env_sh is None or np.ndim(env_sh) == 2):  # a per-vertex light is not cached
+            lit = self._shading.lit_rows(env_sh, tuple(sphere_lights), pts, transfer, changed)
+            out = _shade(visibility, pts, nrm, lit_rows=lit, **kw)
+        else:
+            out = _shade(visibility, pts, nrm, env_sh, tuple(sphere_lights),
+                         local_visibility=local_visibility, form=form, transfer=transfer,
+                         light_terms=self._shading.light_terms(sphere_lights, pts)
+                         if sphere_lights else None, **kw)
         if s.deringing == "desaturate":
             out = desaturate_negative(out)
         return out

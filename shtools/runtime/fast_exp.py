@@ -213,18 +213,19 @@ class QuadratureProducts:
 
     def _values(self, parts, ws=None):
         if ws is None:
-            return [_matmul(p, r) for p, r in zip(parts, self.recon, strict=True)]
+            return [row_matmul(p, r) for p, r in zip(parts, self.recon, strict=True)]
         rows = parts[0].shape[0]
-        return [_matmul(p, r, out=w[:rows])
+        return [row_matmul(p, r, out=w[:rows])
                 for p, r, w in zip(parts, self.recon, ws, strict=False)]
 
     def _project(self, vals, rows=slice(None), sizes=None, square=False, out=None):
         mats = self.proj_sq if square else self.proj
         sizes = sizes or [p.shape[1] for p in mats]
         if out is None:
-            return [_matmul(v[rows], p[:, :s]) for v, p, s in zip(vals, mats, sizes, strict=True)]
+            return [row_matmul(v[rows], p[:, :s])
+                    for v, p, s in zip(vals, mats, sizes, strict=True)]
         for v, p, s, o in zip(vals, mats, sizes, out, strict=True):
-            _matmul(v[rows], p[:, :s], out=o)
+            row_matmul(v[rows], p[:, :s], out=o)
         return out
 
     def square_values(self, parts, ws=None):
@@ -301,7 +302,7 @@ PRODUCT_BLOCK_ROWS = 256
 PRODUCT_ROW_MULTIPLE = 8
 
 
-def _matmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def row_matmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``a @ b`` (into ``out``), the same bytes per row whatever the number of rows."""
     rows = a.shape[0]
     if out is None:

@@ -50,9 +50,9 @@ class CapLogTable:
         :math:`f^*_l` at ``x_k = k / (K - 1)``.
     slopes : ndarray, shape (n, K) float32
         ``values[:, k+1] - values[:, k]`` (0 in the last column).
-    ratios : ndarray, shape (n, RATIO_SAMPLES) float32
+    ratios : ndarray, shape (n, RATIO_SAMPLES + 1) float32
         :math:`F_l(x)/x` at the midpoints of ``RATIO_SAMPLES`` equal cells of
-        ``[0, 1]`` (see :meth:`lookup_ratio`).
+        ``[0, 1]`` (see :meth:`lookup_ratio`), the last repeated for ``x = 1``.
     """
 
     def __init__(self, tables: dict, order: int, samples: int = TABLE_SAMPLES):
@@ -81,8 +81,11 @@ class CapLogTable:
         self.scale = np.float32(self.samples - 1)
         mids = (np.arange(RATIO_SAMPLES) + 0.5) / RATIO_SAMPLES
         ratios = np.stack([np.interp(mids, x_src, f_src[:, l]) for l in range(order)]) / mids
-        # one contiguous row per band: the kernel gathers each band separately
-        self.ratios = np.ascontiguousarray(ratios, dtype=np.float32)
+        # one contiguous row per band: the kernel gathers each band separately;
+        # x = 1 lands on index RATIO_SAMPLES, so the last cell is repeated there and
+        # every index is in range (no clipping in the gather)
+        self.ratios = np.ascontiguousarray(np.concatenate([ratios, ratios[:, -1:]], axis=1),
+                                           dtype=np.float32)
         self.ratio_cells = np.float32(RATIO_SAMPLES)
 
     def lookup(self, one_minus_cos, out: np.ndarray | None = None) -> np.ndarray:

@@ -39,7 +39,7 @@ import math
 import numpy as np
 
 from shtools.runtime.blockers import SphereLight
-from shtools.runtime.fast_exp import QuadratureProducts
+from shtools.runtime.fast_exp import QuadratureProducts, row_matmul
 from shtools.sh import band_of, basis, cap_zh_cos, clamped_cosine_zh, product_matrix, window
 
 #: Rec. 709 luminance weights of linear RGB.
@@ -195,14 +195,18 @@ def sphere_light_terms(light: SphereLight, points, order: int
     return zh, basis(axis, order)
 
 
-def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win,
-                           terms=None) -> np.ndarray:
-    """Radiance of spherical lights through the visibility, shape ``(V, 3)``.
+def sphere_light_transfer(lights, points, transfer, order: int, win, terms=None
+                          ) -> np.ndarray:
+    """The spherical lights' lit transfer, shape ``(V, 3, n*n)`` float32.
 
-    Per light, ``(H * g) . L_cap``: the shadowed transfer ``H * g`` by exact
-    quadrature (once for all lights), dotted with each light's rotated zonal
-    radiance without forming its ``(V, n*n)`` vector (``y(axis)`` times the
-    shadowed transfer, summed per band, weighted by the zonal coefficients).
+    :math:`\\sum_k \\mathbf c_k\\,(\\mathbf H * \\mathbf L_k)`: dotted with the
+    windowed visibility it gives their radiance.
+
+    The triple product is symmetric, :math:`(\\mathbf H * \\mathbf g)\\cdot\\mathbf L =
+    \\mathbf g\\cdot(\\mathbf H * \\mathbf L)` (both are :math:`\\int H g L` for order-``n``
+    vectors), so a light's term is a per-row table like :math:`\\mathbf L_H` that a
+    static receiver keeps while the light holds still.  ``H * L_k`` is an exact
+    quadrature product of ``H`` with the light's rotated, windowed zonal radiance.
 
     Parameters
     ----------
@@ -210,8 +214,6 @@ def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win
     points : ndarray, shape (V, 3)
     transfer : ndarray, shape (V, n*n) float32
         ``H(N)`` (or ``H(N) * g_p``).
-    visibility : ndarray, shape (V, n*n) float32
-        Windowed visibility.
     order : int
     win : ndarray, shape (n*n,)
         Window factors of the lighting.
@@ -221,41 +223,34 @@ def sphere_lights_radiance(lights, points, transfer, visibility, order: int, win
 
     Returns
     -------
-    ndarray, shape (V, 3) float64
+    ndarray, shape (V, 3, n*n) float32
     """
     ops = QuadratureProducts(order, np.float32)
-    recon, proj = ops.recon[0], ops.proj[0]
-    band_sum = _band_sum(order)
-    scale = np.sqrt(4.0 * np.pi / (2.0 * np.arange(order) + 1.0))
-    zonal_win = scale * win[np.arange(order) ** 2 + np.arange(order)]
-    n_v = points.shape[0]
-    out = np.zeros((n_v, 3))
-    vals_h = np.empty((min(n_v, LIGHT_CHUNK), recon.shape[1]), np.float32)
-    vals_g = np.empty_like(vals_h)
+    degrees = np.arange(order)
+    scale = np.sqrt(4.0 * np.pi / (2.0 * degrees + 1.0))
+    zonal_win = (scale * win[degrees * degrees + degrees]).astype(np.float32)
+    n_v = transfer.shape[0]
+    out = np.zeros((n_v, 3, order * order), np.float32)
+    colors = [light.color.astype(np.float32)[None, :, None] for light in lights]
     for start in range(0, n_v, LIGHT_CHUNK):
         stop = min(n_v, start + LIGHT_CHUNK)
-        rows = stop - start
-        if len(ops.classes) == 1:  # (H * g) by quadrature: one class below order 5
-            np.matmul(transfer[start:stop], recon, out=vals_h[:rows])
-            np.matmul(visibility[start:stop], recon, out=vals_g[:rows])
-            vals_h[:rows] *= vals_g[:rows]
-            shadowed = vals_h[:rows] @ proj
-        else:
-            shadowed = ops.product(transfer[start:stop], visibility[start:stop])
+        # one class below order 7: H's values at the nodes are shared by the lights
+        h_vals = row_matmul(transfer[start:stop], ops.recon[0]) if len(ops.classes) == 1 else None
         for k, light in enumerate(lights):
             if terms is None:
                 zh, y = sphere_light_terms(light, points[start:stop], order)
             else:
                 zh, y = terms[k][0][start:stop], terms[k][1][start:stop]
-            per_band = (y * shadowed) @ band_sum
-            lit = np.einsum("vl,vl->v", per_band, zh * zonal_win.astype(np.float32))
-            out[start:stop] += lit[:, None].astype(np.float64) * light.color[None, :]
+            # the light's windowed radiance (V', n*n)
+            rotated = y * np.repeat(zh * zonal_win, 2 * degrees + 1, axis=1)
+            if h_vals is None:
+                lit = ops.product(transfer[start:stop], rotated)
+            else:  # row by row the same bytes whatever rows share the call (a cache)
+                vals = row_matmul(rotated, ops.recon[0])
+                vals *= h_vals
+                lit = row_matmul(vals, ops.proj[0])
+            out[start:stop] += colors[k] * lit[:, None, :]
     return out
-
-
-def _band_sum(order: int) -> np.ndarray:
-    """``(n*n, n)`` float32 indicator summing the coefficients of each band."""
-    return (band_of(order)[:, None] == np.arange(order)[None, :]).astype(np.float32)
 
 
 def _sphere_light_zonal(light: SphereLight, points, order: int):
@@ -326,7 +321,7 @@ def sphere_light_unshadowed(light: SphereLight, points, normals) -> np.ndarray:
 def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: int,
           window_kind: str | None = "cosine", window_h: float | None = None,
           local_visibility=None, form: str = "tabulated", transfer=None,
-          env_transfer=None, light_terms=None) -> np.ndarray:
+          env_transfer=None, light_terms=None, lit_rows=None) -> np.ndarray:
     """Outgoing radiance of white Lambertian receivers, shape ``(V, 3)``.
 
     Parameters
@@ -356,6 +351,11 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
         costs one dot product per vertex and colour.
     light_terms : sequence of (zh, y), optional
         Precomputed :func:`sphere_light_terms` of each sphere light (a cache).
+    lit_rows : ndarray, shape (V, 3, n*n), optional
+        Precomputed lit transfer of the shared environment and the sphere lights
+        together, :func:`lit_transfer` plus :func:`sphere_light_transfer` (a
+        cache): the radiance is then one dot product per vertex and colour, and
+        ``env_sh``, ``sphere_lights`` and the transfer are not read.
 
     Returns
     -------
@@ -365,25 +365,93 @@ def shade(visibility, points, normals, env_sh=None, sphere_lights=(), *, order: 
     g = np.asarray(visibility, dtype=np.float32)[:, :size]
     win = band_window(order, window_kind, window_h)
     g_w = g * win.astype(np.float32)
+    if lit_rows is not None:
+        return lit_transfer_radiance(lit_rows, g_w)
     if transfer is None:
         transfer = cosine_transfer(normals, order)
     transfer = np.asarray(transfer, dtype=np.float32)
     if local_visibility is not None:
         local = np.asarray(local_visibility, dtype=np.float32)[:, :size]
         transfer = QuadratureProducts(order, np.float32).product(transfer, local)
-    out = np.zeros((g.shape[0], 3))
-    if env_transfer is not None:
-        out += lit_transfer_radiance(env_transfer, g_w)
-    elif env_sh is not None and np.ndim(env_sh) == 3:  # per vertex (mid-range lighting)
-        out += per_vertex_environment_radiance(transfer, env_sh, g_w, win)
-    elif env_sh is not None:
-        mats = environment_matrices(env_sh, order, window_kind, window_h)
-        fn = tabulated_radiance if form == "tabulated" else on_the_fly_radiance
-        out += fn(transfer, mats, g_w)
+    shared = env_sh is not None and np.ndim(env_sh) == 2
+    if env_transfer is None and shared and form == "tabulated":
+        env_transfer = lit_transfer(transfer, environment_matrices(env_sh, order, window_kind,
+                                                                   window_h))
+    lit = env_transfer
     if sphere_lights:
-        out += sphere_lights_radiance(sphere_lights, np.asarray(points), transfer, g_w, order,
-                                      win, light_terms)
+        lights = sphere_light_transfer(sphere_lights, np.asarray(points), transfer, order,
+                                       win, light_terms)
+        lit = lights if lit is None else lit + lights
+    out = np.zeros((g.shape[0], 3)) if lit is None else lit_transfer_radiance(lit, g_w)
+    if env_transfer is None and env_sh is not None:
+        if shared:  # on the fly
+            out += on_the_fly_radiance(transfer, environment_matrices(
+                env_sh, order, window_kind, window_h), g_w)
+        else:  # per vertex (mid-range lighting)
+            out += per_vertex_environment_radiance(transfer, env_sh, g_w, win)
     return out
+
+
+def shading_matrix(points, normals, env_sh=None, sphere_lights=(), *, order: int,
+                   window_kind: str | None = "cosine", window_h: float | None = None,
+                   transfer=None) -> np.ndarray:
+    r"""The linear map of :func:`shade` in the visibility: ``K`` with ``shade(g) = K g``.
+
+    :func:`shade` is linear in ``g`` (de-ringing, outside it, is not), so for
+    receivers whose position, normal and lights stay fixed a new visibility
+    costs one small product.  Every term is ``g_w`` dotted with a vector of
+    the vertex: the environment's lit transfer :math:`\mathbf L_H(N)`
+    (:func:`lit_transfer`); for a spherical light and a per-vertex environment,
+    the dot of the shadowed transfer :math:`\mathbf H * \mathbf g_w` with a
+    radiance vector :math:`\mathbf w`, which is :math:`\mathbf g_w\cdot(\mathbf
+    H * \mathbf w)` because the exact triple product :math:`\int y_i y_j y_k`
+    is symmetric in its three indices (SHEXP Sec. 3; the product runs on the
+    same exact quadrature as :func:`shade`'s).  The window of ``g_w`` is folded
+    into ``K``.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (V, 3)
+    env_sh : array_like, shape (n'*n', 3) or (V, n'*n', 3), optional
+        As :func:`shade`.
+    sphere_lights : sequence of SphereLight
+    order : int
+    window_kind, window_h
+        As :func:`shade`.
+    transfer : ndarray, shape (V, n*n), optional
+        :func:`cosine_transfer` of ``normals`` (a cache).
+
+    Returns
+    -------
+    ndarray, shape (V, 3, n*n) float32
+        ``K[v] @ g[v]`` is ``shade(g, ...)[v]`` before de-ringing, to float32
+        rounding.
+    """
+    size = order * order
+    win = band_window(order, window_kind, window_h)
+    win32 = win.astype(np.float32)
+    transfer = np.asarray(cosine_transfer(normals, order) if transfer is None else transfer,
+                          dtype=np.float32)
+    K = np.zeros((transfer.shape[0], 3, size), np.float32)
+    ops = QuadratureProducts(order, np.float32)
+    if env_sh is not None and np.ndim(env_sh) == 3:  # per vertex: (H * g_w) . (win L_v)
+        env = np.asarray(env_sh, dtype=np.float32)
+        env_n = np.zeros((env.shape[0], size, 3), np.float32)
+        env_n[:, :min(size, env.shape[1])] = env[:, :size]
+        for c in range(3):
+            K[:, c] = ops.product(transfer, env_n[:, :, c] * win32)
+    elif env_sh is not None:
+        K += lit_transfer(transfer, environment_matrices(env_sh, order, window_kind, window_h))
+    if sphere_lights:  # per light (H * g_w) . w with w = y(axis) x the windowed zonal cap
+        scale = np.sqrt(4.0 * np.pi / (2.0 * np.arange(order) + 1.0))
+        zonal_win = (scale * win[np.arange(order) ** 2 + np.arange(order)]).astype(np.float32)
+        points = np.asarray(points)
+        for light in sphere_lights:
+            zh, y = sphere_light_terms(light, points, order)
+            shadowed = ops.product(transfer, y * (zh * zonal_win)[:, band_of(order)])
+            K += shadowed[:, None, :] * np.asarray(light.color, np.float32)[None, :, None]
+    K *= win32
+    return K
 
 
 def per_vertex_environment_radiance(transfer, env_sh, visibility, win) -> np.ndarray:

@@ -1,8 +1,9 @@
 """Per-vertex shading terms kept between frames: cosine transfer, lit transfer, light terms.
 
 Static receivers (most of a scene) keep their normals, and a scene's light often
-holds still: the runtime then reuses H(N) and L_H = L * H(N) row by row instead of
-projecting them again each frame, as the paper keeps L_H per normal.
+holds still: the runtime then reuses H(N), L_H = L * H(N) and the sphere lights'
+lit transfer row by row instead of projecting them again each frame, as the paper
+keeps L_H per normal, so a static row's shading is one dot product with ``g``.
 """
 
 from __future__ import annotations
@@ -10,10 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from shtools.runtime.shading import (
+    band_window,
     cosine_transfer,
     environment_matrices,
     lit_transfer,
     sphere_light_terms,
+    sphere_light_transfer,
 )
 
 
@@ -35,6 +38,7 @@ class ShadingCache:
         self._lit: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._points: np.ndarray | None = None  # receivers of the kept light terms
         self._lights: list = []  # per light: (position, radius, zh, y)
+        self._rows: tuple | None = None  # (key, lit rows, their receivers) of lit_rows
 
     def cosine_transfer(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """H(N) per vertex, recomputed only for vertices whose normal changed since last call.
@@ -54,7 +58,7 @@ class ShadingCache:
             self._transfer = (normals.copy(), transfer)
             return transfer, None
         old_n, transfer = cached
-        changed = np.flatnonzero(np.any(old_n != normals, axis=1))
+        changed = _changed_rows(old_n, normals)
         if changed.size:
             transfer[changed] = cosine_transfer(normals[changed], self.order)
             old_n[changed] = normals[changed]
@@ -92,7 +96,7 @@ class ShadingCache:
             self._points = points.copy()
             self._lights = [self._fresh(light, points) for light in lights]
             return [(zh, y) for _, _, zh, y in self._lights]
-        moved = np.flatnonzero(np.any(self._points != points, axis=1))
+        moved = _changed_rows(self._points, points)
         if moved.size:
             self._points[moved] = points[moved]
         for k, light in enumerate(lights):
@@ -103,6 +107,69 @@ class ShadingCache:
                 zh[moved], y[moved] = sphere_light_terms(light, points[moved], self.order)
         return [(zh, y) for _, _, zh, y in self._lights]
 
+    def lit_rows(self, env_sh, lights, points: np.ndarray, transfer: np.ndarray,
+                 changed: np.ndarray | None) -> np.ndarray:
+        """Lit transfer of a shared environment and the sphere lights, ``(V, 3, n*n)``.
+
+        :meth:`lit_transfer` plus
+        :func:`~shtools.runtime.shading.sphere_light_transfer`, kept per row:
+        refreshed where the normal changed (``changed``, None for all) or the
+        receiver moved, all of them when the light, a sphere light (position,
+        size, colour) or the window changed.
+        """
+        s = self.settings
+        l_h = None if env_sh is None else self.lit_transfer(env_sh, transfer, changed)
+        key = (None if env_sh is None else np.array(env_sh, dtype=np.float64),
+               s.resolved_window(), s.window_h,
+               tuple((light.position.copy(), light.radius, light.color.copy())
+                     for light in lights))
+        kept = self._rows
+        if (kept is None or changed is None or kept[2].shape != points.shape
+                or not _same(kept[0], key)):
+            self._rows = (key, self._lit_part(l_h, lights, points, transfer, slice(None)),
+                          points.copy())
+            return self._rows[1]
+        _, lit, old_points = kept
+        refresh = np.zeros(points.shape[0], dtype=bool)
+        refresh[changed] = True
+        moved = _changed_rows(old_points, points)
+        refresh[moved] = True
+        old_points[moved] = points[moved]
+        rows = np.flatnonzero(refresh)
+        if rows.size:
+            lit[rows] = self._lit_part(l_h, lights, points, transfer, rows)
+        return lit
+
+    def _lit_part(self, l_h, lights, points, transfer, rows) -> np.ndarray:
+        """The ``rows`` of :meth:`lit_rows` computed afresh (as ``shade`` does)."""
+        s = self.settings
+        lit = None if l_h is None else l_h[rows]
+        if lights:
+            win = band_window(self.order, s.resolved_window(), s.window_h)
+            part = sphere_light_transfer(lights, points[rows], transfer[rows], self.order, win)
+            lit = part if lit is None else lit + part
+        if lit is None:
+            lit = np.zeros((transfer[rows].shape[0], 3, self.order ** 2), np.float32)
+        return lit
+
     def _fresh(self, light, points) -> tuple:
         zh, y = sphere_light_terms(light, points, self.order)
         return np.array(light.position, dtype=np.float64), float(light.radius), zh, y
+
+
+def _same(a, b) -> bool:
+    """Whether two :meth:`ShadingCache.lit_rows` keys are equal (arrays by value)."""
+    if isinstance(a, tuple):
+        return (isinstance(b, tuple) and len(a) == len(b)
+                and all(_same(x, y) for x, y in zip(a, b, strict=True)))
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
+                and a.shape == b.shape and np.array_equal(a, b))
+    return a == b
+
+
+def _changed_rows(old: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """Rows of ``(V, 3)`` arrays that differ (column by column: several times faster
+    than a reduction over the short last axis)."""
+    return np.flatnonzero((old[:, 0] != new[:, 0]) | (old[:, 1] != new[:, 1])
+                          | (old[:, 2] != new[:, 2]))

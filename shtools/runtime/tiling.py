@@ -30,6 +30,12 @@ TILE_ROWS = 32
 #: self-shadow rules, in this many steps (flat ground far from the blockers
 #: needs none, a blocker's own surface nearly all).
 RULE_SHARES = 2
+#: A block stops growing before its lists' padding (radius-0 spheres up to the
+#: block's longest list) exceeds this many pairs and this share of its pairs:
+#: padding costs as much as real pairs, and a block's fixed cost (a few hundred
+#: NumPy calls) is worth about this many pairs.
+PADDING_PAIRS = 4096
+PADDING_FRACTION = 0.1
 #: Tiles per batched plane test in :func:`_tile_sphere_lists` (bounds its
 #: ``(tiles, TILE_ROWS, S)`` scratch to a few MB).
 _CURVED_TILES_PER_CHUNK = 256
@@ -109,8 +115,13 @@ def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_
         while start < last:
             # grow the block while it stays within chunk_pairs at its largest list
             # (the sizes ascend within a group, so the last tile's size is the block's)
-            pairs = np.arange(1, last - start + 1) * TILE_ROWS * sorted_sizes[start:last]
-            stop = start + max(1, int(np.count_nonzero(pairs <= chunk_pairs)))
+            # and its padding stays within what a block costs anyway
+            run_sizes = sorted_sizes[start:last]
+            pairs = np.arange(1, last - start + 1) * TILE_ROWS * run_sizes
+            padding = pairs - TILE_ROWS * np.cumsum(run_sizes)
+            fits = (pairs <= chunk_pairs) & (
+                padding <= np.maximum(PADDING_PAIRS, PADDING_FRACTION * pairs))
+            stop = start + max(1, int(np.argmin(fits)) if not fits.all() else fits.size)
             blocks.append((by_size[start:stop], int(sorted_sizes[stop - 1])))
             start = stop
 

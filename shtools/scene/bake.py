@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 
-from shtools.data_formats.bake import parse_frames
 from shtools.errors import AssetError, InputError
 from shtools.scene.kinds import LIGHT_SHADOWS, VISIBILITY_METHODS, bake_method_names
 from shtools.scene.pose import FrameState, pose_frame
@@ -416,6 +415,8 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
             "center": [float(c) for c in sphere.center], "radius": sphere.radius,
             "scaling": None if scaling is None else Path(scaling).name}
     inputs = {"scene": scene.path, **prepared.inputs}
+    from shtools.scene.light_record import scene_pose_table
+
     return BakeWriter(
         output,
         n_frames=len(frames),
@@ -433,6 +434,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
         parameters=parameters,
         inputs=inputs,
         fps=st.fps,
+        light_poses=scene_pose_table(scene, times),  # relighting reads them (--lights)
     )
 
 
@@ -544,3 +546,29 @@ def check_bake_size(frames: int, vertices: int, store_visibility: bool, order: i
             f"{size / 2**30:,.1f} GiB, above the limits ({MAX_VERTEX_FRAMES:,} vertex-frames, "
             f"{MAX_BAKE_BYTES / 2**30:.0f} GiB); bake a range with --frames A:B or pass --force",
             path)
+
+
+def parse_frames(text: str | None, n_frames: int, path=None) -> range:
+    """``"A:B"`` (half-open, like Python), ``"A:"``, ``":B"`` or ``"A"`` -> range of frames.
+
+    Raises
+    ------
+    InputError
+        Not of that form, empty, or outside ``0..n_frames-1``.
+    """
+    if text is None or text == "":
+        return range(n_frames)
+    try:
+        if ":" in text:
+            a, b = text.split(":", 1)
+            start = int(a) if a.strip() else 0
+            stop = int(b) if b.strip() else n_frames
+        else:
+            start = int(text)
+            stop = start + 1
+    except ValueError:
+        raise InputError(f"--frames '{text}' is not A:B, A: or A (frame numbers)", path) from None
+    if not 0 <= start < stop <= n_frames:
+        raise InputError(f"--frames {text} is outside the scene's frames 0..{n_frames - 1} "
+                         "(or empty); A:B is half-open like Python", path)
+    return range(start, stop)

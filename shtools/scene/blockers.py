@@ -229,9 +229,10 @@ class FitSpheres(SphereSetKind):
             from shtools.geometry.sphere_fit import fit_spheres
 
             mesh = trimesh.Trimesh(prep.vertices, prep.faces, process=False)
+            # the bake uses the spheres only: no E or coverage measured
             s = fit_spheres(mesh, spec.count, method=spec.options["method"],
                             seed=spec.options["seed"], progress=ctx.progress,
-                            _desc=f"fit {prep.spec.name}")
+                            diagnostics=False, _desc=f"fit {prep.spec.name}")
             return {"centers": np.asarray(s.centers), "radii": np.asarray(s.radii)}
 
         if ctx.cache is None:

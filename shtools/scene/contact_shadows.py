@@ -84,10 +84,13 @@ class ContactPart:
 
 
 #: Rays of an object receiver's cone that fills its hemisphere, as a share of the
-#: ground's ``traced_shadow_directions``: an object's receivers are few and close to
-#: what they trace, where the surface filter is narrow (what each share costs and buys:
+#: ground's ``traced_shadow_directions``: an object's receivers sit close to what they
+#: trace, where the surface filter is narrow, so their error is the set's quadrature
+#: (``make demo``'s legs, between each other and buried in the torso); they cast the
+#: set in strata (:func:`~shtools.scene.traced_shadows.set_visibility`), the rays
+#: only where the first ones found the mesh (what each share costs and buys:
 #: ``benchmarks/bench_look.py --demo``, docs/scenes.md).
-CONTACT_SCALE = 0.5
+CONTACT_SCALE = 1.25
 
 
 def contact_directions(ground_directions: int) -> int:

@@ -9,7 +9,8 @@ keeps existing bakes unchanged):
   *meshes*; the light contributes ``color * S * E(N)`` with the closed-form
   unshadowed term :func:`shtools.runtime.shading.sphere_light_unshadowed`.
   Where the camera finds the receiver in penumbra (``0 < S < 1``, or umbra next to
-  a silhouette record), the light is ray-traced instead with ``rays`` strata (:func:`ssoc_radiance`; the spec's
+  a silhouette record), the light is ray-traced instead with ``rays`` strata
+  (:func:`ssoc_radiance`; the spec's
   Sec. 7.4 hybrid: the camera classifies umbra / lit / penumbra, rays resolve
   the penumbra, a few per cent of the receivers).  Settings: the light's
   ``ssoc = { ... }`` table (:class:`SSOCSettings`, plus ``rays``).

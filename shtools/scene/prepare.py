@@ -46,12 +46,14 @@ class PreparedObject:
         What a blocker kind that is not a sphere set prepared (its own type).
     self_log : ndarray, shape (V, n_acc^2) or None
         Self-visibility log in the object's frame (exact self-shadowing,
-        :mod:`shtools.scene.transfer`); None when the object uses its spheres.
+        :mod:`shtools.scene.transfer`: a ``transfer`` asset's, a field's O_v, a
+        convex mesh's zero); None when the object uses its spheres or only a
+        traced ``self_transfer``.
     self_transfer : ndarray, shape (V, m*m) or None
-        The projected self-visibility ``self_log`` is the log of (a ``transfer``
-        asset's or traced), in the object's frame: multiplied into its rows after
-        the exp (:func:`shtools.scene.pose.pose_frame`) instead of adding
-        ``self_log`` before it, whose eigen-log and exp do not give it back.
+        The projected self-visibility (a ``transfer`` asset's, or traced at the
+        shading order), in the object's frame: multiplied into its rows after
+        the exp (:func:`shtools.scene.pose.pose_frame`) instead of adding a log
+        before it, whose eigen-log and exp do not give it back.
     local_log : ndarray, shape (V, n_acc^2) or None
         Rest-pose local visibility log of a skinned object (``local_visibility``).
     traced : bool
@@ -297,8 +299,8 @@ def _self_visibility(scene: Scene, objects: list[PreparedObject], inputs: dict, 
     acc = st.resolved_acc_order()
     for prep in objects:
         if uses_self_visibility(prep, st.self_visibility):
-            prep.self_log, prep.self_transfer, path = object_self_log(prep, acc, log=log,
-                                                                      cache=cache)
+            prep.self_log, prep.self_transfer, path = object_self_log(prep, acc, st.order,
+                                                                      log=log, cache=cache)
             if path is not None:
                 inputs[f"{prep.spec.name}.transfer"] = path
         elif uses_traced_visibility(prep, st.self_visibility):

@@ -6,20 +6,23 @@ cosine, the light and ``g`` (SHEXP Sec. 7; Sloan et al. 2002, "Precomputed
 Radiance Transfer", Sec. 4 — keeping visibility in SH is what makes a new
 light cheap), so a new environment, optionally turned about +Y by an SH
 rotation, needs no posing, no blockers and no exponential.  Frames are shaded
-by the runtime's :meth:`~shtools.runtime.ShadowRuntime.shade`, the call the
-baker's :func:`~shtools.scene.shadows.shade_frame` makes for the environment
-and the ``shexp`` lights (for vertices that never move, once per unit
-visibility vector: shading is linear in ``g``; :func:`relight_frames`), so the
-result is the radiance a fresh bake of the same scene under that light gives,
-to float32 rounding.  Without ``[[lights]]`` nothing here reads the scene, so
-the scene parser is not imported.
+by :func:`~shtools.runtime.shading.shade`, the call the runtime's
+:meth:`~shtools.runtime.ShadowRuntime.shade` makes for the baker's
+:func:`~shtools.scene.shadows.shade_frame` (the environment and the ``shexp``
+lights; for vertices that never move, through its linear map in ``g``,
+:func:`~shtools.runtime.shading.shading_matrix`; :func:`relight_frames`), so
+the result is the radiance a fresh bake of the same scene under that light
+gives, to float32 rounding.
 
 Spherical lights (a scene's ``[[lights]]``, posed at each frame's time) are
 shaded through the same stored visibility, the baker's ``shexp`` way; the
 other ways (SSOC, ray tracing) need the posed blocker meshes, which a bake
-does not keep.  A bake lit from a finite environment sphere (mid-range
-lighting, Wang et al. 2005, Sec. 3.2) records it, and the new light is put on
-that sphere (:func:`relight_midrange`).
+does not keep.  A bake records its lights, so the lights of the scene it was
+baked from are read from it, and the scene parser is imported only for
+another scene or an older bake (:mod:`shtools.scene.light_record`).  A bake lit
+from a finite environment sphere (mid-range lighting, Wang et al. 2005, Sec.
+3.2) records it, and the new light is put on that sphere
+(:func:`relight_midrange`).
 
 Frames stream from the open bake a batch at a time
 (:func:`~shtools.data_formats.bake_stream.open_bake`), so memory is set by the
@@ -160,37 +163,6 @@ def relight_midrange(bake, env_sh: np.ndarray):
                                np.asarray(env_sh, dtype=float), bake.sh_order, bake.path)
 
 
-def scene_lights(scene) -> object:
-    """The parsed scene whose ``[[lights]]`` a relight adds (each must use ``shexp``).
-
-    Parameters
-    ----------
-    scene : path-like or shtools.scene.scene.Scene
-
-    Raises
-    ------
-    InputError
-        A light shadowed another way than ``shexp``.
-    """
-    from shtools.scene.scene import Scene, load_scene
-    from shtools.scene.shadows import ShexpLight
-
-    scene = scene if isinstance(scene, Scene) else load_scene(scene)
-    for spec in scene.lights:
-        if spec.srf is not None:
-            raise InputError(f"light '{spec.name}' is a field light (field = "
-                             f"\"{spec.srf.name}\"); relighting adds spherical lights "
-                             "(shadows = \"shexp\") only: bake the scene for it", scene.path)
-        if spec.shadows != ShexpLight.name:
-            raise InputError(f"light '{spec.name}' uses shadows = \"{spec.shadows}\", which "
-                             "needs the posed blocker meshes a bake does not keep; relighting "
-                             "shades spherical lights through the stored visibility (shadows = "
-                             "\"shexp\") only", scene.path)
-    if not scene.lights:
-        raise InputError("has no [[lights]] to add; leave the scene out", scene.path)
-    return scene
-
-
 def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None = None,
                    midrange=None):
     """Radiance of every frame of ``bake`` under ``env_sh`` (and ``scene``'s lights).
@@ -199,14 +171,14 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     position, normal and lights do not change over the bake has radiance
     ``K g`` with a fixed ``K (3, n*n)`` -- for the environment ``K = M(L) H``,
     the light's product matrix applied to the cosine lobe (Sloan et al. 2002,
-    Sec. 4), plus the spherical lights' lobes.  ``K`` is made once by the
-    runtime shading the baker uses (without de-ringing) of the unit
-    visibility vectors, so these vertices cost one float32 product per batch
-    of frames; the others are shaded as the baker shades them (a batch of
-    frames in one call while the lights do not change).  Frames are read
-    from the bake a batch at a time: a batch holds at most
-    :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads`` batches
-    are in flight, so memory does not grow with the frame count
+    Sec. 4), plus the spherical lights' lobes.  ``K`` is made once, the linear
+    map of the runtime shading the baker uses
+    (:func:`~shtools.runtime.shading.shading_matrix`), so these vertices cost
+    one float32 product per batch of frames; the others are shaded as the
+    baker shades them (a batch of frames in one call while the lights do not
+    change).  Frames are read from the bake a batch at a time: a batch holds
+    at most :data:`BATCH_ROWS` receiver rows, and at most ``2 * threads``
+    batches are in flight, so memory does not grow with the frame count
     (:func:`relight_bytes`).  De-ringing (``settings.deringing``) follows, as
     in the runtime's ``shade``.
 
@@ -217,9 +189,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
         or the open datasets of :func:`~shtools.data_formats.bake_stream.open_bake`.
     env_sh : ndarray, shape (n*n, 3) or None
         Distant environment (:func:`relight_environment`).
-    scene : shtools.scene.scene.Scene, optional
-        Its spherical lights are posed at each frame's time and shaded through
-        the stored visibility (:func:`scene_lights`).
+    scene : shtools.scene.scene.Scene or shtools.scene.light_record.PosedLights, optional
+        Its spherical lights, posed at each frame's time, are shaded through the
+        stored visibility (:func:`~shtools.scene.light_record.frame_lights`).
     settings : shtools.runtime.ShadowSettings, optional
         Default :func:`relight_settings` of the bake.
     threads : int, optional
@@ -238,6 +210,7 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
 
     from shtools.data_formats.bake_stream import check_finite
     from shtools.runtime.shading import desaturate_negative
+    from shtools.scene.light_record import frame_lights
     from shtools.tasks import default_workers
 
     check_relightable(bake)
@@ -250,12 +223,15 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
     batch = max(1, BATCH_ROWS // bake.n_vertices) if same else 1
     still, held = _fixed_rows(bake, batch) if same else (np.zeros(bake.n_vertices, bool), None)
     fixed, moving = np.flatnonzero(still), np.flatnonzero(~still)  # indices: faster to gather
+    # the still rows as runs (whole still objects): slices, not gathers, when they are few
+    runs = _runs(still)
+    runs = runs if len(runs) <= MAX_RUNS else [(fixed, 0, fixed.size)]
     batches = [range(a, min(a + batch, bake.n_frames)) for a in range(0, bake.n_frames, batch)]
     shaders = _Shaders(env_sh, settings, midrange)
     path = bake.path
 
     def linear_part(rows):
-        return shaders.linear(_state(bake, range(1), rows, lights[0]), bake.sh_order ** 2)
+        return shaders.linear(_state(bake, range(1), rows, lights[0]))
 
     def frames_of(frames, K):
         """The finished frames ``frames`` (float32 ``(len, V, 3)``)."""
@@ -270,7 +246,10 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             out[:, moving] = shaded.reshape(len(frames), moving.size, 3)
         if K is not None:  # every frame of the batch in one float32 product, as the
             # baker dots its float32 lit transfer with the visibility
-            out[:, fixed] = np.einsum("vcj,tvj->tvc", K, vis[:, fixed], optimize=True)
+            # (F, T, n*n) @ (F, n*n, 3): one small product per vertex, batched
+            for rows, k, z in runs:
+                out[:, rows] = np.matmul(vis[:, rows].transpose(1, 0, 2),
+                                         K[k:z]).transpose(1, 0, 2)
         if settings.deringing == "desaturate":  # as ShadowRuntime.shade de-rings
             # colours without a negative channel are left as they are by it
             flat = out.reshape(-1, 3)
@@ -279,11 +258,12 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
             flat[neg] = desaturate_negative(flat[neg])
         return out.astype(np.float32)
 
-    with shaders, ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
+    with ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
         K = None
         if fixed.size:  # parts of at most BATCH_ROWS rows: bounded shading scratch
             parts = np.array_split(fixed, max(threads, -(-fixed.size // BATCH_ROWS)))
             K = np.concatenate(list(pool.map(linear_part, [p for p in parts if p.size])))
+            K = np.ascontiguousarray(K.transpose(0, 2, 1))  # (F, n*n, 3) for the product
         window = 2 * threads  # batches in flight: bounded memory, every thread busy
         pending = [pool.submit(frames_of, frames, K) for frames in batches[:window]]
         for i in range(len(batches)):
@@ -292,6 +272,20 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
                 pending.append(pool.submit(frames_of, batches[i + window], K))
             yield from done
 
+
+def _runs(mask: np.ndarray) -> list[tuple[slice, int, int]]:
+    """The runs of True in ``mask (V,)``: ``(rows, k, z)``, the rows as a slice and their
+    positions ``k:z`` among the True rows."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    runs, k = [], 0
+    for a, z in zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True):
+        runs.append((slice(a, z), k, k + z - a))
+        k += z - a
+    return runs
+
+
+#: Most runs of still rows taken as slices; more are gathered by index at once.
+MAX_RUNS = 64
 
 #: Most receiver rows (vertices x frames) of one batch of frames under unchanging
 #: lights; its visibility, shading scratch and radiance grow with it.
@@ -318,75 +312,63 @@ def relight_bytes(n_frames: int, n_vertices: int, size: int, threads: int) -> in
     return int(K + GEOMETRY_BYTES + 2 * threads * batch * per_row + 2 * batch * (4 * 3 + 4 * 6))
 
 
-def frame_lights(bake, scene=None) -> list:
-    """The posed spherical lights of each frame: ``scene``'s at the bake's times."""
-    if scene is None:
-        return [[] for _ in range(bake.n_frames)]
-    from shtools.scene.pose import pose_lights
-
-    return [pose_lights(scene, float(t)) for t in bake.times]
-
-
 class _Shaders:
-    """One runtime per thread, without de-ringing (applied to each whole frame after) and
-    with the accumulation order of the shading (nothing is accumulated)."""
+    """The baker's shading of stored visibility, without de-ringing (applied to each
+    whole frame after): :func:`~shtools.runtime.shading.shade` with the lit transfer of
+    the environment, the call :meth:`~shtools.runtime.ShadowRuntime.shade` makes, and
+    its linear map :func:`~shtools.runtime.shading.shading_matrix`.  Thread-safe: the
+    mid-range sphere, which caches the last vertices' radiance SH, is one per thread."""
 
     def __init__(self, env_sh, settings, midrange=None):
         import threading
 
-        self.env_sh, self.midrange = env_sh, midrange
-        # no blockers are accumulated here, so the runtime's log tables (built when
-        # it starts) need only the shading order: the smallest and quickest to build
-        self.settings = replace(settings, deringing="none", acc_order=settings.order)
+        from shtools.runtime.shading import environment_matrices
+
+        self.env_sh, self.midrange, self.order = env_sh, midrange, settings.order
+        self.window = {"window_kind": settings.resolved_window(),
+                       "window_h": settings.window_h}
+        # the environment's product matrices once (the runtime keeps them while the
+        # light does not change); a finite sphere's light is per vertex
+        self.mats = (environment_matrices(env_sh, self.order, **self.window)
+                     if env_sh is not None and midrange is None else None)
         self.local = threading.local()
-        self.runtimes: list = []
-        self.lock = threading.Lock()
 
-    def _runtime(self):
-        runtime = getattr(self.local, "runtime", None)
-        if runtime is None:
-            from shtools.runtime import ShadowRuntime
+    def _receivers(self, state):
+        """Checked float64 positions and unit normals, and the environment at them."""
+        from shtools.runtime.blockers import check_receivers
 
-            with self.lock:  # one at a time: the second reuses the first's cached log tables
-                runtime = self.local.runtime = ShadowRuntime(self.settings)
-                self.runtimes.append(runtime)
-            # a sphere of its own per thread: it caches the last vertices' radiance SH
-            self.local.sphere = (None if self.midrange is None
-                                 else replace(self.midrange, _cache={}))
-        return runtime
+        pts, nrm = check_receivers(state.vertices, state.normals)
+        if self.midrange is None:
+            return pts, nrm, self.env_sh
+        sphere = getattr(self.local, "sphere", None)
+        if sphere is None:
+            sphere = self.local.sphere = replace(self.midrange, _cache={})
+        return pts, nrm, sphere.radiance_sh(pts)
 
     def shade(self, state, visibility) -> np.ndarray:
         """Radiance ``(R, 3)`` of ``state``'s rows (before de-ringing).
 
         What :func:`~shtools.scene.shadows.shade_frame` computes for a frame
-        without blockers whose lights are all ``shexp``: one runtime
-        :meth:`~shtools.runtime.ShadowRuntime.shade` of the environment (per
+        without blockers whose lights are all ``shexp``: the environment (per
         vertex on a finite sphere) and the lights through the visibility.
         """
-        runtime = self._runtime()
-        env = (self.env_sh if self.local.sphere is None
-               else self.local.sphere.radiance_sh(state.vertices))
-        return runtime.shade(visibility, state.vertices, state.normals, env,
-                             sphere_lights=state.lights)
+        from shtools.runtime.shading import cosine_transfer, lit_transfer, shade
 
-    def linear(self, state, size: int) -> np.ndarray:
-        """``K (R, 3, n*n)`` float32: the radiance of each unit visibility vector, before
-        de-ringing."""
-        rows = len(state.vertices)
-        K = np.empty((rows, 3, size), np.float32)
-        unit = np.zeros((rows, size), np.float32)
-        for j in range(size):
-            unit[:, j] = 1.0
-            K[:, :, j] = self.shade(state, unit)
-            unit[:, j] = 0.0
-        return K
+        pts, nrm, env = self._receivers(state)
+        transfer = cosine_transfer(nrm, self.order)
+        return shade(visibility, pts, nrm, env, tuple(state.lights), order=self.order,
+                     transfer=transfer,
+                     env_transfer=None if self.mats is None else lit_transfer(transfer,
+                                                                              self.mats),
+                     **self.window)
 
-    def __enter__(self):
-        return self
+    def linear(self, state) -> np.ndarray:
+        """``K (R, 3, n*n)`` float32: :meth:`shade` of ``state``'s rows is ``K g``."""
+        from shtools.runtime.shading import shading_matrix
 
-    def __exit__(self, *exc):
-        for runtime in self.runtimes:
-            runtime.close()
+        pts, nrm, env = self._receivers(state)
+        return shading_matrix(pts, nrm, env, tuple(state.lights), order=self.order,
+                              **self.window)
 
 
 def _state(bake, frames: range, rows, lights) -> SimpleNamespace:
@@ -436,23 +418,28 @@ def _fixed_rows(bake, batch: int):
         return np.ones(bake.n_vertices, bool), None
     T, V = bake.n_frames, bake.n_vertices
     names = ("vertices", "normals")
-    held = ({name: np.empty((T, V, 3), np.float32) for name in names}
-            if T * V * 3 * 4 * len(names) <= GEOMETRY_BYTES else None)
-    first = {name: np.asarray(getattr(bake, name)[0]) for name in names}
     still = np.ones(V, bool)
-    for a in range(0, T, batch):
-        for name, ref in first.items():
-            values = check_finite(np.asarray(getattr(bake, name)[a:a + batch]), name,
-                                  bake.path)
-            # any() over the frame axis first: a contiguous reduction, far faster
-            # than all() over the frame and coordinate axes together
-            still &= ~(values != ref).any(axis=0).any(axis=1)
-            if held is not None:
-                held[name][a:a + batch] = values
-    if held is not None:
-        moving = np.flatnonzero(~still)
-        held = SimpleNamespace(**{name: values[:, moving] for name, values in held.items()})
-    return still, held
+
+    def compare(values, ref):
+        nonlocal still
+        # any() over the frame axis first: a contiguous reduction, far faster than
+        # all() over the frame and coordinate axes together
+        still &= ~(values != ref).any(axis=0).any(axis=1)
+
+    if T * V * 3 * 4 * len(names) > GEOMETRY_BYTES:  # a batch at a time, read again later
+        first = {name: np.asarray(getattr(bake, name)[0]) for name in names}
+        for a in range(0, T, batch):
+            for name, ref in first.items():
+                compare(check_finite(np.asarray(getattr(bake, name)[a:a + batch]), name,
+                                     bake.path), ref)
+        return still, None
+    # each dataset in one read (no copy into a buffer), the moving rows kept
+    held = {name: check_finite(np.asarray(getattr(bake, name)[()]), name, bake.path)
+            for name in names}
+    for values in held.values():
+        compare(values, values[0])
+    moving = np.flatnonzero(~still)
+    return still, SimpleNamespace(**{name: values[:, moving] for name, values in held.items()})
 
 
 #: Most bytes of per-frame geometry relighting keeps in memory to read it once.
@@ -502,8 +489,10 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         The relit bake asset.
     rotate : float
         Turn the light this many degrees about +Y (SH rotation).
-    scene : path-like or Scene, optional
-        Add this scene's ``[[lights]]`` (``shexp`` shadows from the stored visibility).
+    scene : path-like, Scene or shtools.scene.light_record.PosedLights, optional
+        Add this scene's ``[[lights]]`` (``shexp`` shadows from the stored visibility):
+        read from the bake when it is the scene file the bake recorded them from,
+        else parsed (:func:`~shtools.scene.light_record.scene_lights`).
     compression : str or None
         h5py filter of the output's radiance: None (the default) stores it
         plain, so writing costs no more than the shading; ``"gzip"`` as a bake
@@ -534,10 +523,11 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     from shtools.data_formats.bake import BakeWriter
     from shtools.data_formats.bake_stream import open_bake
     from shtools.progress import silent
+    from shtools.scene.light_record import PosedLights, pose_table, posed
 
     start = time.perf_counter()
-    for src in (bake, light) + (() if scene is None or not isinstance(scene, str | os.PathLike)
-                                 else (scene,)):
+    named = scene.path if isinstance(scene, PosedLights) else scene
+    for src in (bake, light) + (() if not isinstance(named, str | os.PathLike) else (named,)):
         if same_file(output, src):
             raise InputError(f"is also an input ({src}); choose another output", output)
     with open_bake(bake) as b:
@@ -548,7 +538,7 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                                   b.parameters.get("window", settings.window), rotate, inputs)
         sphere = relight_midrange(b, env)
         if scene is not None:
-            scene = scene_lights(scene)
+            scene = posed(b, scene)
             inputs["scene"] = scene.path
         parameters = dict(b.parameters)
         parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
@@ -567,7 +557,8 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                 times=b.times,
                 frame_index=b.frame_index, albedo=b.albedo, object_offsets=b.object_offsets,
                 object_names=b.object_names, parameters=parameters, inputs=inputs,
-                fps=b.attrs.get("fps"), compression=compression, copy=copy)
+                fps=b.attrs.get("fps"), compression=compression, copy=copy,
+                light_poses=None if scene is None else pose_table(scene.frames))
             frames = relight_frames(b, env, scene, settings, threads, midrange=sphere)
             first = next(frames)
             writer = made.result()

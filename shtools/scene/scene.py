@@ -71,8 +71,9 @@ class Settings(ShadowSettings):
                                         "mesh (rigid: traced once; skinned: every frame)")
     self_visibility_directions: int = setting(
         SKINNED_DIRECTIONS, "int", lo=4, hi=4096,
-        doc="rays per self-shadowed vertex and frame tracing skinned objects' posed mesh "
-            "(a ninth of them on every vertex finds which are)")
+        doc="directions of each vertex's set tracing skinned objects' posed mesh every "
+            "frame (a ninth of them on every vertex finds where the mesh is; the rest are "
+            "cast only there)")
     traced_shadows: bool = setting(True, "bool",
                                    doc="the shadow of skinned objects that trace their posed "
                                        "mesh and of rigid sphere-set blockers is ray traced "

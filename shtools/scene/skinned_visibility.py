@@ -2,22 +2,29 @@ r"""A skinned object's self-visibility, ray traced on its posed mesh every frame
 
 A posed character is traced on its own vertices over each vertex's hemisphere.
 The error of a vertex's estimate is that of its binary samples, and it sits
-exactly where the character shadows itself (between the legs, under the arms):
-the shadowed vertices need several times the rays a fully visible one does.
-So the rays go where the shadows are, in two passes
+exactly where the character shadows itself (between the legs, under the arms),
+and there only in the directions the mesh fills: the shadowed vertices need
+several times the rays a fully visible one does, and only towards the mesh.
+So the rays go where the shadows are, in two passes of one set
 (:func:`adaptive_self_visibility`):
 
-1. every vertex casts a few rays (:data:`FIRST_FRACTION` of the count);
+1. each vertex's set (a spherical Fibonacci set of ``n`` directions in its tangent
+   frame) is cut into **strata**, the directions nearest each of every
+   :data:`FIRST_STRIDE`-th point of the set; every vertex casts those points first;
 2. the vertices that any of them finds blocked, and their mesh neighbours (a
    faint shadow the first rays missed sits next to a stronger one they found),
-   cast the rest.
+   cast the rest of the set in the strata where the mesh may be: those whose first
+   ray was blocked, on the vertex or on a neighbour (that ray's direction in the
+   vertex's frame), and the strata next to them (:data:`STRATUM_RINGS`).
 
-A vertex of the second pass averages both passes' estimates by their counts; a
-vertex of the first pass alone, none of whose rays was blocked and none of whose
-neighbours', keeps the exact constant 1.  Each vertex's hemisphere set (a
-spherical Fibonacci set in its tangent frame) is turned about its normal by its
-own angle (``v`` golden angles for vertex ``v``), the second set half a golden
-angle from the first, so neighbouring vertices do not repeat one pattern's error.
+Every ray of a vertex stands for ``2π / n``: a vertex of the second pass sums
+the blocked rays of both, over the whole set where the mesh may be (the nested
+passes are one Fibonacci set, not two sets that overlap); a stratum that casts
+only its first ray, unblocked, and a vertex of the first pass alone, none of
+whose rays was blocked and none of whose neighbours', count as unblocked (the
+exact constant 1 on a vertex the mesh does not shadow).  Each vertex's set is
+turned about its normal by its own angle (``v`` golden angles for vertex ``v``),
+so neighbouring vertices do not repeat one pattern's error.
 
 The rays are not shared between neighbours, and the visibility is not filtered over
 the surface: on a character's mesh neighbouring vertices' visibilities differ far
@@ -27,6 +34,7 @@ less accurate at every count than the vertex's own rays; ``bench_look``).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -34,15 +42,19 @@ import numpy as np
 from shtools.geometry.visibility import GOLDEN_ANGLE
 from shtools.sh.basis import SQRT_4PI
 
-#: Rays per vertex of a skinned object's posed mesh where it is self-shadowed (the
-#: ``self_visibility_directions`` default): the fewest that keep the error over
-#: CesiumMan's own shadowed vertices under 4 % (``benchmarks/bench_look.py``).
-SKINNED_DIRECTIONS = 112
-#: Share of the rays every vertex casts first (at least :data:`FIRST_MIN`).
-FIRST_FRACTION = 1.0 / 9.0
+#: Rays per vertex of a skinned object's posed mesh where it shadows itself in every
+#: direction (the ``self_visibility_directions`` default; a vertex casts those of the
+#: strata the mesh may be in): the error over CesiumMan's own shadowed vertices is
+#: 3.3 % (``benchmarks/bench_look.py``).
+SKINNED_DIRECTIONS = 120
+#: Every this-th point of a vertex's set is cast first, one per stratum (14 of 120; at
+#: least :data:`FIRST_MIN` points, when the set has that many).
+FIRST_STRIDE = 9
 FIRST_MIN = 4
 #: Mesh rings around the vertices the first rays find blocked that cast the rest too.
 DILATE_RINGS = 1
+#: Rings of strata around the blocked ones whose rest a vertex of the second pass casts.
+STRATUM_RINGS = 1
 
 
 def turned_frames(normals) -> np.ndarray:
@@ -57,11 +69,40 @@ def turned_frames(normals) -> np.ndarray:
     return np.stack([c * t1 + s * t2, c * t2 - s * t1, n], axis=1)
 
 
-def split_directions(n_dirs: int) -> tuple[int, int]:
-    """Rays of the first pass and of the second for a count of ``n_dirs``."""
-    n = int(n_dirs)
-    first = min(n, max(FIRST_MIN, round(FIRST_FRACTION * n)))
-    return first, n - first
+def first_stride(n_dirs: int) -> int:
+    """Stride of the points a set of ``n_dirs`` casts first (1: one pass, all first)."""
+    return max(1, min(FIRST_STRIDE, int(n_dirs) // FIRST_MIN))
+
+
+@functools.lru_cache(maxsize=8)
+def strata(n_dirs: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A set of ``n_dirs`` hemisphere directions cut into strata.
+
+    Returns
+    -------
+    local : ndarray, shape (n, 3) float32
+        The set (:func:`~shtools.geometry.visibility.hemisphere_directions`).
+    first : ndarray of int, shape (K,)
+        Its points cast first (every :func:`first_stride`-th), one per stratum.
+    cell : ndarray of int, shape (n,)
+        The stratum of each point (its nearest first point).
+    touching : ndarray, shape (K, K) float32
+        1 where two strata touch (a point of one has the other's first point second
+        nearest) or are the same.
+    """
+    from shtools.geometry.visibility import hemisphere_directions
+
+    local = hemisphere_directions(int(n_dirs))
+    first = np.arange(0, len(local), first_stride(n_dirs))
+    near = np.argsort(-(local @ local[first].T), axis=1, kind="stable")
+    cell = near[:, 0]
+    touching = np.eye(len(first), dtype=np.float32)
+    if len(first) > 1:
+        touching[cell, near[:, 1]] = touching[near[:, 1], cell] = 1.0
+    out = (local.astype(np.float32), first, cell, touching)
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 #: The last meshes' vertex adjacency, per process: (faces array, vertex count, CSR).
@@ -90,13 +131,31 @@ def _blocked(caster, origins, frames, local) -> tuple[np.ndarray, np.ndarray]:
     return dirs, hit.reshape(len(origins), local.shape[0])
 
 
+def _neighbour_strata(hit, dirs, frames, first_local, adj) -> np.ndarray:
+    """Bool ``(V, K)``: the strata of each vertex's frame holding a blocked first ray of
+    one of its mesh neighbours (that ray's world direction, above the tangent plane)."""
+    out = np.zeros(hit.shape, dtype=bool)
+    holders = np.flatnonzero(hit.any(axis=1))
+    if not holders.size:
+        return out
+    edges = adj[holders].tocoo()  # (neighbour that has blocked rays, vertex): symmetric
+    e, k = np.divmod(np.flatnonzero(hit[holders[edges.row]]), hit.shape[1])
+    v = edges.col[e]
+    # the neighbour's blocked direction in the vertex's frame (rows t1, t2, N); np.take
+    # gathers rows several times faster than fancy indexing
+    w = np.take(dirs.reshape(-1, 3), holders[edges.row[e]] * hit.shape[1] + k, axis=0)
+    local = np.einsum("eij,ej->ei", np.take(frames, v, axis=0), w)
+    above = local[:, 2] > 0
+    out[v[above], np.argmax(local[above] @ first_local.T, axis=1)] = True
+    return out
+
+
 def adaptive_self_visibility(points, normals, faces, caster, order: int,
                              n_dirs: int = SKINNED_DIRECTIONS, *,
                              offset: float | None = None) -> np.ndarray:
     r"""Self-visibility ``(V, order^2)`` float64 of a posed mesh on its own vertices.
 
-    With ``n`` the rays a vertex casts in all (``n_dirs`` where it is self-shadowed,
-    the first pass's count elsewhere) and the blocked ones ``s_q``:
+    With ``n = n_dirs`` and ``s_q`` the blocked rays of a vertex (of both passes):
 
     .. math::
 
@@ -115,45 +174,48 @@ def adaptive_self_visibility(points, normals, faces, caster, order: int,
     order : int
         SH order of the result.
     n_dirs : int
-        Rays of a self-shadowed vertex (:func:`split_directions` splits them).
+        Points of each vertex's set (:func:`strata` cuts them).
     offset : float, optional
         Ray origin offset along the normal (default ``RAY_OFFSET`` times the caster's
         bounding-box diagonal).
     """
-    from shtools.geometry.visibility import RAY_OFFSET, _subtract_blocked, hemisphere_directions
+    from shtools.geometry.visibility import RAY_OFFSET, _subtract_blocked
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    n_first, n_rest = split_directions(n_dirs)
+    local, first, cell, touching = strata(n_dirs)
     frames = turned_frames(nrm).astype(np.float32)
     if offset is None:
         offset = RAY_OFFSET * caster.diagonal
     origins = caster.embree_points(p + offset * nrm)
+    weight = 2.0 * math.pi / len(local)
     g = np.zeros((p.shape[0], order * order))
     g[:, 0] = SQRT_4PI
-    dirs, blocked = _blocked(caster, origins, frames,
-                             hemisphere_directions(n_first).astype(np.float32))
-    busy = blocked.any(axis=1)
-    if not busy.any():
-        return g
-    if n_rest:
-        adj = _adjacency(faces, len(p))
-        for _ in range(DILATE_RINGS):
-            busy = busy | (adj @ busy.astype(np.float64) > 0)
-    rows = np.flatnonzero(busy)
-    # a vertex traced once has no blocked ray (its g stays 1): the first pass's blocked
-    # rays all belong to vertices of the second pass, whose ray total is n_dirs
+    dirs, blocked = _blocked(caster, origins, frames, local[first])
     vi, qi = np.nonzero(blocked)
-    _subtract_blocked(g, vi, dirs[vi, qi], 2.0 * math.pi / (n_first + n_rest), order)
-    if not n_rest:
+    if not vi.size:
         return g
-    rest = hemisphere_directions(n_rest).astype(np.float32)
-    c, s = math.cos(0.5 * GOLDEN_ANGLE), math.sin(0.5 * GOLDEN_ANGLE)
-    rest = rest @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]], dtype=np.float32)
-    step = max(1, (1 << 20) // rest.shape[0])  # rays per Embree call: bounded memory
+    # a vertex traced once has no blocked ray (its g stays 1): the first pass's blocked
+    # rays all belong to vertices of the second pass
+    _subtract_blocked(g, vi, dirs[vi, qi], weight, order)
+    rest = np.setdiff1d(np.arange(len(local)), first)
+    if not rest.size:
+        return g
+    adj = _adjacency(faces, len(p))
+    busy = blocked.any(axis=1)
+    for _ in range(DILATE_RINGS):
+        busy = busy | (adj @ busy.astype(np.float64) > 0)
+    active = blocked | _neighbour_strata(blocked, dirs, frames, local[first], adj)
+    for _ in range(STRATUM_RINGS):
+        active = (active.astype(np.float32) @ touching) > 0
+    rows = np.flatnonzero(busy & active.any(axis=1))
+    step = max(1, (1 << 20) // rest.size)  # rays per Embree call: bounded memory
     for start in range(0, rows.size, step):
         at = rows[start:start + step]
-        dirs, blocked = _blocked(caster, origins[at], frames[at], rest)
-        vi, qi = np.nonzero(blocked)
-        _subtract_blocked(g, at[vi], dirs[vi, qi], 2.0 * math.pi / (n_first + n_rest), order)
+        take = active[at][:, cell[rest]]  # (B, n - K): the rest in the strata cast
+        flat = np.flatnonzero(take)
+        d = np.take(np.matmul(local[rest][None], frames[at]).reshape(-1, 3), flat, axis=0)
+        hit = caster.occluded_embree(np.repeat(origins[at], take.sum(axis=1), axis=0), d)
+        # flat is sorted: the blocked rays come in one run per vertex
+        _subtract_blocked(g, at[flat[hit] // rest.size], d[hit], weight, order)
     return g

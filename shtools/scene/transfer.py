@@ -54,21 +54,24 @@ def uses_self_visibility(obj, default: bool = True) -> bool:
     return bool(choice) and obj.spec.receives and obj.spec.blocks and obj.motion is None
 
 
-#: Algorithm version of the cached self-visibility log (:mod:`shtools.cache`): raise it
+#: Algorithm version of the cached self-visibility (:mod:`shtools.cache`): raise it
 #: when :func:`object_self_log`'s traced result changes, even by rounding (a bake is the
 #: same bytes with or without the cache).
-SELF_LOG_VERSION = 4
+SELF_LOG_VERSION = 5
 
 
-def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = None,
-                    cache=None) -> tuple[np.ndarray, np.ndarray | None, Path | None]:
-    """The object's self-visibility log in its own frame, ``(V, acc_order^2)`` float32,
-    and the ray-traced visibility it is the log of, when there is one.
+def object_self_log(obj, acc_order: int, order: int | None = None, *,
+                    log: Callable[[str], None] | None = None,
+                    cache=None) -> tuple[np.ndarray | None, np.ndarray | None, Path | None]:
+    """The object's self-visibility in its own frame: a log ``(V, acc_order^2)`` float32
+    (added before the exp) or the visibility itself (multiplied in after it), or both.
 
     From the first source that applies: the ``transfer`` asset the scene names
-    (``self_visibility = "x.transfer.h5"``); the O_v stored in the object's
+    (``self_visibility = "x.transfer.h5"``: both); the O_v stored in the object's
     shadow-field asset (``blocker = { field = ... }``, :mod:`shtools.scene.field_blocker`)
-    when it is at least the accumulation order; zero for a convex mesh; ray traced now.
+    when it is at least the accumulation order (a log); a zero log for a convex mesh;
+    the visibility ray traced now, at the shading ``order`` (the runtime multiplies it
+    in at that order, and needs no log of it).
 
     Parameters
     ----------
@@ -76,20 +79,23 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         With ``vertices``, ``normals``, ``faces`` (own frame) and ``spec``.
     acc_order : int
         The runtime's accumulation order.
+    order : int, optional
+        The shading order a traced visibility is projected to (default ``acc_order``).
     log : callable, optional
         Progress messages.
     cache : shtools.cache.SetupCache, optional
-        Where the traced log and visibility (and a convex mesh's zero) are read from
+        Where the traced visibility (and whether the mesh is convex) is read from
         when its mesh, normals and order were traced before, and stored otherwise.
 
     Returns
     -------
-    log : ndarray, shape (V, acc_order^2) float32
+    log : ndarray, shape (V, acc_order^2) float32, or None
+        None for a traced visibility.
     visibility : ndarray, shape (V, m*m) float32, or None
-        The projected visibility of a transfer asset or of the tracing (the
-        runtime multiplies it in exactly: the eigen-log's exp does not give it
-        back where the mesh shadows itself deeply); None for a field's O_v and a
-        convex mesh.
+        The projected visibility of a transfer asset (``m`` its order) or of the
+        tracing (``m = order``; the runtime multiplies it in exactly: the
+        eigen-log's exp does not give it back where the mesh shadows itself
+        deeply); None for a field's O_v and a convex mesh.
     path : Path or None
         The ``transfer`` asset read (for the bake's inputs), None otherwise.
     """
@@ -102,43 +108,43 @@ def object_self_log(obj, acc_order: int, *, log: Callable[[str], None] | None = 
         # accumulation order (fields sampled before it was stored there) would cost
         # accuracy (dragon: 3.5 % instead of 2.4 %), so such an object is traced
         return stored, None, None
+    order = acc_order if order is None else int(order)
+    zero = np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
     if cache is None:
-        return *_traced_self_log(obj, acc_order, log), None
-    from shtools.geometry.transfer import TRANSFER_DIRECTIONS
-    from shtools.geometry.visibility import LOG_FLOOR
+        g = _traced_self_visibility(obj, order, log)
+        return (zero, None, None) if g is None else (None, g, None)
+    from shtools.geometry.transfer import FIRST_DIRECTIONS, TRANSFER_DIRECTIONS
 
     parts = {"vertices": np.asarray(obj.vertices), "normals": np.asarray(obj.normals),
-             "faces": np.asarray(obj.faces), "order": int(acc_order),
-             "estimator": "hemisphere", "n_dirs": TRANSFER_DIRECTIONS, "floor": LOG_FLOOR}
+             "faces": np.asarray(obj.faces), "order": order, "estimator": "hemisphere",
+             "n_dirs": TRANSFER_DIRECTIONS, "n_first": FIRST_DIRECTIONS}
 
     def compute():
-        f, g = _traced_self_log(obj, acc_order, log)
+        g = _traced_self_visibility(obj, order, log)
         # a convex mesh's "no visibility" is stored as an empty array
-        return {"log": f, "visibility": np.zeros((0, f.shape[1]), np.float32) if g is None
-                else g}
+        return {"visibility": np.zeros((0, order * order), np.float32) if g is None else g}
 
-    got = cache.fetch("self_log", SELF_LOG_VERSION, parts, compute)
-    g = got["visibility"]
-    return got["log"], (g if len(g) else None), None
+    g = cache.fetch("self_log", SELF_LOG_VERSION, parts, compute)["visibility"]
+    return (None, g, None) if len(g) else (zero, None, None)
 
 
-def _traced_self_log(obj, acc_order: int, log) -> tuple[np.ndarray, np.ndarray | None]:
-    """The self-visibility log and visibility ``(V, acc_order^2)`` float32 ray traced now
-    (a zero log and no visibility if convex)."""
+def _traced_self_visibility(obj, order: int, log) -> np.ndarray | None:
+    """The self-visibility ``(V, order^2)`` float32 ray traced now (None if convex)."""
     import trimesh
 
     if is_convex(obj.vertices, obj.faces):
-        return np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32), None
+        return None
     from shtools.geometry.transfer import hemisphere_transfer
 
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     if log:
         log(f"ray tracing the self-visibility of {obj.spec.name} ({len(obj.vertices)} vertices; "
             "the set-up cache keeps it for the next bake)")
-    # rays over each vertex's own hemisphere only: fewer than the product rule of
-    # `shtools transfer` casts, at no larger error (geometry.transfer.TRANSFER_DIRECTIONS)
-    g, f, _ = hemisphere_transfer(mesh, acc_order, normals=obj.normals)
-    return f.astype(np.float32), g.astype(np.float32)
+    # rays over each vertex's own hemisphere only, refined where its shadow boundaries
+    # are: fewer than the product rule of `shtools transfer` casts, at no larger error
+    # (geometry.transfer.TRANSFER_DIRECTIONS)
+    g, _, _ = hemisphere_transfer(mesh, order, normals=obj.normals, with_log=False)
+    return g.astype(np.float32)
 
 
 #: A closed mesh whose volume is within this fraction of its convex hull's is convex.

@@ -365,6 +365,14 @@ def _factored_series(parts, degree: int, ops, ws=None):
     Even powers are built as :math:`f^{2*} = f * f`, :math:`f^{2k*} = f^{(2k-2)*} * f^{2*}`.
     """
     coef = [1.0 / math.factorial(k) for k in range(degree + 1)]
+    if degree == 2:  # 1 + f + f^2/2 in place in the square (the sums of the loop below)
+        f2 = ops.square_split(parts, ws=ws)
+        for e in f2:
+            e *= coef[2]
+        f2[0][:, 0] += SQRT_4PI * coef[0]
+        for e, p in zip(f2, parts, strict=True):
+            e += p
+        return f2
     even = [np.zeros_like(p) for p in parts]
     even[0][:, 0] = SQRT_4PI * coef[0]
     odd = [np.zeros_like(p) for p in parts]
@@ -405,7 +413,10 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None) -> None
     q_sorted = q[by_norm[:live]]
     norm_sorted = norm[by_norm[:live]]
     scale = np.ldexp(1.0, -q_sorted)
-    scaled = [p[by_norm[:live]] * scale[:, None].astype(p.dtype) for p in parts]
+    column = scale[:, None].astype(parts[0].dtype)  # exact: powers of 2
+    scaled = [np.take(p, by_norm[:live], axis=0) for p in parts]
+    for p in scaled:
+        p *= column
     if method == "hyb":
         g = _ol_split(scaled, norm_sorted * scale, tables)
     else:

@@ -44,35 +44,48 @@ This module imports only the standard library; ``dask``/``distributed`` are
 imported when a Dask scheduler is asked for (``pip install shtools[distributed]``).
 """
 
-from shtools.tasks.dask_cluster import (
-    CONNECT_TIMEOUT,
-    EMBEDDED_CLUSTER_CONFIG,
-    LOCAL_NAMES,
-    MAX_SCHEDULER_FILE,
-    SCHEMES,
-    check_scheduler,
-)
-from shtools.tasks.pool import (
-    MAX_RESUBMITS,
-    WINDOW_PER_WORKER,
-    Shared,
-    TaskPool,
-    WorkerStats,
-    task_pool,
-)
-from shtools.tasks.workers import (
-    HELD_SIGNALS,
-    MAX_LOCAL_WORKERS,
-    TRACKER_WARNINGS,
-    WORKER_PRELOAD,
-    blas_threads,
-    can_start_workers,
-    default_workers,
-    die_with_parent,
-    start_worker,
-    use_blas_threads,
-    worker_context,
-)
+import importlib
+
+#: public name -> module, loaded on first use: a command that only asks how many cores
+#: it may use (``shtools relight``) imports no multiprocessing or Dask machinery
+_LAZY = {
+    "CONNECT_TIMEOUT": "shtools.tasks.dask_cluster",
+    "EMBEDDED_CLUSTER_CONFIG": "shtools.tasks.dask_cluster",
+    "LOCAL_NAMES": "shtools.tasks.dask_cluster",
+    "MAX_SCHEDULER_FILE": "shtools.tasks.dask_cluster",
+    "SCHEMES": "shtools.tasks.dask_cluster",
+    "check_scheduler": "shtools.tasks.dask_cluster",
+    "MAX_RESUBMITS": "shtools.tasks.pool",
+    "WINDOW_PER_WORKER": "shtools.tasks.pool",
+    "Shared": "shtools.tasks.pool",
+    "TaskPool": "shtools.tasks.pool",
+    "WorkerStats": "shtools.tasks.pool",
+    "task_pool": "shtools.tasks.pool",
+    "HELD_SIGNALS": "shtools.tasks.workers",
+    "MAX_LOCAL_WORKERS": "shtools.tasks.workers",
+    "TRACKER_WARNINGS": "shtools.tasks.workers",
+    "WORKER_PRELOAD": "shtools.tasks.workers",
+    "blas_threads": "shtools.tasks.workers",
+    "can_start_workers": "shtools.tasks.workers",
+    "default_workers": "shtools.tasks.workers",
+    "die_with_parent": "shtools.tasks.workers",
+    "start_worker": "shtools.tasks.workers",
+    "use_blas_threads": "shtools.tasks.workers",
+    "worker_context": "shtools.tasks.workers",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # looked up once
+        return value
+    raise AttributeError(f"module 'shtools.tasks' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_LAZY])
+
 
 __all__ = [
     "CONNECT_TIMEOUT",

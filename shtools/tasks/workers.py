@@ -13,7 +13,6 @@ Standard library only.
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import os
 import signal
 import sys
@@ -41,7 +40,8 @@ def default_workers() -> int:
 #: imported trimesh, SciPy and Embree itself took ~1.5 s more per bake).  One that
 #: cannot be imported (a core install) is skipped.
 WORKER_PRELOAD = (
-    "shtools.tasks", "shtools.runtime.evaluator", "shtools.scene.bake", "shtools.scene.transfer",
+    "shtools.tasks.pool", "shtools.tasks.workers", "shtools.tasks.dask_cluster",
+    "shtools.runtime.evaluator", "shtools.scene.bake", "shtools.scene.transfer",
     "shtools.scene.midrange", "shtools.scene.primitives", "shtools.fields.build",
     "shtools.fields.deformable", "shtools.geometry.assets", "shtools.geometry.raycast",
     "shtools.sh.scaling", "shtools.progress",
@@ -66,6 +66,8 @@ def worker_context():
     pool here and by the runtime's in-frame workers
     (:class:`shtools.runtime.parallel.VertexWorkers`).
     """
+    import multiprocessing  # here: a caller of default_workers alone starts no worker
+
     if "forkserver" not in multiprocessing.get_all_start_methods():  # Windows
         return None
     from multiprocessing import forkserver
@@ -136,6 +138,8 @@ def start_worker(submit: Callable, *args):
 
 def can_start_workers() -> bool:
     """Whether local worker processes are available (not on Windows)."""
+    import multiprocessing
+
     return "forkserver" in multiprocessing.get_all_start_methods()
 
 

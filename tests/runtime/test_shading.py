@@ -166,3 +166,29 @@ def test_cached_tables_follow_changed_normals_and_lights(change):
     # and the tabulated cache equals the on-the-fly form of the same light
     otf = rt.shade(g, pts, nrm, env, form="on_the_fly")
     np.testing.assert_allclose(got, otf, rtol=1e-5, atol=1e-5)  # float32 sums, other order
+
+
+@pytest.mark.parametrize("order", [2, 4, 6])  # one quadrature class below order 5, four above
+@pytest.mark.parametrize("environment", ["distant", "per-vertex", "none"])
+def test_shading_matrix_is_the_linear_map_of_shade(order, environment):
+    """``K g`` equals ``shade(g)`` for random visibility (any g: the map is linear), with
+    the environment at infinity or per vertex and two spherical lights, one of them
+    around some receivers; ``shade`` evaluates the triple product by quadrature, ``K``
+    through its symmetry."""
+    from shtools.runtime.shading import shading_matrix
+
+    rng = np.random.default_rng(order)
+    g, env, nrm = _random(order, v=300, seed=order)
+    g = g.astype(np.float32)
+    pts = rng.normal(size=(300, 3))
+    env = {"distant": env, "none": None,
+           "per-vertex": env[None] + rng.normal(size=(300, order * order, 3)) * 0.1}[environment]
+    lights = [SphereLight([1.0, 2.0, 0.5], 0.3, [5.0, 4.0, 3.0]),
+              SphereLight([0.0, 0.0, 0.0], 0.8, [1.0, 2.0, 3.0])]  # some receivers inside
+    for window in ("cosine", None):
+        ref = shade(g, pts, nrm, env, lights, order=order, window_kind=window)
+        K = shading_matrix(pts, nrm, env, lights, order=order, window_kind=window)
+        assert K.shape == (300, 3, order * order) and K.dtype == np.float32
+        # float32 sums of n*n terms in another order than shade's (values of order 1-10)
+        np.testing.assert_allclose(np.einsum("vcj,vj->vc", K, g), ref, rtol=1e-5,
+                                   atol=1e-5 * np.max(np.abs(ref)))

@@ -11,8 +11,8 @@ from shtools.runtime.shading import desaturate_negative, shade
 
 
 def test_kept_light_terms_give_the_bytes_of_fresh_shading():
-    """Rows that moved and lights that moved are refreshed; the rest is reused, and
-    every frame equals shading without any cache, bit for bit."""
+    """Rows that moved or turned and lights that moved or changed colour are refreshed;
+    the rest is reused, and every frame equals shading without any cache, bit for bit."""
     sc = capsule_scene(grid=16)
     settings = ShadowSettings(order=4, processes=1)
     rt = ShadowRuntime(settings)
@@ -22,19 +22,24 @@ def test_kept_light_terms_give_the_bytes_of_fresh_shading():
               SphereLight((-1.5, 1.0, -0.5), 0.2, (0.5, 1.0, 2.0))]
     moved = v0.copy()
     moved[:40] += (0.0, 0.05, 0.0)  # some receivers move
-    frames = [(v0, lights), (v0, lights), (moved, lights),
-              (moved, [SphereLight((1.1, 2.0, 0.5), 0.3, (3.0, 2.0, 1.0)), lights[1]]),
-              (moved, [lights[0], SphereLight((-1.5, 1.0, -0.5), 0.25, (0.5, 1.0, 2.0))])]
-    for v, ls in frames:
-        got = rt.shade(g, v, n0, sc.env_sh, ls)
-        want = desaturate_negative(shade(g, v, n0, sc.env_sh, tuple(ls), order=4,
+    turned = n0.copy()  # others turn (their cosine transfer changes)
+    turned[50:70] = turned[50:70, [1, 2, 0]]
+    recoloured = [lights[0], SphereLight((-1.5, 1.0, -0.5), 0.25, (0.5, 1.5, 2.0))]
+    frames = [(v0, n0, lights), (v0, n0, lights), (moved, n0, lights),
+              (moved, n0, [SphereLight((1.1, 2.0, 0.5), 0.3, (3.0, 2.0, 1.0)), lights[1]]),
+              (moved, n0, [lights[0], SphereLight((-1.5, 1.0, -0.5), 0.25, (0.5, 1.0, 2.0))]),
+              (moved, n0, recoloured), (moved, turned, recoloured), (v0, turned, recoloured),
+              (v0, n0, [])]
+    for v, n, ls in frames:
+        got = rt.shade(g, v, n, sc.env_sh, ls)
+        want = desaturate_negative(shade(g, v, n, sc.env_sh, tuple(ls), order=4,
                                          window_kind=settings.resolved_window(),
                                          window_h=settings.window_h))
         np.testing.assert_array_equal(got, want)
     # the light terms are kept, not recomputed: a cache told that nothing moved
     # serves the old rows' terms, and the bytes then differ from fresh shading
     rt.shade(g, v0, n0, sc.env_sh, lights)
-    rt._shading._points[:] = moved
+    rt._shading._rows[2][:] = moved  # the receivers its lit rows were made for
     want = desaturate_negative(shade(g, moved, n0, sc.env_sh, tuple(lights), order=4,
                                      window_kind=settings.resolved_window(),
                                      window_h=settings.window_h))

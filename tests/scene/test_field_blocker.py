@@ -251,8 +251,9 @@ def test_an_o_v_below_the_accumulation_order_is_traced_at_bake_time(torus_dir, m
         prepared = prepare_scene(load_scene(path))
         torus = prepared.objects[1]
         assert bool(calls) == traced
-        if traced:  # at the accumulation order 6, not the stored order-4 O_v
-            assert torus.self_log.shape == (len(torus.vertices), 36)
-            assert np.abs(torus.self_log[:, 16:]).max() > 0
+        if traced:  # its visibility, multiplied in, not the stored order-4 O_v's log
+            assert torus.self_log is None
+            assert torus.self_transfer.shape[0] == len(torus.vertices)
+            assert np.abs(torus.self_transfer[:, 1:]).max() > 0.1
         else:
             assert torus.self_log is None and torus.blocker_data.self_order == 4

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from shtools.data_formats.bake import read_bake
+from shtools.data_formats.bake_stream import open_bake
 from shtools.data_formats.light import write_light
 from shtools.scene import relight as relight_module
 from shtools.scene.bake import bake_to_file
@@ -204,6 +205,14 @@ def test_relight_refuses_bad_input_in_one_line(baked_a, tmp_path, run_cli):
                           tmp_path / "b.h5", "-o", out)
     assert "nan.h5" in err and "'visibility' contains NaN" in err
     assert not out.exists() and bake_a.read_bytes() == before
+    # -o a file the scene names (its sky, a.h5), whether the lamp is read from the bake
+    # or, for an older bake, from the parsed scene
+    sky = (tmp_path / "a.h5").read_bytes()
+    for bake in (bake_a, _older(bake_a, tmp_path / "old.h5")):
+        err = _one_line_error(run_cli, "relight", bake, "--light", tmp_path / "b.h5",
+                              "--lights", scene_a, "-o", tmp_path / "a.h5")
+        assert "a.h5" in err and ("also an input" in err or "a file the scene" in err), err
+    assert (tmp_path / "a.h5").read_bytes() == sky
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
 
 
@@ -289,7 +298,8 @@ def _assert_fresh(relit_path, fresh_path):
 @pytest.mark.parametrize("held", [True, False], ids=["geometry-held", "geometry-reread"])
 def test_streamed_relight_in_tiny_batches_equals_a_fresh_bake(tmp_path, monkeypatch, held):
     """One frame a batch, the K of the still ground built in parts of 5 rows, the moving
-    ball's geometry kept in memory or read again per batch: the same radiance."""
+    ball's geometry kept in memory or read again per batch, the still rows taken as a
+    slice or gathered by index: the same radiance."""
     _sky(tmp_path / "a.h5", 1)
     _sky(tmp_path / "b.h5", 2)
     scene_a = _scene(tmp_path, "a.toml", "a.h5", moving="ball")
@@ -299,6 +309,7 @@ def test_streamed_relight_in_tiny_batches_equals_a_fresh_bake(tmp_path, monkeypa
     monkeypatch.setattr(relight_module, "BATCH_ROWS", 5)
     if not held:
         monkeypatch.setattr(relight_module, "GEOMETRY_BYTES", 0)
+        monkeypatch.setattr(relight_module, "MAX_RUNS", 0)
     relight(tmp_path / "a_baked.h5", tmp_path / "b.h5", tmp_path / "relit.h5", rotate=25.0,
             scene=scene_a, threads=2)
     _assert_fresh(tmp_path / "relit.h5", tmp_path / "b_baked.h5")
@@ -430,3 +441,55 @@ def test_nan_geometry_is_found_as_frames_stream(baked_a, tmp_path, run_cli, movi
                           tmp_path / "b.h5", "--lights", scene_a, "-o", tmp_path / "r.h5")
     assert "nan.h5" in err and "'vertices' contains NaN or inf" in err
     assert not (tmp_path / "r.h5").exists()
+
+
+@pytest.mark.parametrize("moving", ["all"])  # the keyframed lamp
+def test_bake_records_its_lamp_posed_at_each_frame(baked_a):
+    """``light_poses`` holds the lamp at the frame times 0, 0.25, 0.5 s: the keyframes of
+    LAMP_KEYS lerped by hand (the middle frame halfway)."""
+    _, bake_a = baked_a
+    start = np.array([1.0, 2.5, 0.5, 0.3, 6.0, 5.0, 4.0])  # position, radius, colour
+    end = np.array([-1.0, 2.0, 1.0, 0.4, 3.0, 4.0, 6.0])
+    np.testing.assert_allclose(read_bake(bake_a).light_poses[:, 0],
+                               [start, (start + end) / 2, end], rtol=1e-12)
+
+
+def _older(bake, path):
+    """``bake`` as made before bakes recorded their lights (no ``light_poses``)."""
+    import shutil
+
+    import h5py
+
+    shutil.copy(bake, path)
+    with h5py.File(path, "r+") as f:
+        del f["light_poses"]
+    return path
+
+
+@pytest.mark.parametrize("moving", ["all"])
+def test_lights_of_an_older_bake_or_another_scene_are_parsed(baked_a, tmp_path):
+    """The bake's own scene file gives the recorded lamp; an older bake (no record) and an
+    edited scene (another sha256) go through the parser, and each relight equals a fresh
+    bake under its lamp."""
+    from shtools.scene.light_record import PosedLights, own_lights, scene_lights
+
+    scene_a, bake_a = baked_a
+    old = _older(bake_a, tmp_path / "old.h5")
+    warm = scene_a.read_text().replace("color = [6.0, 5.0, 4.0]", "color = [9.0, 5.0, 2.0]")
+    assert warm != scene_a.read_text()
+    (tmp_path / "warm.toml").write_text(warm)
+    with open_bake(bake_a) as b, open_bake(old) as o:
+        assert isinstance(scene_lights(scene_a, b), PosedLights)
+        assert own_lights(b, tmp_path / "warm.toml") is None
+        assert own_lights(o, scene_a) is None
+    for bake, scene, lamp in ((old, scene_a, "6.0, 5.0, 4.0"),
+                              (bake_a, tmp_path / "warm.toml", "9.0, 5.0, 2.0")):
+        fresh = _scene(tmp_path, "b.toml", "b.h5", rotate=35.0, moving="all")
+        fresh.write_text(fresh.read_text().replace("color = [6.0, 5.0, 4.0]",
+                                                   f"color = [{lamp}]"))
+        _bake(fresh, tmp_path / "b_baked.h5")
+        relight(bake, tmp_path / "b.h5", tmp_path / "relit.h5", rotate=35.0, scene=scene)
+        _assert_fresh(tmp_path / "relit.h5", tmp_path / "b_baked.h5")
+        # the relit bake records the lamp it was shaded with
+        np.testing.assert_array_equal(read_bake(tmp_path / "relit.h5").light_poses,
+                                      read_bake(tmp_path / "b_baked.h5").light_poses)

@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from shtools.data_formats.light import write_light
 from shtools.scene.bake import bake_to_file
 from shtools.scene.scene import load_scene
@@ -48,10 +50,15 @@ translate = [0.3, 0.6, 0]
 """
 
 
-#: What relighting under an environment alone does not read: the scene parser
-#: (pydantic, every registered kind), the scene preparation and posing.
+#: What relighting under an environment alone, or keeping the lights of the scene the
+#: bake was made from (the bake records them), does not read: the scene parser
+#: (pydantic, every registered kind), the scene preparation and posing; nor tqdm (no
+#: progress bar for a stage this short) or the modules of the other commands.
 SCENE_STACK = ("pydantic", "shtools.scene.scene", "shtools.scene.schema",
-               "shtools.scene.prepare", "shtools.scene.pose")
+               "shtools.scene.prepare", "shtools.scene.pose", "tqdm")
+#: The command modules ``shtools relight`` uses: the group, its own, the shared helpers.
+RELIGHT_CLI = {"shtools.cli", "shtools.cli.main", "shtools.cli.relight", "shtools.cli._common",
+               "shtools.cli._limits", "shtools.cli._outputs"}
 
 
 def _relight_modules(tmp_path, *extra) -> list[str]:
@@ -82,8 +89,20 @@ def test_relight_command_imports_no_geometry_stack(tmp_path):
     assert bad == [], f"shtools relight imported {bad}"
 
 
-def test_relight_without_lights_imports_no_scene_parser(tmp_path):
-    loaded = set(_relight_modules(tmp_path))
+@pytest.mark.parametrize("lights", [False, True], ids=["environment", "own-lights"])
+def test_relight_imports_no_scene_parser_nor_other_commands(tmp_path, lights):
+    extra = ["--lights", str(tmp_path / "scene.toml")] if lights else []
+    loaded = set(_relight_modules(tmp_path, *extra))
     assert "shtools.runtime.shading" in loaded  # the check sees the shading modules
     bad = sorted(m for m in SCENE_STACK if m in loaded)
-    assert bad == [], f"shtools relight (no --lights) imported {bad}"
+    assert bad == [], f"shtools relight {' '.join(extra)} imported {bad}"
+    commands = sorted(m for m in loaded if m.startswith("shtools.cli") and m not in RELIGHT_CLI)
+    assert commands == [], f"shtools relight imported other commands' modules {commands}"
+
+
+def test_relight_of_another_scene_parses_it(tmp_path):
+    """The check above can fail: lights from a scene the bake was not made from (its
+    bytes differ) go through the parser."""
+    (tmp_path / "other.toml").write_text(SCENE.replace("radius = 0.3", "radius = 0.35"))
+    loaded = set(_relight_modules(tmp_path, "--lights", str(tmp_path / "other.toml")))
+    assert {"pydantic", "shtools.scene.scene"} <= loaded

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import trimesh
 
 from shtools.geometry.raycast import RayCaster
@@ -157,11 +158,126 @@ def test_a_static_object_is_traced_once_and_a_moved_one_again(monkeypatch):
     again = traced_ground(pts.copy(), nrm.copy(), v.copy(), f, caster, 3, 96)
     assert not traced
     fresh = traced_ground(pts, nrm, v, f, RayCaster(v, f), 3, 96)  # an independent trace
-    assert len(traced) == 1
+    # one trace: the shared set, and the denser set near the contact (the receivers are
+    # sparser than the filter there)
+    per_trace = len(traced)
+    assert per_trace in (1, 2)
     for a, b in zip(again, fresh, strict=True):
         np.testing.assert_array_equal(a, b)
     moved = pts + np.array([0.0, -0.2, 0.0])
     lower = traced_ground(moved, nrm, v, f, caster, 3, 96)
-    assert len(traced) == 2 and not np.array_equal(lower[2][:, 0], fresh[2][:, 0])
+    assert len(traced) > per_trace and not np.array_equal(lower[2][:, 0], fresh[2][:, 0])
+    before = len(traced)
     traced_ground(moved, nrm, v, f, caster, 3, 96, lights=[((0.0, 5.0, 0.0), 0.1)])
-    assert len(traced) == 3
+    assert len(traced) > before
+
+
+def test_receiver_spacing_of_a_grid_and_the_refine_weights():
+    """On a regular grid of spacing h the fourth nearest neighbour is an edge neighbour
+    at h (a coincident duplicate vertex does not count); the denser set's weight is 0
+    where the filter is at least one spacing wide, 1 where at most half of it (or 0
+    wide: a contact) and the smoothstep of spacing / width - 1 between."""
+    from shtools.scene.traced_shadows import receiver_spacing, refine_weights
+
+    h, n = 0.3, 9
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    pts = np.column_stack([i.ravel() * h, np.zeros(n * n), j.ravel() * h])
+    pts = np.concatenate([pts, pts[40:41]])  # a duplicate of the middle vertex
+    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    idx, dist = neighbours(pts, nrm)
+    s = receiver_spacing(idx, dist)
+    inside = (i.ravel() > 0) & (i.ravel() < n - 1) & (j.ravel() > 0) & (j.ravel() < n - 1)
+    np.testing.assert_allclose(s[:-1][inside], h, rtol=1e-12)
+    assert s[40] == s[-1] == pytest.approx(h)
+    width = np.array([2 * h, h, 0.75 * h, 0.5 * h, 0.1 * h, 0.0])
+    t = np.clip(h / np.where(width > 0, width, 1e-300) - 1.0, 0.0, 1.0)
+    want = t * t * (3 - 2 * t)
+    np.testing.assert_allclose(refine_weights(width, np.full(6, h)), want, rtol=1e-12)
+    assert refine_weights(width, np.full(6, h)).tolist()[:2] == [0.0, 0.0]
+    assert refine_weights(width, np.full(6, h)).tolist()[3:] == [1.0, 1.0, 1.0]
+    assert refine_weights([0.0], [np.inf]).tolist() == [0.0]  # no neighbour at all
+
+
+def test_a_coarse_ground_near_its_object_is_traced_closer_to_the_closed_form():
+    """A unit sphere over a coarse grid (spacing 0.5, so the filter finds no neighbour
+    near the contact): from a receiver at distance D it blocks the cap of half-angle
+    asin(1/D) about the direction to its centre, wholly above the receiver's tangent
+    plane here, whose SH projection is closed form (``shtools.sh.cap``).  The denser
+    set where the filter cannot average brings the traced visibility closer to it
+    than the shared set alone."""
+    import shtools.scene.traced_shadows as ts
+    from shtools.sh import cap
+
+    v, f, caster = _unit_sphere()
+    x = np.arange(-1.0, 1.01, 0.5)
+    X, Z = np.meshgrid(x, x)
+    pts = np.column_stack([X.ravel(), np.full(X.size, -1.05), Z.ravel()])
+    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    dist = np.linalg.norm(pts, axis=1)
+    axis = -pts / dist[:, None]
+    # the cap lies above the tangent plane: the angle of its axis to the normal plus its
+    # half-angle below 90 degrees (so the ray tracer's "below the plane is visible"
+    # convention does not cut it)
+    assert np.all(np.arccos(axis[:, 1]) + np.arcsin(1.0 / dist) < 0.5 * math.pi)
+    want = cap(np.arcsin(1.0 / dist), axis, 3)
+
+    def error(factor):
+        ts._GROUND.clear()
+        old = ts.REFINE_FACTOR
+        ts.REFINE_FACTOR = factor
+        try:
+            rows, _, g = traced_ground(pts, nrm, v, f, caster, 3, 96)
+        finally:
+            ts.REFINE_FACTOR = old
+            ts._GROUND.clear()
+        assert rows.tolist() == list(range(len(pts)))
+        return float(np.sqrt(np.mean((g - want) ** 2)))
+
+    shared, refined = error(1), error(ts.REFINE_FACTOR)
+    # each of the shared set's 192 directions is 4 pi / 192 = 0.065 sr, 0.018 in g_00
+    # (times 1 / sqrt(4 pi)): a cap rim cutting a few of them leaves ~0.02-0.04; four
+    # times the rays at least halve that (the rim's error falls as the rays' angular
+    # spacing, 1 / sqrt(4), or faster where the steps cancel), margin 1.2
+    assert refined < 0.6 * shared
+    assert refined < 0.015
+
+
+def test_a_still_object_has_its_whole_shadow_traced_closer_to_the_closed_form():
+    """A unit sphere over a grid dense enough for the surface filter away from the
+    contact (spacing 0.05): a still object (traced once per bake) gets the denser set
+    on its whole shadow, not only where the receivers are sparse, and lands closer to
+    the closed-form cap (``shtools.sh.cap``, as above) on the receivers the filter
+    alone serves on the moving path."""
+    import shtools.scene.traced_shadows as ts
+    from shtools.sh import cap
+
+    v, f, caster = _unit_sphere()
+    h = 0.05
+    x = np.arange(-1.2, 1.2001, h)
+    X, Z = np.meshgrid(x, x)
+    pts = np.column_stack([X.ravel(), np.full(X.size, -1.05), Z.ravel()])
+    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    dist = np.linalg.norm(pts, axis=1)
+    axis = -pts / dist[:, None]
+    # the cap wholly above the tangent plane (the ray tracer's convention does not cut it)
+    above = np.arccos(axis[:, 1]) + np.arcsin(1.0 / dist) < 0.5 * math.pi - 0.05
+    want = cap(np.arcsin(1.0 / dist), axis, 3)
+    # receivers where the moving path's denser set has weight 0: the filter (the shared
+    # set's spacing times the distance to the mesh, here the sphere's surface up to the
+    # icosphere's facets) at least one grid spacing wide
+    filtered = above & (math.sqrt(4.0 * math.pi / 192) * (dist - 1.0) > 1.1 * h)
+    assert filtered.sum() >= 500
+
+    def error(still):
+        ts._GROUND.clear()
+        rows, _, g = traced_ground(pts, nrm, v, f, caster, 3, 96, still=still)
+        ts._GROUND.clear()
+        assert rows.tolist() == list(range(len(pts)))
+        return float(np.sqrt(np.mean((g[filtered] - want[filtered]) ** 2)))
+
+    moving, still = error(False), error(True)
+    # the shared set's 0.018 per direction in g_00 (above), filtered, leaves ~0.01; four
+    # times the rays at least halve the rim's error (it falls as the rays' angular
+    # spacing, 1 / sqrt(4), or faster where the steps cancel)
+    assert moving > 0.005
+    assert still < 0.5 * moving
