@@ -8,11 +8,17 @@ its own registers itself there, and one module imports every such plugin
 (:mod:`shtools.scene.kinds` for the scene's registries), so a registry never imports
 its users and no import cycle closes through it (``docs/architecture.md``,
 "Protocols").
+
+A package's public names can also be a registry of modules: :func:`lazy_attributes`
+binds each name on first use (PEP 562), so a caller of one part of a package does not
+pay for importing the rest.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, MutableMapping
+import importlib
+import sys
+from collections.abc import Callable, Iterator, Mapping, MutableMapping
 from typing import Generic, TypeVar
 
 T = TypeVar("T")
@@ -99,3 +105,33 @@ class Registry(MutableMapping[str, T], Generic[T]):
 
     def __repr__(self) -> str:
         return f"Registry({self.what!r}: {', '.join(self._entries)})"
+
+
+def lazy_attributes(package: str, modules: Mapping[str, str]) -> tuple[Callable, Callable]:
+    """A package's ``__getattr__`` and ``__dir__`` (PEP 562) for names loaded on first use.
+
+    Parameters
+    ----------
+    package : str
+        The package's ``__name__``.
+    modules : mapping of str to str
+        Public name -> the module that defines it.
+
+    Returns
+    -------
+    getattr, dir : callable
+        Assign them to the package's ``__getattr__`` and ``__dir__``.  A name is
+        imported from its module once and then bound in the package, so later
+        lookups are plain attribute reads.
+    """
+    def __getattr__(name: str):
+        if name in modules:
+            value = getattr(importlib.import_module(modules[name]), name)
+            setattr(sys.modules[package], name, value)
+            return value
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    def __dir__():
+        return sorted([*vars(sys.modules[package]), *modules])
+
+    return __getattr__, __dir__

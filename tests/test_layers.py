@@ -21,7 +21,7 @@ ALLOWED = {
     "errors": set(),
     "registry": set(),  # the one registry mechanism (name -> entry), a leaf like errors
     "progress": set(),  # the progress protocol, a leaf like errors
-    "tasks": {"errors"},  # a package: pool, workers, dask_cluster
+    "tasks": {"errors", "registry"},  # a package: pool, workers, dask_cluster
     "cache": set(),  # the set-up cache: stdlib and numpy only
     "sh": {"errors", "registry"},
     "data_formats": {"errors", "registry", "sh"},

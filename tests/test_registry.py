@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import pytest
 
 from shtools.registry import Registry, UnknownName
@@ -86,3 +88,20 @@ def test_product_kernels_are_a_registry():
     with pytest.raises(ValueError, match=r"unknown product kernel 'nope'; use one of "
                                          r"\('cp', 'sparse'"):
         run_product(f, None, 2, 2, kernel="nope")
+
+
+def test_lazy_attributes_import_on_first_use_and_bind_once(monkeypatch):
+    import json
+    import types
+
+    from shtools.registry import lazy_attributes
+
+    pkg = types.ModuleType("lazy_pkg")
+    monkeypatch.setitem(sys.modules, "lazy_pkg", pkg)
+    pkg.__getattr__, pkg.__dir__ = lazy_attributes("lazy_pkg", {"dumps": "json"})
+    assert "dumps" not in vars(pkg)  # nothing loaded before the first use
+    assert "dumps" in dir(pkg)
+    assert pkg.dumps is json.dumps
+    assert vars(pkg)["dumps"] is json.dumps  # bound: later reads skip __getattr__
+    with pytest.raises(AttributeError, match="'lazy_pkg' has no attribute 'loads'"):
+        _ = pkg.loads

@@ -108,7 +108,7 @@ order) -> (V, order^2)`` may be passed among the blockers (summed in log space)
     ``env_sh`` to ``shade``.
 """
 
-import importlib
+from shtools.registry import lazy_attributes
 
 # a function named as its module: bound here, or importing the module (the shading
 # does) would leave the package attribute the module
@@ -141,17 +141,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value  # looked up once
-        return value
-    raise AttributeError(f"module 'shtools.runtime' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted([*globals(), *_LAZY])
-
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY)
 
 __all__ = [
     "CapLogTable",

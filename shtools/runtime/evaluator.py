@@ -493,9 +493,10 @@ class ShadowRuntime:
         """exp at the accumulation order, truncated to the shading order, shape ``(V, n*n)``.
 
         A log that is zero everywhere (no blocker reaches these receivers, e.g. every
-        row's own blocker skipped) gives ``exp(0)`` of the same method without an exp.
-        (The fast exp's products give each row the same bytes whatever rows share
-        its batch: :data:`~shtools.runtime.fast_exp.PRODUCT_BLOCK_ROWS`.)
+        row's own blocker skipped) gives ``exp(0)`` of the same method, computed once
+        for one row (equal to the exp of every row up to the last bits of the float32
+        products, which may depend on a row's place in its block:
+        :func:`~shtools.runtime.fast_exp.row_matmul`).
         """
         log_vis = np.asarray(log_vis)
         if log_vis.shape[0] == 0 or log_vis.any():

@@ -291,19 +291,25 @@ class QuadratureProducts:
 
 
 #: Rows per matrix product, and the multiple a product's rows are padded to with
-#: zero rows.  BLAS libraries run small products on other kernels than large
-#: ones (OpenBLAS's small-matrix path below about 2^20 multiply-adds, its
-#: matrix-vector path for one row, edge kernels for a ragged row count), which
-#: sum in another order, so a vector's product would change in its last bits
-#: with the number of vectors beside it (e.g. when other receivers skip every
-#: blocker).  Blocks of 256 rows stay on one kernel at the orders the runtime
-#: uses and run as fast as one large product.
+#: zero rows.  BLAS libraries run products of other shapes on other kernels
+#: (OpenBLAS's small-matrix path, its matrix-vector path for one row, edge kernels
+#: for a ragged row count), and some kernels sum a row in another order by its
+#: place in the block (OpenBLAS's AVX-512 SGEMM on AMD Zen rows 6-11 of every 12),
+#: so a vector's product changes in its last bits with the rows beside it.
+#: :func:`row_matmul` multiplies in blocks of 256 rows from the first: a row taken
+#: in the same block at the same place gives the same bytes, which is what a cache
+#: that refreshes whole blocks (:mod:`shtools.runtime.shading_cache`) relies on.
 PRODUCT_BLOCK_ROWS = 256
 PRODUCT_ROW_MULTIPLE = 8
 
 
 def row_matmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``a @ b`` (into ``out``), the same bytes per row whatever the number of rows."""
+    """``a @ b`` (into ``out``) in blocks of :data:`PRODUCT_BLOCK_ROWS` rows.
+
+    Rows ``k * PRODUCT_BLOCK_ROWS`` to ``(k + 1) * PRODUCT_BLOCK_ROWS`` of ``a`` give
+    the same bytes whatever follows them; a ragged last block is cut at a multiple
+    of :data:`PRODUCT_ROW_MULTIPLE` and its rest padded to one.
+    """
     rows = a.shape[0]
     if out is None:
         out = np.empty((rows, b.shape[1]), dtype=np.result_type(a, b))

@@ -148,8 +148,10 @@ def lit_transfer(transfer, env_matrices) -> np.ndarray:
         The table a static receiver keeps while the light does not change.
     """
     n_c, size = env_matrices.shape[0], env_matrices.shape[1]
-    # all colours with one matrix product: (V, n*n) @ (n*n, 3*n*n); M_L is symmetric
-    return (transfer @ np.concatenate(list(env_matrices), axis=1)).reshape(-1, n_c, size)
+    # all colours with one matrix product: (V, n*n) @ (n*n, 3*n*n); M_L is symmetric;
+    # in blocks, so that a cache refreshing whole blocks gets the bytes of all rows
+    mats = np.concatenate(list(env_matrices), axis=1).astype(transfer.dtype, copy=False)
+    return row_matmul(transfer, mats).reshape(-1, n_c, size)
 
 
 def lit_transfer_radiance(l_h, visibility) -> np.ndarray:
@@ -245,7 +247,7 @@ def sphere_light_transfer(lights, points, transfer, order: int, win, terms=None
             rotated = y * np.repeat(zh * zonal_win, 2 * degrees + 1, axis=1)
             if h_vals is None:
                 lit = ops.product(transfer[start:stop], rotated)
-            else:  # row by row the same bytes whatever rows share the call (a cache)
+            else:  # in blocks from the first row: a cache refreshing whole blocks (row_matmul)
                 vals = row_matmul(rotated, ops.recon[0])
                 vals *= h_vals
                 lit = row_matmul(vals, ops.proj[0])

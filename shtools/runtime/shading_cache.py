@@ -4,12 +4,19 @@ Static receivers (most of a scene) keep their normals, and a scene's light often
 holds still: the runtime then reuses H(N), L_H = L * H(N) and the sphere lights'
 lit transfer row by row instead of projecting them again each frame, as the paper
 keeps L_H per normal, so a static row's shading is one dot product with ``g``.
+
+Rows are refreshed a whole block of
+:data:`~shtools.runtime.fast_exp.PRODUCT_BLOCK_ROWS` at a time, the blocks the
+terms were first computed in: a row's matrix products then see the rows they saw
+the first time, and the kept terms are the bytes of terms computed afresh
+(:func:`~shtools.runtime.fast_exp.row_matmul`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from shtools.runtime.fast_exp import PRODUCT_BLOCK_ROWS
 from shtools.runtime.shading import (
     band_window,
     cosine_transfer,
@@ -81,7 +88,8 @@ class ShadingCache:
             return self._lit[1]
         _, l_h, mats = cached
         if changed.size:
-            l_h[changed] = lit_transfer(transfer[changed], mats)
+            rows = _whole_blocks(changed, transfer.shape[0])
+            l_h[rows] = lit_transfer(transfer[rows], mats)
         return l_h
 
     def light_terms(self, lights, points: np.ndarray) -> list:
@@ -135,7 +143,7 @@ class ShadingCache:
         moved = _changed_rows(old_points, points)
         refresh[moved] = True
         old_points[moved] = points[moved]
-        rows = np.flatnonzero(refresh)
+        rows = _whole_blocks(np.flatnonzero(refresh), points.shape[0])
         if rows.size:
             lit[rows] = self._lit_part(l_h, lights, points, transfer, rows)
         return lit
@@ -173,3 +181,13 @@ def _changed_rows(old: np.ndarray, new: np.ndarray) -> np.ndarray:
     than a reduction over the short last axis)."""
     return np.flatnonzero((old[:, 0] != new[:, 0]) | (old[:, 1] != new[:, 1])
                           | (old[:, 2] != new[:, 2]))
+
+
+def _whole_blocks(rows: np.ndarray, n_rows: int) -> np.ndarray:
+    """Every row ``(R',)`` of the blocks of :data:`PRODUCT_BLOCK_ROWS` (from row 0 of
+    ``n_rows``) that hold one of the sorted ``rows``, in order."""
+    if not rows.size:
+        return rows
+    starts = np.unique(rows // PRODUCT_BLOCK_ROWS) * PRODUCT_BLOCK_ROWS
+    return np.concatenate([np.arange(a, min(a + PRODUCT_BLOCK_ROWS, n_rows))
+                           for a in starts.tolist()])

@@ -260,8 +260,9 @@ def relight_frames(bake, env_sh, scene=None, settings=None, threads: int | None 
 
     with ThreadPoolExecutor(threads, thread_name_prefix="relight") as pool:
         K = None
-        if fixed.size:  # parts of at most BATCH_ROWS rows: bounded shading scratch
-            parts = np.array_split(fixed, max(threads, -(-fixed.size // BATCH_ROWS)))
+        if fixed.size:  # parts of PART_ROWS rows, whatever the threads: a row's float32
+            # products sum in an order that may depend on the rows beside it (row_matmul)
+            parts = [fixed[a:a + PART_ROWS] for a in range(0, fixed.size, PART_ROWS)]
             K = np.concatenate(list(pool.map(linear_part, [p for p in parts if p.size])))
             K = np.ascontiguousarray(K.transpose(0, 2, 1))  # (F, n*n, 3) for the product
         window = 2 * threads  # batches in flight: bounded memory, every thread busy
@@ -290,6 +291,9 @@ MAX_RUNS = 64
 #: Most receiver rows (vertices x frames) of one batch of frames under unchanging
 #: lights; its visibility, shading scratch and radiance grow with it.
 BATCH_ROWS = 1 << 16
+#: Still rows per part of their one-time shading table (the threads share the parts;
+#: bounded shading scratch).
+PART_ROWS = 1 << 13
 
 
 def relight_bytes(n_frames: int, n_vertices: int, size: int, threads: int) -> int:

@@ -40,11 +40,12 @@ their inputs, so a rerun gives the same bytes.  Ctrl-C or SIGTERM in the
 caller cancels the pending tasks and stops the local workers (and a
 ``LocalCluster`` started here) before the exception propagates.
 
-This module imports only the standard library; ``dask``/``distributed`` are
-imported when a Dask scheduler is asked for (``pip install shtools[distributed]``).
+This package imports only the standard library and :mod:`shtools.registry`;
+``dask``/``distributed`` are imported when a Dask scheduler is asked for
+(``pip install shtools[distributed]``).
 """
 
-import importlib
+from shtools.registry import lazy_attributes
 
 #: public name -> module, loaded on first use: a command that only asks how many cores
 #: it may use (``shtools relight``) imports no multiprocessing or Dask machinery
@@ -75,17 +76,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value  # looked up once
-        return value
-    raise AttributeError(f"module 'shtools.tasks' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted([*globals(), *_LAZY])
-
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY)
 
 __all__ = [
     "CONNECT_TIMEOUT",
