@@ -49,14 +49,15 @@ _CLASS_PAIRS = {c: tuple(tuple((i, i ^ k) for i in range(c)) for k in range(c)) 
 #: for ~4x more elementwise work).  Up to order 6 the 4-class split is slower: its
 #: sixteen elementwise passes per square are bound by memory traffic (on the
 #: Lebedev rule of order 6, 0.27 ms a square of 2,048 vectors, the 2 classes of
-#: :data:`HALF_ORDERS` 0.21 ms).
+#: :data:`HALF_ORDERS` 0.19 ms).
 SPLIT_MIN_ORDER = 7
 #: Orders whose products split in 2 classes by the parity under s -> -s (sign
 #: (-1)^l) over half of the (centrally symmetric) Lebedev rule: a function's values
 #: at s and -s are a +- b of the even-l and odd-l reconstructions at s, so the
 #: matrix products shrink by half for 3 elementwise passes more per square (the
 #: inversion fixes no node, so both classes use all half nodes).  Measured on
-#: order 6 squares of 2,048 vectors, one BLAS thread: 0.21 ms against 0.28 ms.
+#: order 6 squares of 2,048 vectors, one BLAS thread: 0.19 ms (parts padded by
+#: :func:`padded_width`) against 0.27 ms on the full rule.
 HALF_ORDERS = (5, 6)
 
 
