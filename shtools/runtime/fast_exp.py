@@ -4,8 +4,10 @@ Every truncated SH product :math:`(\mathbf f * \mathbf g)_i = \int f g\, y_i` is
 evaluated as two small matrix products through a quadrature that integrates
 the degree :math:`3(n-1)` integrand exactly: reconstruct ``f`` and ``g`` at the
 ``Q`` directions, multiply pointwise, project back.  Up to order 6 the rule is
-the one with the fewest nodes known here (Lebedev's for orders 4-6); from order
-7 on, the products are split by parity over a quarter of a product Gauss rule.
+the one with the fewest nodes known here (Lebedev's for orders 4-6); at orders 5
+and 6 the products are split by the parity of the band ``l`` over half of it (one
+node of each antipodal pair); from order 7 on, by two parities over a quarter of
+a product Gauss rule.
 For tens of thousands of vectors this runs on BLAS in float32 and is far faster
 than contracting the sparse triple-product tensor.
 
@@ -39,13 +41,24 @@ VOLTERRA_DEGREE = (4, 6)
 #: Parity classes of the SH coefficients under the two reflections that map the
 #: product quadrature onto itself, z -> -z (sign (-1)^(l+m)) and phi -> phi + pi
 #: (sign (-1)^m): a = (even, even), b = (odd, even), c = (even, odd), d = (odd, odd).
-#: The projection onto class k of f * g collects f_i g_j with i XOR j == k.
-_CLASS_PAIRS = tuple(tuple((i, i ^ k) for i in range(4)) for k in range(4))
+#: The projection onto class k of f * g collects f_i g_j with i XOR j == k (the
+#: same with the 2 classes of :data:`HALF_ORDERS`, even and odd l), keyed by the
+#: number of classes.
+_CLASS_PAIRS = {c: tuple(tuple((i, i ^ k) for i in range(c)) for k in range(c)) for c in (2, 4)}
 #: From this order on, products use the 4 parity classes (4x fewer matrix flops
-#: for ~4x more elementwise work).  Up to order 6 the plain full quadrature is
-#: faster: its two matrix products run near the BLAS peak, while the split's
-#: sixteen elementwise passes per square are bound by memory traffic.
+#: for ~4x more elementwise work).  Up to order 6 the 4-class split is slower: its
+#: sixteen elementwise passes per square are bound by memory traffic (on the
+#: Lebedev rule of order 6, 0.27 ms a square of 2,048 vectors, the 2 classes of
+#: :data:`HALF_ORDERS` 0.19 ms).
 SPLIT_MIN_ORDER = 7
+#: Orders whose products split in 2 classes by the parity under s -> -s (sign
+#: (-1)^l) over half of the (centrally symmetric) Lebedev rule: a function's values
+#: at s and -s are a +- b of the even-l and odd-l reconstructions at s, so the
+#: matrix products shrink by half for 3 elementwise passes more per square (the
+#: inversion fixes no node, so both classes use all half nodes).  Measured on
+#: order 6 squares of 2,048 vectors, one BLAS thread: 0.19 ms (parts padded by
+#: :func:`padded_width`) against 0.27 ms on the full rule.
+HALF_ORDERS = (5, 6)
 
 
 #: Lebedev rules (V. I. Lebedev and D. N. Laikov, "A quadrature formula for the
@@ -91,6 +104,34 @@ def _product_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
     return min(rules, key=lambda rule: rule[1].shape[0])  # the first of equal sizes
 
 
+def half_rule(dirs: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One node of each antipodal pair ``(s, -s)`` of a centrally symmetric rule
+    (the one whose first nonzero coordinate is positive), shapes ``(Q/2, 3)`` and
+    ``(Q/2,)``; weights doubled, so ``sum_q w_q g(s_q)`` integrates an even ``g``
+    (``g(-s) = g(s)``) exactly."""
+    lead = np.where(dirs[:, 0] != 0, dirs[:, 0], np.where(dirs[:, 1] != 0, dirs[:, 1],
+                                                          dirs[:, 2]))
+    keep = lead > 0
+    mirror = np.argmin(np.linalg.norm(dirs[keep][:, None] + dirs[None], axis=2), axis=1)
+    if (2 * np.count_nonzero(keep) != len(weights)
+            or not np.allclose(dirs[mirror], -dirs[keep], atol=1e-12)
+            or not np.allclose(weights[mirror], weights[keep], rtol=1e-12)):
+        raise ValueError("the rule is not centrally symmetric")
+    return dirs[keep], 2.0 * weights[keep]
+
+
+def padded_width(columns: int) -> int:
+    """``columns`` rounded up to a multiple of 8 when that adds at most half as many.
+
+    OpenBLAS's float32 kernels run a product with a multiple of 8 output columns
+    much faster: ``(2048, 43) @ (43, n)`` took 46 us at n = 15 and 32 us at 16,
+    51 us at 21 and 44 us at 24, 28 us at 6 and 20 us at 8, but 28 us at 10 and
+    32 us at 16 (one BLAS thread).
+    """
+    up = -(-columns // 8) * 8
+    return up if 2 * (up - columns) <= columns else columns
+
+
 @functools.lru_cache(maxsize=16)
 def _split_operators(order: int, dtype_name: str):
     """Class-split quadrature operators of an exact order-``n`` product.
@@ -100,9 +141,11 @@ def _split_operators(order: int, dtype_name: str):
     Each SH coefficient is even or odd under both, so a function's values at
     the 4 images of a base point are ``a +- b +- c +- d`` of the 4 class
     reconstructions at that point, and a product needs reconstructions at a
-    quarter of the nodes only (odd classes vanish at z = 0).  Below
-    :data:`SPLIT_MIN_ORDER` there is one class (all coefficients) on the fewest-node
-    rule exact to that degree (:func:`_product_rule`).
+    quarter of the nodes only (odd classes vanish at z = 0).  At
+    :data:`HALF_ORDERS` there are 2 classes (even and odd band ``l``) on
+    :func:`half_rule` of the fewest-node rule exact to that degree
+    (:func:`_product_rule`); at the other orders below :data:`SPLIT_MIN_ORDER`,
+    one class (all coefficients) on that rule.
 
     Returns
     -------
@@ -110,30 +153,39 @@ def _split_operators(order: int, dtype_name: str):
         Coefficient indices of each class, ascending (so ascending in band: a
         prefix of each is a lower order).
     recon : tuple of ndarray, shapes (n_k, Qb)
-    proj : tuple of ndarray, shapes (Qb, n_k)
-        Projection; includes the factor 4 of the images (for the split).
-    proj_sq : tuple of ndarray, shapes (Qb, n_k)
+    proj : tuple of ndarray, shapes (Qb, w_k)
+        Projection; includes the factor 4 of the images (for the split).  Its
+        columns beyond ``n_k`` (up to :func:`padded_width` for the 2 classes) are 0.
+    proj_sq : tuple of ndarray, shapes (Qb, w_k)
         ``proj`` with the factor 2 of the cross terms of a square folded in.
     """
     degree = max(0, 3 * (order - 1))
-    if order < SPLIT_MIN_ORDER:
+    band = np.repeat(np.arange(order), 2 * np.arange(order) + 1)
+    m = np.arange(order * order) - band * band - band
+    if order >= SPLIT_MIN_ORDER:
+        dirs, w = quarter_sphere_quadrature(degree)
+        cls = (band + m) % 2 + 2 * (np.abs(m) % 2)
+        n_classes, sq_factor = 4, (1.0, 2.0, 2.0, 2.0)
+    elif order in HALF_ORDERS:
+        dirs, w = half_rule(*_product_rule(degree))
+        cls = band % 2
+        n_classes, sq_factor = 2, (1.0, 2.0)
+    else:
         dirs, w = _product_rule(degree)
         cls = np.zeros(order * order, dtype=np.int64)
         n_classes, sq_factor = 1, (1.0,)
-    else:
-        dirs, w = quarter_sphere_quadrature(degree)
-        band = np.repeat(np.arange(order), 2 * np.arange(order) + 1)
-        m = np.arange(order * order) - band * band - band
-        cls = (band + m) % 2 + 2 * (np.abs(m) % 2)
-        n_classes, sq_factor = 4, (1.0, 2.0, 2.0, 2.0)
     y = basis(dirs, order)  # (Qb, n*n)
     classes, recon, proj, proj_sq = [], [], [], []
     for k in range(n_classes):
         idx = np.flatnonzero(cls == k)
         yk = y[:, idx]
+        # the half split's parts carry zero columns up to padded_width (BLAS speed)
+        cols = padded_width(idx.size) if n_classes == 2 else idx.size
+        yp = np.zeros((len(w), cols))
+        yp[:, : idx.size] = yk
         mats = (np.ascontiguousarray(yk.T, dtype=dtype_name),
-                np.ascontiguousarray(yk * w[:, None], dtype=dtype_name),
-                np.ascontiguousarray(yk * (w * sq_factor[k])[:, None], dtype=dtype_name))
+                np.ascontiguousarray(yp * w[:, None], dtype=dtype_name),
+                np.ascontiguousarray(yp * (w * sq_factor[k])[:, None], dtype=dtype_name))
         for a in (idx, *mats):
             a.setflags(write=False)
         classes.append(idx)
@@ -147,7 +199,7 @@ class QuadratureProducts:
     """Exact truncated SH products/squares of order-``n`` vectors via quadrature.
 
     Vectors are handled *split* into the 4 parity classes of
-    :func:`_split_operators` (a list of ``(B, n_k)`` arrays) by the ``*_split``
+    :func:`_split_operators` (a list of ``(B, w_k)`` arrays) by the ``*_split``
     methods, so chains of products (the exp) split and merge once.
 
     Parameters
@@ -165,16 +217,30 @@ class QuadratureProducts:
          self.proj_sq) = _split_operators(self.order, self.dtype.name)
 
     def class_sizes(self, out_order: int | None = None) -> list[int]:
-        """Coefficients of each class below ``out_order`` (default ``n``)."""
+        """Columns of each class part truncated to ``out_order`` (default ``n``): its
+        coefficients below that order, then zero or higher-order columns up to
+        :func:`padded_width` (at most the part's width)."""
         top = (self.order if out_order is None else out_order) ** 2
-        return [int(np.count_nonzero(c < top)) for c in self.classes]
+        counts = [int(np.count_nonzero(c < top)) for c in self.classes]
+        if len(self.classes) != 2:
+            return counts
+        return [min(padded_width(k), p.shape[1]) for k, p in zip(counts, self.proj,
+                                                                   strict=True)]
 
     def split(self, f: np.ndarray, copy: bool = True) -> list[np.ndarray]:
-        """``(B, n*n)`` -> contiguous ``(B, n_k)`` class parts (a copy unless
-        ``copy=False`` and there is one class)."""
+        """``(B, n*n)`` -> contiguous ``(B, w_k)`` class parts (a copy unless
+        ``copy=False`` and there is one class; the 2 classes padded with zero
+        columns to :func:`padded_width`)."""
         if len(self.classes) == 1:
             return [np.array(f, dtype=self.dtype, order="C", copy=copy or None)]
-        return [np.take(f, c, axis=1) for c in self.classes]
+        if len(self.classes) == 4:
+            return [np.take(f, c, axis=1) for c in self.classes]
+        parts = []
+        for c, p in zip(self.classes, self.proj, strict=True):
+            part = np.zeros((f.shape[0], p.shape[1]), dtype=self.dtype)
+            part[:, : c.size] = f[:, c]
+            parts.append(part)
+        return parts
 
     def merge(self, parts, out_order: int | None = None, out: np.ndarray | None = None
               ) -> np.ndarray:
@@ -198,8 +264,7 @@ class QuadratureProducts:
         Reusing it matters: fresh arrays above glibc's mmap threshold (128 KiB)
         are page-faulted on every call, which costs more than the arithmetic.
         """
-        q_b = self.recon[0].shape[1]
-        return [np.empty((rows, q_b), self.dtype) for _ in range(2 * len(self.recon))]
+        return [np.empty((rows, r.shape[1]), self.dtype) for r in self.recon * 2]
 
     def workspace_layout(self) -> tuple[int, int]:
         """``(arrays, columns)`` of a :meth:`workspace`."""
@@ -212,10 +277,11 @@ class QuadratureProducts:
         return self._project(vals, rows, sizes, square=True, out=out)
 
     def _values(self, parts, ws=None):
-        if ws is None:
-            return [row_matmul(p, r) for p, r in zip(parts, self.recon, strict=True)]
+        if ws is None:  # (the padding columns of a part are not read)
+            return [row_matmul(p[:, : r.shape[0]], r)
+                    for p, r in zip(parts, self.recon, strict=True)]
         rows = parts[0].shape[0]
-        return [row_matmul(p, r, out=w[:rows])
+        return [row_matmul(p[:, : r.shape[0]], r, out=w[:rows])
                 for p, r, w in zip(parts, self.recon, ws, strict=False)]
 
     def _project(self, vals, rows=slice(None), sizes=None, square=False, out=None):
@@ -237,6 +303,14 @@ class QuadratureProducts:
         if len(vals) == 1:
             np.multiply(vals[0], vals[0], out=vals[0])
             return vals
+        if len(vals) == 2:  # values a +- b at the two images of a base point
+            a, b = vals
+            vb = np.empty_like(b) if ws is None else ws[3][: a.shape[0]]
+            np.multiply(a, b, out=vb)
+            a *= a
+            b *= b
+            a += b
+            return [a, vb]
         a, b, c, d = vals
         if ws is None:
             vb, vc, vd, tmp = (np.empty_like(a) for _ in range(4))
@@ -273,7 +347,7 @@ class QuadratureProducts:
             vf[0] *= vg[0]
             return self._project(vf)
         vals = []
-        for pairs in _CLASS_PAIRS:
+        for pairs in _CLASS_PAIRS[len(vf)]:
             acc = np.multiply(vf[pairs[0][0]], vg[pairs[0][1]])
             for i, j in pairs[1:]:
                 acc += vf[i] * vg[j]
@@ -313,10 +387,13 @@ def row_matmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> n
     rows = a.shape[0]
     if out is None:
         out = np.empty((rows, b.shape[1]), dtype=np.result_type(a, b))
+    full = rows - rows % PRODUCT_BLOCK_ROWS
+    if full:  # one call: NumPy runs one BLAS product per block of the stack
+        np.matmul(a[:full].reshape(-1, PRODUCT_BLOCK_ROWS, a.shape[1]), b,
+                  out=out[:full].reshape(-1, PRODUCT_BLOCK_ROWS, b.shape[1]))
     whole = rows - rows % PRODUCT_ROW_MULTIPLE
-    for start in range(0, whole, PRODUCT_BLOCK_ROWS):
-        stop = min(whole, start + PRODUCT_BLOCK_ROWS)
-        np.matmul(a[start:stop], b, out=out[start:stop])
+    if whole > full:
+        np.matmul(a[full:whole], b, out=out[full:whole])
     if whole < rows:
         padded = np.zeros((PRODUCT_ROW_MULTIPLE, a.shape[1]), dtype=a.dtype)
         padded[:rows - whole] = a[whole:]

@@ -196,6 +196,7 @@ class ProductBackend(Protocol):
 
     def split(self, f: np.ndarray, copy: bool = True) -> list[np.ndarray]: ...
     def merge(self, parts, out_order: int | None = None, out=None) -> np.ndarray: ...
+    def class_sizes(self, out_order: int | None = None) -> list[int]: ...
     def workspace(self, rows: int) -> list: ...
     def workspace_layout(self) -> tuple[int, int]: ...
     def square_split(self, parts, out_order: int | None = None, ws=None) -> list: ...
@@ -250,6 +251,9 @@ class TensorProducts:
 
     def product_split(self, f_parts, g_parts):
         return [np.ascontiguousarray(self._run(f_parts[0], g_parts[0], self.order))]
+
+    def class_sizes(self, out_order: int | None = None) -> list[int]:
+        return [(self.order if out_order is None else out_order) ** 2]
 
     def square_values(self, parts, ws=None):
         return parts  # the square is formed when projected
@@ -396,10 +400,11 @@ def _factored_series(parts, degree: int, ops, ws=None):
 def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None) -> None:
     """exp of ``f (B, n*n)`` truncated to ``n_out``, written into ``out (B, n_out^2)``."""
     dc = np.exp(f[:, 0].astype(np.float64) / SQRT_4PI)
-    parts = ops.split(f)
-    parts[0][:, 0] = 0.0  # f_hat: DC isolated
-    norm = np.sqrt(sum(np.einsum("bi,bi->b", p, p, dtype=np.float64) for p in parts))
+    # |f_hat| of the coefficients after the DC (DC isolated), in float64
+    norm = np.sqrt(np.einsum("bi,bi->b", f[:, 1:], f[:, 1:], dtype=np.float64))
     if method == "ol":
+        parts = ops.split(f)
+        parts[0][:, 0] = 0.0
         ops.merge(_ol_split(parts, norm, tables), n_out, out=out)
         out *= dc[:, None].astype(out.dtype)
         return
@@ -413,31 +418,33 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None) -> None
     q_sorted = q[by_norm[:live]]
     norm_sorted = norm[by_norm[:live]]
     scale = np.ldexp(1.0, -q_sorted)
-    column = scale[:, None].astype(parts[0].dtype)  # exact: powers of 2
-    scaled = [np.take(p, by_norm[:live], axis=0) for p in parts]
-    for p in scaled:
-        p *= column
+    column = scale[:, None].astype(f.dtype)  # exact: powers of 2
+    scaled = f[by_norm[:live]]
+    scaled[:, 0] = 0.0  # f_hat: DC isolated
+    scaled *= column
+    scaled = ops.split(scaled, copy=False)
     if method == "hyb":
         g = _ol_split(scaled, norm_sorted * scale, tables)
     else:
         g = _factored_series(scaled, degree, ops, ws)
-    res = np.empty((f.shape[0], n_out * n_out), dtype=out.dtype)
-    res[live:] = 0.0
-    res[live:, 0] = SQRT_4PI
+    # each row's result, in class parts (sorted rows), merged once at the end
+    res = [np.zeros((f.shape[0], k), dtype=out.dtype) for k in ops.class_sizes(n_out)]
+    res[0][live:, 0] = SQRT_4PI
     q_max = int(q_sorted.max(initial=0))
     done = int(np.count_nonzero(q_sorted > 0))
-    ops.merge([p[done:] for p in g], n_out, out=res[done:live])
+    for r, p in zip(res, g, strict=True):
+        r[done:live] = p[done:, : r.shape[1]]
     for step in range(q_max):
         count = done
         done = int(np.count_nonzero(q_sorted > step + 1))
         # rows [done, count) take their last square: project onto the kept
         # coefficients only; rows [0, done) keep squaring at full order
         vals = ops.square_values([p[:count] for p in g], ws)
-        ops.merge(ops.project_square(vals, slice(done, count), n_out), n_out,
-                  out=res[done:count])
+        ops.project_square(vals, slice(done, count), n_out,
+                           out=[r[done:count] for r in res])
         if done:
             ops.project_square(vals, slice(0, done), out=[p[:done] for p in g])
-    out[by_norm] = res
+    out[by_norm] = ops.merge(res, n_out)
     out *= dc[:, None].astype(out.dtype)
 
 

@@ -110,3 +110,19 @@ def test_an_all_zero_log_skips_the_exp(method):
     f = zeros.copy()
     f[7] = 0.3 * rng.normal(size=f.shape[1])
     np.testing.assert_array_equal(rt.exponentiate(f), rt._exp(f))
+
+
+def test_half_rule_integrates_even_functions_and_rejects_asymmetric_rules():
+    from shtools.runtime.fast_exp import half_rule, lebedev_rule
+
+    dirs, w = half_rule(*lebedev_rule(15))
+    assert dirs.shape == (43, 3)
+    # every even-band SH up to degree 14 has the integral sqrt(4 pi) delta_l0 (closed
+    # form); the Lebedev rule is exact to degree 15, so to rounding
+    y = basis(dirs, 15)
+    even = band_of(15) % 2 == 0
+    want = np.zeros(int(even.sum()))
+    want[0] = np.sqrt(4 * np.pi)
+    np.testing.assert_allclose(w @ y[:, even], want, atol=1e-13)
+    with pytest.raises(ValueError, match="centrally symmetric"):
+        half_rule(dirs, w)
