@@ -124,9 +124,9 @@ def rigid_objects(pts, nrm, spheres: list[SphereBlocker], sphere_of: dict,
         local_pts = _snap((pts[rows] - origin) @ axes, step)
         local_nrm = _snap(nrm[rows] @ axes, 2.0 ** -SNAP_BITS)
         local_cen = _snap((b.centers - origin) @ axes, step)
-        labels = ReceiverClusters.from_labels(clusters.labels[rows]).labels
         key = (local_pts, local_nrm, local_cen, b.radii,
-               *((b.parent, b.leaf) if b.parent is not None else (None, None)), labels)
+               *((b.parent, b.leaf) if b.parent is not None else (None, None)),
+               clusters.labels[rows])
         objects.append(RigidObject(sphere=j, rows=rows, rotation=axes, key=key))
     return objects
 
@@ -150,12 +150,14 @@ class RigidPairs:
 
     def frame(self, pts, nrm, blockers: list, spheres: list[SphereBlocker], rigid_receivers,
               exclude: Skipped | None, clusters: ReceiverClusters, accumulate, order: int
-              ) -> tuple[Skipped | None, np.ndarray | None]:
-        """This frame's exclusions (``exclude`` and the kept pairs) and kept log sum.
+              ) -> tuple[Skipped | None, list]:
+        """This frame's exclusions (``exclude`` and the kept pairs) and kept log sums.
 
         ``accumulate(pts, nrm, blockers, clusters)``: the log sum ``(R, n_acc^2)`` of
-        one object's pairs, by the frame's own cuts and kernel.  Returns ``(exclude,
-        None)`` when no row is flagged.
+        one object's pairs, by the frame's own cuts and kernel.  Returns the
+        exclusions and ``[(rows (R,), world-space log sum (R, n_acc^2)), ...]`` (to
+        add to the frame's rows: :func:`add_rows`); ``(exclude, [])`` when no row is
+        flagged.
         """
         sphere_of = {}
         for k, b in enumerate(blockers):
@@ -164,14 +166,14 @@ class RigidPairs:
         objects = rigid_objects(pts, nrm, spheres, sphere_of, rigid_receivers, exclude,
                                 clusters)
         if not objects:
-            return exclude, None
+            return exclude, []
 
         def compute(obj):
             return accumulate(obj.key[0], obj.key[1], [object_blocker(obj, spheres[obj.sphere])],
                               ReceiverClusters.from_labels(obj.key[-1]))
 
-        total = self.log_sum(pts.shape[0], order * order, objects, compute, order)
-        return self.exclusions(pts.shape[0], len(spheres), exclude, objects), total
+        sums = self.log_sums(objects, compute, order)
+        return self.exclusions(pts.shape[0], len(spheres), exclude, objects), sums
 
     def exclusions(self, n_vertices: int, n_spheres: int, exclude: Skipped | None,
                    objects: list[RigidObject]) -> Skipped:
@@ -185,14 +187,13 @@ class RigidPairs:
                                    for x in inputs), result)
         return self._exclude[1]
 
-    def log_sum(self, n_vertices: int, size: int, objects: list[RigidObject], compute,
-                order: int) -> np.ndarray:
-        """The objects' own pairs' log sum ``(V, size)`` in world space.
+    def log_sums(self, objects: list[RigidObject], compute, order: int) -> list:
+        """Each object's own pairs' log sum in world space: ``[(rows, (R, n*n)), ...]``.
 
-        ``compute(obj)``: the object-space sum ``(R, size)`` of one object's pairs,
+        ``compute(obj)``: the object-space sum ``(R, n*n)`` of one object's pairs,
         made from ``obj.key`` alone.  Sums are kept while an object's key holds.
         """
-        total = np.zeros((n_vertices, size), dtype=np.float32)
+        out = []
         kept = {}
         for obj in objects:
             entry = self._kept.get(obj.sphere)
@@ -201,19 +202,26 @@ class RigidPairs:
                 local.setflags(write=False)
                 entry = (tuple(None if x is None else x.copy() for x in obj.key), local)
             kept[obj.sphere] = entry
+            # block diagonal: one product with the whole matrix is cheaper in BLAS than
+            # one per band
             d = rotation_matrix(obj.rotation, order).astype(np.float32)
-            total[obj.rows] = _rotate_bands(entry[1], d, order)
+            out.append((obj.rows, entry[1] @ d.T))
         self._kept = kept
+        return out
+
+
+def add_rows(total: np.ndarray | None, sums: list, n_vertices: int) -> np.ndarray | None:
+    """``total`` ``(V, n*n)`` (None is zero; a read-only one is copied) plus ``sums``
+    (``[(rows, values), ...]`` of :meth:`RigidPairs.frame`)."""
+    if not sums:
         return total
-
-
-def _rotate_bands(f: np.ndarray, d: np.ndarray, order: int) -> np.ndarray:
-    """``f @ d.T`` band by band (``d`` is block diagonal): ``(R, n*n)`` float32."""
-    out = np.empty_like(f)
-    for l in range(order):
-        a, b = l * l, (l + 1) * (l + 1)
-        np.matmul(f[:, a:b], d[a:b, a:b].T, out=out[:, a:b])
-    return out
+    if total is None:
+        total = np.zeros((n_vertices, sums[0][1].shape[1]), dtype=np.float32)
+    elif not total.flags.writeable:
+        total = total.copy()
+    for rows, values in sums:
+        total[rows] += values
+    return total
 
 
 def object_blocker(obj: RigidObject, sphere: SphereBlocker) -> SphereBlocker:
