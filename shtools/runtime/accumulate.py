@@ -295,8 +295,7 @@ class BlockKernel:
         # scaled column by column into receiver-major rows: several times faster
         # than NumPy's copy of the transposed (n*n, R) array
         out = np.empty((n_k * n_t, self.order * self.order), np.float32)
-        for k, c in enumerate(self._coef):
-            np.multiply(sums[k], c, out=out[:, k])
+        np.multiply(sums.T, self._coef, out=out)
         return out.reshape(n_k, n_t, -1)
 
     def _lookup(self, u, bands, cell, idx):
