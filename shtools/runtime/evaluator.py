@@ -44,7 +44,7 @@ from shtools.runtime.parallel import (
     VertexWorkers,
     resolve_processes,
 )
-from shtools.runtime.rigid_pairs import RigidPairs, add_rows
+from shtools.runtime.rigid_pairs import RigidPairs
 from shtools.runtime.self_visibility import SelfTerms
 from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import desaturate_negative
@@ -240,8 +240,8 @@ class ShadowRuntime:
             kept_seconds = time.process_time() - t0
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = add_rows(_add(_add(self._other_logs(pts, nrm, blockers, skip, in_parts=True),
-                                   own), kept), rigid, pts.shape[0])
+        extra = _add(self._other_logs(pts, nrm, blockers, skip, in_parts=True), own)
+        extra = self._rigid.add_rows(_add(extra, kept), rigid, pts.shape[0])
         stats["seconds"]["kept_pairs"] = kept_seconds
         parts = self._part_blockers(blockers, skip, pts.shape[0])
         cost = 0 if parts is None else DEFORMABLE_RECEIVER_PAIRS * len(parts.deformables)

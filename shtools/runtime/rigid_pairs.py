@@ -147,6 +147,34 @@ class RigidPairs:
     def __init__(self):
         self._kept: dict[int, tuple[tuple, np.ndarray]] = {}  # sphere -> (key, sum)
         self._exclude: tuple | None = None  # (inputs, Skipped) of the last frame
+        # a writable copy of a read-only base (the kept static sum) with the last
+        # frame's rows added, and those rows: rewriting them is cheaper than a copy
+        self._base: np.ndarray | None = None
+        self._combined: np.ndarray | None = None
+        self._dirty: list = []
+
+    def add_rows(self, total: np.ndarray | None, sums: list, n_vertices: int
+                 ) -> np.ndarray | None:
+        """``total`` ``(V, n*n)`` (None is zero) plus ``sums`` (``[(rows, values), ...]``
+        of :meth:`frame`), in place when ``total`` is writable.
+
+        A read-only ``total`` (the kept static sum, the same array while it holds) is
+        copied once; later frames restore only the rows the previous frame changed.
+        """
+        if not sums:
+            return total
+        if total is None:
+            total = np.zeros((n_vertices, sums[0][1].shape[1]), dtype=np.float32)
+        elif not total.flags.writeable:
+            if self._base is not total or self._combined is None:
+                self._base, self._combined, self._dirty = total, total.copy(), []
+            for rows in self._dirty:
+                self._combined[rows] = total[rows]
+            self._dirty = [rows for rows, _ in sums]
+            total = self._combined
+        for rows, values in sums:
+            total[rows] += values
+        return total
 
     def frame(self, pts, nrm, blockers: list, spheres: list[SphereBlocker], rigid_receivers,
               exclude: Skipped | None, clusters: ReceiverClusters, accumulate, order: int
@@ -156,7 +184,7 @@ class RigidPairs:
         ``accumulate(pts, nrm, blockers, clusters)``: the log sum ``(R, n_acc^2)`` of
         one object's pairs, by the frame's own cuts and kernel.  Returns the
         exclusions and ``[(rows (R,), world-space log sum (R, n_acc^2)), ...]`` (to
-        add to the frame's rows: :func:`add_rows`); ``(exclude, [])`` when no row is
+        add to the frame's rows: :meth:`add_rows`); ``(exclude, [])`` when no row is
         flagged.
         """
         sphere_of = {}
@@ -208,20 +236,6 @@ class RigidPairs:
             out.append((obj.rows, entry[1] @ d.T))
         self._kept = kept
         return out
-
-
-def add_rows(total: np.ndarray | None, sums: list, n_vertices: int) -> np.ndarray | None:
-    """``total`` ``(V, n*n)`` (None is zero; a read-only one is copied) plus ``sums``
-    (``[(rows, values), ...]`` of :meth:`RigidPairs.frame`)."""
-    if not sums:
-        return total
-    if total is None:
-        total = np.zeros((n_vertices, sums[0][1].shape[1]), dtype=np.float32)
-    elif not total.flags.writeable:
-        total = total.copy()
-    for rows, values in sums:
-        total[rows] += values
-    return total
 
 
 def object_blocker(obj: RigidObject, sphere: SphereBlocker) -> SphereBlocker:
