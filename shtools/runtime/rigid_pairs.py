@@ -4,8 +4,10 @@ A rigid object's spheres and the receiver rows that move with it keep their rela
 pose, so the log sum of those pairs is the same function in the object's own frame
 every frame; only its orientation in the world changes.  The sum is made once in that
 frame by the same cuts and kernel as a frame and turned into the world per frame by an
-SH rotation (block diagonal per band, SHEXP Sec. 4 eq. 5's rotation invariance of the
-log), instead of being accumulated again.
+SH rotation (block diagonal, one small matrix per band) instead of being accumulated
+again.  The turned sum equals the world-space one to float32 rounding: the pair
+geometry is rounded in another frame, which moves ``1 - cos(theta)`` by ulps (and the
+piecewise-constant ratio table by at most one cell where it sits on a cell edge).
 
 The object frame is read off the frame's own inputs alone: the origin is the mean of
 the object's leaf centres and the axes their principal axes (signs fixed by the third
