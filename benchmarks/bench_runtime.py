@@ -9,10 +9,11 @@ side by side with that checkout and prints the ratio per stage.
 Scenes are procedural (capsule-built characters and columns over a ground grid,
 sphere sets bounding the capsules exactly), so the figures do not depend on
 the data directory.  The columns' spheres and the ground and column receivers are
-flagged static (their pairs' log sum is kept between frames) where the runtime
-imported has the flags.  Timings are process CPU time (``time.process_time``),
-minima over the frames of one run: the machine is shared by several jobs, and
-CPU time is what a frame costs on one otherwise idle core.  Run with
+flagged static (their pairs' log sum is kept between frames), and each character's
+receivers rigid with its own spheres (that log sum is kept in the character's frame
+and rotated), where the runtime imported has the flags.  Timings are process CPU
+time (``time.process_time``), minima over the frames of one run: the machine is
+shared by several jobs, and CPU time is what a frame costs on one otherwise idle core.  Run with
 ``OPENBLAS_NUM_THREADS=1``: on a loaded 2-core machine OpenBLAS threads spin
 and multiply the cost of small matrix products many times over.
 """
@@ -20,6 +21,7 @@ and multiply the cost of small matrix products many times over.
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import math
 import os
@@ -52,6 +54,9 @@ from shtools.runtime.parallel import available_cores
 #: Whether the runtime imported keeps static pairs (a baseline checkout may not):
 #: the battle scene flags its columns and ground static where it can.
 STATIC_FLAGS = "static" in getattr(SphereBlocker, "__dataclass_fields__", {})
+#: Whether the runtime imported keeps rigid objects' own pairs in object space: the
+#: battle scene flags each character's receivers as moving with its spheres.
+RIGID_FLAGS = "rigid_receivers" in inspect.signature(ShadowRuntime.visibility).parameters
 
 #: The runtime's targets: a battle frame, its memory, log space against product space.
 FRAME_TARGET_S = 0.150
@@ -155,8 +160,12 @@ class BattleScene:
 
     @staticmethod
     def static_kwargs(groups) -> dict:
-        """``visibility`` keywords flagging the ground and the columns static."""
-        return {"static_receivers": np.isin(groups, (0, 9))} if STATIC_FLAGS else {}
+        """``visibility`` keywords flagging the ground and the columns static and each
+        character's receivers rigid with its spheres (blocker ``k`` is group ``k + 1``)."""
+        kw = {"static_receivers": np.isin(groups, (0, 9))} if STATIC_FLAGS else {}
+        if RIGID_FLAGS:
+            kw["rigid_receivers"] = np.where(np.isin(groups, (1, 2)), groups - 1, -1)
+        return kw
 
 
 #: untimed frames before timing a configuration (steady state)

@@ -295,8 +295,7 @@ class BlockKernel:
         # scaled column by column into receiver-major rows: several times faster
         # than NumPy's copy of the transposed (n*n, R) array
         out = np.empty((n_k * n_t, self.order * self.order), np.float32)
-        for k, c in enumerate(self._coef):
-            np.multiply(sums[k], c, out=out[:, k])
+        np.multiply(sums.T, self._coef, out=out)
         return out.reshape(n_k, n_t, -1)
 
     def _lookup(self, u, bands, cell, idx):
@@ -348,10 +347,8 @@ class BlockKernel:
             for l, gamma in self._gammas[m]:
                 if l == m:
                     q = None  # R_m = 1
-                    term = bands[l]
                 elif l == m + 1:
                     q = z  # R_{m+1} = z (read only)
-                    term = self._term(bands[l], q, prod, m)
                 else:
                     q = q_buf[l % 3]
                     np.multiply(z, q_prev1, out=q)
@@ -360,28 +357,22 @@ class BlockKernel:
                     else:
                         np.multiply(q_prev2, gamma, out=prod)
                         q -= prod
-                    term = self._term(bands[l], q, prod, m)
                 base = l * l + l
-                # reductions over the spheres (axis 0)
+                # reductions over the spheres (axis 0), the per-pair products formed
+                # inside einsum only (one pass over its operands, no temporaries)
                 if m == 0:
-                    # zonal: sum_s bands * Q without forming the product
-                    if l == 0:
-                        np.einsum("sr->r", term, out=sums[base])
+                    if q is None:
+                        np.einsum("sr->r", bands[l], out=sums[base])
                     else:
-                        np.einsum("sr,sr->r", *term, out=sums[base])
-                else:
+                        np.einsum("sr,sr->r", bands[l], q, out=sums[base])
+                elif q is None:
                     # rows base + m (cos) and base - m (sin) at once
-                    np.einsum("sr,tsr->tr", term, cs, out=sums[base + m:base - m - 1:-2 * m])
+                    np.einsum("sr,tsr->tr", bands[l], cs, out=sums[base + m:base - m - 1:-2 * m])
+                else:
+                    np.einsum("sr,sr,tsr->tr", bands[l], q, cs,
+                              out=sums[base + m:base - m - 1:-2 * m])
                 if l > m:
                     q_prev2, q_prev1 = q_prev1, q
-
-    @staticmethod
-    def _term(band, q, prod, m):
-        """``band * q`` in ``prod`` (m > 0, reduced twice), or the pair (m = 0, once)."""
-        if m == 0:
-            return band, q
-        np.multiply(band, q, out=prod)
-        return prod
 
 
 def _recurrence_constants(order: int, norm: np.ndarray) -> tuple[list, np.ndarray]:

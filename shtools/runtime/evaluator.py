@@ -44,6 +44,7 @@ from shtools.runtime.parallel import (
     VertexWorkers,
     resolve_processes,
 )
+from shtools.runtime.rigid_pairs import RigidPairs
 from shtools.runtime.self_visibility import SelfTerms
 from shtools.runtime.settings import ShadowSettings
 from shtools.runtime.shading import desaturate_negative
@@ -109,6 +110,7 @@ class ShadowRuntime:
         self._self = SelfTerms(self.order, self.acc_order)  # self-visibility and its caches
         self._shading = ShadingCache(self.order, self.settings)
         self._static = StaticPairs()  # static spheres x static receivers, kept
+        self._rigid = RigidPairs()  # rigid objects' own pairs, kept in object space
         self._exp_workspaces: list = []  # fast_exp scratch, kept between frames
         self._exp_zero: np.ndarray | None = None  # exp(0) at the shading order
         #: processes sharing the per-vertex stages (worker processes start on the
@@ -146,7 +148,7 @@ class ShadowRuntime:
         """
         pts, nrm = check_receivers(vertices, normals)
         spheres, _ = self._blockers(blockers)
-        own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
+        own, exclude, skip = self._self.terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
         f = self._accumulate(work.task(pts, nrm), self.last_stats)
@@ -159,7 +161,7 @@ class ShadowRuntime:
     def visibility(self, vertices, normals, blockers: list[SphereBlocker],
                    clusters: ReceiverClusters | None = None, *,
                    self_visibility: tuple[SelfVisibility, ...] | list = (),
-                   static_receivers=None) -> np.ndarray:
+                   static_receivers=None, rigid_receivers=None) -> np.ndarray:
         """Shadowing visibility per receiver vertex: accumulate logs, exp, truncate.
 
         Parameters
@@ -184,11 +186,15 @@ class ShadowRuntime:
             field) on those rows.  Clusters must not mix rows of different
             objects (build them with ``groups``).
         static_receivers : array_like of bool, shape (V,), optional
-            Rows that do not move between frames.  With sphere blockers flagged
-            ``static``, the log sum of those pairs is computed once and kept while
-            they stay equal (:mod:`~shtools.runtime.static_pairs`); frames with
-            and without the flags agree to float32 rounding.  Ignored in frames
-            with shadow fields.
+            Rows that do not move between frames: with sphere blockers flagged
+            ``static``, those pairs' log sum is kept while they stay equal
+            (:mod:`~shtools.runtime.static_pairs`).
+        rigid_receivers : array_like of int, shape (V,), optional
+            Per row, the index in ``blockers`` of the sphere blocker it moves
+            rigidly with (-1: none): those pairs' log sum is kept in the object's
+            frame and turned with it (:mod:`~shtools.runtime.rigid_pairs`).
+            Frames with and without either flag agree to float32 rounding; both
+            are ignored in frames with shadow fields.
 
         Returns
         -------
@@ -197,38 +203,46 @@ class ShadowRuntime:
 
         Notes
         -----
-        Frames of at least ``MIN_PARALLEL_PAIRS`` sphere-receiver pairs are
-        split by receiver cluster into ``FRAME_PARTS`` parts; with
-        ``settings.processes > 1`` (the default on a multi-core machine) worker
-        processes share them with this process (:mod:`shtools.runtime.parallel`;
-        :meth:`close` stops them).  The split does not depend on the process
-        count, so the result is the same bytes with any number of processes.
+        Frames of at least ``MIN_PARALLEL_PAIRS`` sphere-receiver pairs are split
+        by receiver cluster into ``FRAME_PARTS`` parts, shared with worker processes
+        when ``settings.processes > 1`` (:mod:`shtools.runtime.parallel`; :meth:`close`
+        stops them); the split does not depend on the process count (same bytes).
         """
         pts, nrm = check_receivers(vertices, normals)
-        g = self._visibility(pts, nrm, blockers, clusters, self_visibility, static_receivers)
+        g = self._visibility(pts, nrm, blockers, clusters, self_visibility, static_receivers,
+                             rigid_receivers)
         return self._multiply_self(g, self_visibility)
 
     def _visibility(self, pts, nrm, blockers, clusters, self_visibility,
-                    static_receivers=None) -> np.ndarray:
+                    static_receivers=None, rigid_receivers=None) -> np.ndarray:
         """:meth:`visibility` before the self-visibilities given as visibility."""
         spheres, others = self._blockers(blockers)
         if any(isinstance(b, FieldBlocker) for b in others):
             return self._visibility_with_fields(pts, nrm, blockers, clusters, self_visibility)
-        own, exclude, skip = self._self_terms(self_visibility, pts.shape[0], blockers)
-        kept = None
-        if static_receivers is not None and self.settings.hierarchy and spheres:
+        own, exclude, skip = self._self.terms(self_visibility, pts.shape[0], blockers)
+        kept, rigid = None, []
+        kept_seconds = 0.0
+        if (static_receivers is not None or rigid_receivers is not None) and \
+                self.settings.hierarchy and spheres:
             if clusters is None:  # the clusters a frame without the flags would use
                 clusters = self._clusters_for(pts, None if exclude is None else exclude.labels)
-            split = self._static.split(pts, nrm, spheres, static_receivers, exclude, clusters)
+            t0 = time.process_time()
+            if rigid_receivers is not None:
+                exclude, rigid = self._rigid.frame(pts, nrm, blockers, spheres, rigid_receivers,
+                                                   exclude, clusters, self._kept_sum,
+                                                   self.acc_order)
+            split = None if static_receivers is None else self._static.split(
+                pts, nrm, spheres, static_receivers, exclude, clusters)
             if split is not None:
-                kept = self._static.log_sum(split, lambda skipped: self._accumulate(
-                    self._frame_work(pts, spheres, clusters, skipped).task(pts, nrm),
-                    {"pairs_evaluated": 0}))
+                kept = self._static.log_sum(split, lambda skipped: self._kept_sum(
+                    pts, nrm, spheres, clusters, skipped))
                 exclude = split.frame_exclude
+            kept_seconds = time.process_time() - t0
         work = self._frame_work(pts, spheres, clusters, exclude)
         stats = self.last_stats
-        extra = _add(_add(self._other_logs(pts, nrm, blockers, skip, in_parts=True), own),
-                     kept)
+        extra = _add(self._other_logs(pts, nrm, blockers, skip, in_parts=True), own)
+        extra = self._rigid.add_rows(_add(extra, kept), rigid, pts.shape[0])
+        stats["seconds"]["kept_pairs"] = kept_seconds
         parts = self._part_blockers(blockers, skip, pts.shape[0])
         cost = 0 if parts is None else DEFORMABLE_RECEIVER_PAIRS * len(parts.deformables)
         if stats["pairs"] + cost * pts.shape[0] >= MIN_PARALLEL_PAIRS:
@@ -393,10 +407,6 @@ class ShadowRuntime:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _self_terms(self, self_visibility, n_vertices: int, blockers: list):
-        """:meth:`~shtools.runtime.self_visibility.SelfTerms.terms` of this frame."""
-        return self._self.terms(self_visibility, n_vertices, blockers)
-
     def _multiply_self(self, g: np.ndarray, self_visibility) -> np.ndarray:
         """:meth:`~shtools.runtime.self_visibility.SelfTerms.multiply` into ``g``."""
         return self._self.multiply(g, self_visibility)
@@ -406,6 +416,11 @@ class ShadowRuntime:
         work, self.last_stats = frame_work(self.settings, self.table, pts, blockers, clusters,
                                            exclude, self._clusters_for)
         return work
+
+    def _kept_sum(self, pts, nrm, spheres, clusters, exclude=None) -> np.ndarray:
+        """Log sums ``(V, n_acc^2)`` of a kept part of a frame, by its cuts and kernel."""
+        work = self._frame_work(pts, spheres, clusters, exclude)
+        return self._accumulate(work.task(pts, nrm), {"pairs_evaluated": 0})
 
     def _accumulate(self, task, stats: dict) -> np.ndarray:
         """Log sums ``(V', n_acc^2)`` of a :meth:`FrameWork.task` in this process."""

@@ -154,8 +154,9 @@ def tree_cuts(forest: Forest, cluster_centers, cluster_radii, theta_max: float) 
     """
     pc = np.asarray(cluster_centers, dtype=np.float64)
     rc = np.asarray(cluster_radii, dtype=np.float64)
-    dist = np.sqrt(((forest.centers[None, :, :] - pc[:, None, :]) ** 2).sum(-1))  # (C, M)
-    passes = forest.radii[None, :] < math.sin(theta_max) * (dist - rc[:, None])
+    # node-major (M, C): each level's parent lookups gather contiguous rows
+    dist = np.sqrt(((forest.centers[:, None, :] - pc[None, :, :]) ** 2).sum(-1))  # (M, C)
+    passes = forest.radii[:, None] < math.sin(theta_max) * (dist - rc[None, :])
     blocked = np.zeros_like(passes)
     owner_node = np.full(passes.shape, -1, dtype=np.int64)
     is_leaf = forest.is_leaf
@@ -163,14 +164,12 @@ def tree_cuts(forest: Forest, cluster_centers, cluster_radii, theta_max: float) 
     for k, nodes in enumerate(forest.levels):
         if k > 0:
             par = forest.parent[nodes]
-            blocked[:, nodes] = blocked[:, par] | passes[:, par]
-        in_cut[:, nodes] = ~blocked[:, nodes] & (passes[:, nodes] | is_leaf[nodes][None, :])
-        if k > 0:
-            inherited = owner_node[:, forest.parent[nodes]]
-        else:
-            inherited = np.full((passes.shape[0], nodes.size), -1, dtype=np.int64)
-        owner_node[:, nodes] = np.where(in_cut[:, nodes], nodes[None, :], inherited)
-    return Cuts(in_cut, owner_node[:, forest.leaf_nodes])
+            blocked[nodes] = blocked[par] | passes[par]
+        in_cut[nodes] = ~blocked[nodes] & (passes[nodes] | is_leaf[nodes][:, None])
+        inherited = owner_node[forest.parent[nodes]] if k > 0 else -1
+        owner_node[nodes] = np.where(in_cut[nodes], nodes[:, None], inherited)
+    return Cuts(np.ascontiguousarray(in_cut.T),
+                np.ascontiguousarray(owner_node[forest.leaf_nodes].T))
 
 
 def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTable,
@@ -218,11 +217,13 @@ def ratio_weights(forest: Forest, cuts: Cuts, cluster_centers, table: CapLogTabl
     zh_leaf[leaf_r <= np.sin(theta_min) * d_leaf] = 0.0
     cos_gamma = np.clip(np.einsum("ij,ij->i", s_leaf, s_bound), -1.0, 1.0)
     contrib = zh_leaf * _legendre(cos_gamma, n)  # (P, n)
+    # sums per (cluster, node) by bincount over the flat key (in the pairs' order, as
+    # a sort-based unique would give them, without the sort)
     key = c_idx * forest.n_nodes + o_idx
-    uniq, inverse = np.unique(key, return_inverse=True)
-    num = np.zeros((uniq.size, n))
-    for l in range(n):
-        num[:, l] = np.bincount(inverse, weights=contrib[:, l], minlength=uniq.size)
+    size = n_c * forest.n_nodes
+    uniq = np.flatnonzero(np.bincount(key, minlength=size))
+    num = np.stack([np.bincount(key, weights=contrib[:, l], minlength=size)[uniq]
+                    for l in range(n)], axis=1)
     uc, uo = uniq // forest.n_nodes, uniq % forest.n_nodes
     # bounding: w_l = (sum over leaves) / f*_l(theta_b)
     _, zh_b, _ = _cap(pc[uc], forest.centers[uo], forest.radii[uo], table)

@@ -201,15 +201,19 @@ def _tile_sphere_lists(pts, nrm, rows, tile_cluster, cen, rad, cut_sizes, self_s
             ruled[ft] &= n_dot_p - tile_h.max(axis=1)[:, None] < radius
         # other tiles: every (receiver, sphere) pair, batched matrix products over
         # chunks of tiles (each tile against its cluster's padded cut)
+        # by cut size, each chunk against its own longest cut only (the cuts are
+        # padded to the frame's longest; past a tile's cut, keep is already False)
         curved = np.flatnonzero(~flat)
+        curved = curved[np.argsort(cut_sizes[tile_cluster[curved]], kind="stable")]
         for start in range(0, curved.size, _CURVED_TILES_PER_CHUNK):
             tiles = curved[start:start + _CURVED_TILES_PER_CHUNK]
             c = tile_cluster[tiles]
-            h = np.matmul(tile_n[tiles], cen[c].transpose(0, 2, 1))  # (k, T, S)
+            s_c = int(cut_sizes[c].max())
+            h = np.matmul(tile_n[tiles], cen[c, :s_c].transpose(0, 2, 1))  # (k, T, s_c)
             h -= height[rows[tiles]][:, :, None]
-            radius = rad[c]  # padding: radius 0 and keep already False
-            keep[tiles] &= _over_rows(np.maximum, h) > -radius  # not behind all planes
-            ruled[tiles] &= _over_rows(np.minimum, h) < radius  # not in front of all
+            radius = rad[c, :s_c]
+            keep[tiles, :s_c] &= _over_rows(np.maximum, h) > -radius  # not behind all planes
+            ruled[tiles, :s_c] &= _over_rows(np.minimum, h) < radius  # not in front of all
     else:
         ruled[:] = False
     # list order: spheres needing the rules, then those in front, then dropped ones
