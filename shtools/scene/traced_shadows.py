@@ -217,12 +217,13 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
         if hi > lo:
             chunks.append((start, stop, lo, hi))
 
-    def cast(start, stop, lo, hi, keep=None):
+    def cone(start, stop, lo, hi):
+        """The directions of the chunk's run inside each cone and above the tangent plane."""
         d = dirs[lo:hi]
-        # directions of the set inside the cone and above the tangent plane
-        take = (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
-        if keep is not None:
-            take &= keep
+        return (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
+
+    def cast(start, stop, lo, hi, take):
+        d = dirs[lo:hi]
         flat = np.flatnonzero(take)
         if not flat.size:
             return None
@@ -238,12 +239,13 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
 
     if around is None:
         for chunk in chunks:
-            cast(*chunk)
+            cast(*chunk, cone(*chunk))
         return g
     coarse, cell, touching = set_strata(n)
     found = np.zeros((p.shape[0] + 1, touching.shape[0]), dtype=np.float32)
-    for start, stop, lo, hi in chunks:
-        hits = cast(start, stop, lo, hi, keep=coarse[lo:hi])
+    cones = [cone(*chunk) for chunk in chunks]  # both passes' (a chunk's run is small)
+    for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
+        hits = cast(start, stop, lo, hi, take & coarse[lo:hi])
         if hits is not None:  # the strata of the blocked first rays
             found[start:stop] = hits @ (cell[lo:hi, None] == np.arange(touching.shape[0]))
     # a receiver's strata and its neighbours' (around holds itself first)
@@ -253,10 +255,8 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
     near = sparse.csr_matrix((np.ones(int(ok.sum()), dtype=np.float32),
                               (np.nonzero(ok)[0], around[ok])), shape=(len(p), len(p)))
     active = ((near @ found[:-1]) @ touching) > 0
-    for start, stop, lo, hi in chunks:
-        keep = ~coarse[lo:hi] & np.take_along_axis(
-            active[start:stop], np.broadcast_to(cell[lo:hi], (stop - start, hi - lo)), axis=1)
-        cast(start, stop, lo, hi, keep=keep)
+    for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
+        cast(start, stop, lo, hi, take & ~coarse[lo:hi] & active[start:stop][:, cell[lo:hi]])
     return g
 
 
@@ -340,13 +340,22 @@ def sphere_distance(points, centers, radii) -> np.ndarray:
     return np.maximum(0.0, d.min(axis=1)).astype(np.float64)
 
 
-def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
+def neighbours(points, normals, rest=None) -> tuple[np.ndarray, np.ndarray]:
     """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
     (-1 for a neighbour facing away by more than ``FILTER_MIN_COS``: a wall's receivers
     are not a floor's) and distances, kept while the same receivers come back (the last
-    ``NEIGHBOUR_ENTRIES`` sets: the ground and the objects a frame traces)."""
+    ``NEIGHBOUR_ENTRIES`` sets: the ground and the objects a frame traces).
+
+    ``rest`` is ``(points (V, 3), normals (V, 3), scale)`` when the receivers are one
+    rigid object posed by a rotation, a translation and a uniform ``scale``: its
+    neighbours are those of its rest geometry (the distances times ``scale``), so a
+    moving rigid object is searched once per bake, not once per frame.
+    """
     from scipy.spatial import cKDTree
 
+    if rest is not None:
+        idx, dist = neighbours(rest[0], rest[1])
+        return idx, dist * float(rest[2])
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     for k, entry in enumerate(_NEIGHBOURS):  # the ground and the objects of a frame
@@ -399,8 +408,8 @@ def surface_filter(values, width, idx, dist) -> np.ndarray:
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  spheres=None, lights=(), strata: bool = False, still: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  spheres=None, lights=(), strata: bool = False, still: bool = False,
+                  rest=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -430,6 +439,9 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         The object and the receivers never move (traced once per bake, the result
         kept): the whole shadow is traced with the denser set (:func:`refine_weights`
         gives weight 1 to every receiver with a blocked ray around it).
+    rest : tuple, optional
+        The receivers' rest geometry when they are one rigid object (``rest`` of
+        :func:`neighbours`).
 
     Returns
     -------
@@ -461,7 +473,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     weight = weight[rows]
     if not rows.size:
         return _keep_ground(key, (rows, weight, np.zeros((0, order * order))))
-    idx, dist = neighbours(p, nrm)
+    idx, dist = neighbours(p, nrm, rest)
     # neighbours among the traced receivers only (row of each in ``rows``, -1 if none)
     where = np.full(len(p) + 1, -1)
     where[rows] = np.arange(len(rows))
@@ -485,12 +497,22 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         if sparse.size:  # too few neighbours inside the filter: the denser set there
             rs = rows[busy[sparse]]
             dense = set_visibility(p[rs], nrm[rs], caster, axis[rs], cos_half[rs], order,
-                                   REFINE_FACTOR * int(n_dirs))
+                                   REFINE_FACTOR * int(n_dirs),
+                                   around=_subset(local, busy[sparse]) if strata else None)
             w = fine[sparse, None]
             g[busy[sparse]] = w * dense + (1.0 - w) * g[busy[sparse]]
         around = local[busy]
         g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
     return _keep_ground(key, (rows, weight, g))
+
+
+def _subset(around, take) -> np.ndarray:
+    """Neighbour lists ``around`` ``(R, K)`` (indices into the R rows, -1 for none) of
+    the rows ``take`` ``(T,)``, as indices into ``take`` (-1 where the neighbour is not
+    taken)."""
+    where = np.full(len(around) + 1, -1)
+    where[take] = np.arange(len(take))
+    return where[around[take]]  # -1 (none) reads the sentinel
 
 
 def receiver_spacing(idx, dist) -> np.ndarray:
@@ -527,7 +549,7 @@ def refine_weights(width, spacing) -> np.ndarray:
     return np.where(np.isfinite(s), t * t * (3.0 - 2.0 * t), 0.0)
 
 
-#: Per process: the last results of :func:`traced_ground`, by caster (a weak reference
+#: Per process: the last results of :func:`traced_ground`, by caster and call (a weak reference
 #: to it and copies of the other inputs kept beside them).  A rigid object's Embree scene
 #: is reused while it stays put, so an object and receivers that do not move are traced
 #: once per bake, not once per frame.
@@ -550,24 +572,33 @@ def _same(a, b) -> bool:
     return False
 
 
+def _slot(key: tuple) -> tuple:
+    """Where :data:`_GROUND` keeps the result of the inputs ``key``: one caster may serve
+    several calls a frame (a group's scene traced on the ground and on its own parts)."""
+    return id(key[0]), len(key[1]), key[6], key[9]
+
+
 def _kept_ground(key: tuple):
     """Copies of the kept result of the same inputs ``key`` (caster first), or None."""
-    kept = _GROUND.get(id(key[0]))
+    kept = _GROUND.get(_slot(key))
     if kept is None or kept[0][0]() is not key[0] or not _same(kept[0][1:], key[1:]):
         return None
+    _GROUND[_slot(key)] = _GROUND.pop(_slot(key))  # the least recently used go first
     return tuple(x.copy() for x in kept[1])
 
 
 def _keep_ground(key: tuple, result: tuple) -> tuple:
     """Keep copies of ``result`` (the inputs as copies too: a caller may reuse its arrays)."""
+    for slot in [k for k, v in _GROUND.items() if v[0][0]() is None]:
+        del _GROUND[slot]  # freed casters (a moving object's last frames) go first
     if len(_GROUND) >= GROUND_KEPT:
         _GROUND.pop(next(iter(_GROUND)))
     try:
         ref = weakref.ref(key[0])  # a skinned mesh's per-frame caster is not kept alive
     except TypeError:
         return result
-    _GROUND.pop(id(key[0]), None)
-    _GROUND[id(key[0])] = ((ref, *(_copied(x) for x in key[1:])),
+    _GROUND.pop(_slot(key), None)
+    _GROUND[_slot(key)] = ((ref, *(_copied(x) for x in key[1:])),
                            tuple(x.copy() for x in result))
     return result
 
