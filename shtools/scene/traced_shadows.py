@@ -233,28 +233,28 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
                                          np.take(d, qi, axis=0))
         hits = np.zeros(take.size, dtype=np.float32)
         hits[flat[blocked]] = 1.0
-        hits = hits.reshape(take.shape)
-        g[start:stop] -= hits @ proj[lo:hi]
-        return hits
+        g[start:stop] -= hits.reshape(take.shape) @ proj[lo:hi]
+        return np.divmod(flat[blocked], take.shape[1])  # (receiver, direction) of each hit
 
     if around is None:
         for chunk in chunks:
             cast(*chunk, cone(*chunk))
         return g
+    from scipy import sparse
+
     coarse, cell, touching = set_strata(n)
-    found = np.zeros((p.shape[0] + 1, touching.shape[0]), dtype=np.float32)
+    found = np.zeros((p.shape[0], touching.shape[0]), dtype=np.float32)
     cones = [cone(*chunk) for chunk in chunks]  # both passes' (a chunk's run is small)
     for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
         hits = cast(start, stop, lo, hi, take & coarse[lo:hi])
-        if hits is not None:  # the strata of the blocked first rays
-            found[start:stop] = hits @ (cell[lo:hi, None] == np.arange(touching.shape[0]))
-    # a receiver's strata and its neighbours' (around holds itself first)
-    from scipy import sparse
-
+        if hits is not None:  # the strata of the blocked first rays (only > 0 counts below)
+            found[start + hits[0], cell[lo + hits[1]]] = 1.0
+    # a receiver's strata and its neighbours' (around holds itself first), and those
+    # touching them (a sparse product: a stratum touches a few)
     ok = around >= 0
     near = sparse.csr_matrix((np.ones(int(ok.sum()), dtype=np.float32),
                               (np.nonzero(ok)[0], around[ok])), shape=(len(p), len(p)))
-    active = ((near @ found[:-1]) @ touching) > 0
+    active = (sparse.csr_matrix(touching).T @ (near @ found).T).T > 0
     for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
         cast(start, stop, lo, hi, take & ~coarse[lo:hi] & active[start:stop][:, cell[lo:hi]])
     return g
