@@ -29,8 +29,9 @@ other (objects that both receive and block).
 ``--quick``: spot on a 3 x 3 ground of 40 subdivisions, one frame.
 
 ``--baseline DIR`` bakes the same scenes with the code in DIR (e.g. the worktree of
-the previous release) in the same run, each bake in its own process (the two
-alternated, the fastest repeat kept), and prints both side by side.
+the previous release) in the same run, each bake in its own process (the codes
+alternated, the fastest repeat kept), and prints them side by side; given again, it
+adds more codes (the CPU ratios are against the first).
 
 ``python benchmarks/bench_look.py [--quick] [--baseline DIR] [--demo DIR]``
 """
@@ -176,6 +177,7 @@ def bake_worker(scene_path: str, first: int, stop: int, out_path: str) -> None:
 
 
 def _bake(code: Path, scene: dict, tag: str) -> dict:
+    tag = "".join(c if c.isalnum() else "_" for c in tag)  # a file name's
     out = CACHE / f"{scene['path'].stem}.{tag}.npz"
     # the bytecode kept out of the code's folder: a set-up frame's imports compile no
     # source after the first repeat (an installed package has its bytecode)
@@ -336,7 +338,9 @@ def score(radiance: np.ndarray, refs: dict) -> list[dict]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="spot, one small ground")
-    parser.add_argument("--baseline", type=Path, help="code to compare with (a worktree)")
+    parser.add_argument("--baseline", type=Path, action="append",
+                        help="code to compare with (a worktree); again for more codes, the "
+                             "ratios against the first")
     parser.add_argument("--demo", type=Path, help="make demo's output folder (its scene.toml)")
     parser.add_argument("--scenes", help="comma-separated scene names (default all)")
     parser.add_argument("--field", type=Path, help="a field asset of teapot.obj (order 4): "
@@ -354,8 +358,9 @@ def main(argv=None) -> int:
         print(f"no data in {DATA}: nothing to measure")
         return 0
     codes = {"this": REPO}
-    if args.baseline is not None:
-        codes = {"baseline": args.baseline.resolve(), **codes}
+    if args.baseline:
+        codes = {("baseline" if i == 0 else f"baseline {i + 1} ({b.name})"): b.resolve()
+                 for i, b in enumerate(args.baseline)} | codes
     n_dirs = 800 if args.quick else 3200
     smooth_dirs = 0 if args.quick else args.smooth_dirs
     print(f"\n### Look at the default settings vs a {n_dirs}-direction ray tracer of the real "

@@ -45,8 +45,12 @@ filter finds no neighbour and the steps stay; there the receiver is traced with 
 set ``REFINE_FACTOR`` times denser (:func:`refine_weights`: blended in as the
 filter's width falls from one receiver spacing to half of it, so no seam where the
 density changes).  Only receivers in the shadow near the object qualify, a few
-hundred on a coarse ground, none on most of a dense one.  A still object over
-still receivers, traced once per bake (the kept result, :data:`_GROUND`), gets
+hundred on a coarse ground, none on most of a dense one; object receivers, next to
+what they trace (the filter narrow: nearly all of them qualify), cast the denser
+set in strata too (the same errors as the whole set on ``make demo``'s walker for
+0.6 of its rays).  A still object over
+still receivers, traced once per bake (the kept result,
+:mod:`shtools.scene.kept_traces`), gets
 the denser set on its whole shadow: every receiver with a blocked ray of the
 shared set at or around it, which costs the set-up frame only.
 
@@ -69,11 +73,13 @@ from __future__ import annotations
 
 import functools
 import math
-import weakref
 
 import numpy as np
 
 from shtools.geometry.visibility import RAY_OFFSET
+from shtools.scene.kept_traces import _GROUND  # noqa: F401  the kept traces (tests clear it)
+from shtools.scene.kept_traces import keep as _keep_ground
+from shtools.scene.kept_traces import kept as _kept_ground
 from shtools.sh.basis import SQRT_4PI
 
 #: Ray counts (at the hemisphere density ``n_dirs``) of a receiver's cone where the
@@ -547,64 +553,3 @@ def refine_weights(width, spacing) -> np.ndarray:
     ratio = np.where(w > 0, s / np.where(w > 0, w, 1.0), np.inf)
     t = np.clip(ratio - 1.0, 0.0, 1.0)
     return np.where(np.isfinite(s), t * t * (3.0 - 2.0 * t), 0.0)
-
-
-#: Per process: the last results of :func:`traced_ground`, by caster and call (a weak reference
-#: to it and copies of the other inputs kept beside them).  A rigid object's Embree scene
-#: is reused while it stays put, so an object and receivers that do not move are traced
-#: once per bake, not once per frame.
-_GROUND: dict = {}
-#: Casters whose last result :data:`_GROUND` keeps (a scene's traced objects).
-GROUND_KEPT = 16
-
-
-def _same(a, b) -> bool:
-    """Equal inputs of :func:`traced_ground` (arrays by value, the caster by identity)."""
-    if a is b:
-        return True
-    if isinstance(a, tuple | list) and isinstance(b, tuple | list):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        a, b = np.asarray(a), np.asarray(b)
-        return a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
-    if isinstance(a, int | float | np.number) and isinstance(b, int | float | np.number):
-        return a == b
-    return False
-
-
-def _slot(key: tuple) -> tuple:
-    """Where :data:`_GROUND` keeps the result of the inputs ``key``: one caster may serve
-    several calls a frame (a group's scene traced on the ground and on its own parts)."""
-    return id(key[0]), len(key[1]), key[6], key[9]
-
-
-def _kept_ground(key: tuple):
-    """Copies of the kept result of the same inputs ``key`` (caster first), or None."""
-    kept = _GROUND.get(_slot(key))
-    if kept is None or kept[0][0]() is not key[0] or not _same(kept[0][1:], key[1:]):
-        return None
-    _GROUND[_slot(key)] = _GROUND.pop(_slot(key))  # the least recently used go first
-    return tuple(x.copy() for x in kept[1])
-
-
-def _keep_ground(key: tuple, result: tuple) -> tuple:
-    """Keep copies of ``result`` (the inputs as copies too: a caller may reuse its arrays)."""
-    for slot in [k for k, v in _GROUND.items() if v[0][0]() is None]:
-        del _GROUND[slot]  # freed casters (a moving object's last frames) go first
-    if len(_GROUND) >= GROUND_KEPT:
-        _GROUND.pop(next(iter(_GROUND)))
-    try:
-        ref = weakref.ref(key[0])  # a skinned mesh's per-frame caster is not kept alive
-    except TypeError:
-        return result
-    _GROUND.pop(_slot(key), None)
-    _GROUND[_slot(key)] = ((ref, *(_copied(x) for x in key[1:])),
-                           tuple(x.copy() for x in result))
-    return result
-
-
-def _copied(x):
-    """Nested tuples/lists of arrays, the arrays copied."""
-    if isinstance(x, tuple | list):
-        return tuple(_copied(y) for y in x)
-    return np.array(x, copy=True) if isinstance(x, np.ndarray) else x

@@ -15,12 +15,11 @@ from scipy.spatial.transform import Rotation
 from shtools.geometry.raycast import RayCaster
 from shtools.reference import raytrace_visibility
 from shtools.scene.contact_shadows import similarity_scale
+from shtools.scene.kept_traces import GROUND_KEPT, kept
 from shtools.scene.traced_shadows import (
     FILTER_MIN_COS,
     FILTER_NEIGHBOURS,
-    GROUND_KEPT,
     REFINE_FACTOR,
-    _kept_ground,
     neighbours,
     set_visibility,
     traced_ground,
@@ -77,13 +76,13 @@ def test_a_still_trace_outlives_moving_ones():
     args = (points, normals, v, faces, still, 3, 48)
     traced_ground(*args, still=True)
     key = (still, points, normals, v, faces, 3, 48, None, (), False, True)
-    assert _kept_ground(key) is not None
+    assert kept(key) is not None
     for step in range(GROUND_KEPT + 4):  # moving objects: a new scene each frame
         moved = v + np.array([0.05 * step, 0.0, 0.0])
         traced_ground(points, normals, moved, faces, RayCaster(moved, faces, robust=False),
                       3, 48)
         assert traced_ground(*args, still=True)[0].size  # the still object's, kept
-    assert _kept_ground(key) is not None
+    assert kept(key) is not None
 
 
 class _Counting(RayCaster):
