@@ -4,8 +4,9 @@ A still object over still receivers is traced once per bake: the result of the
 same inputs (the caster by identity, the arrays by value) comes back as copies.  A
 scene's moving objects add a trace each frame, with a new caster each (their Embree
 scenes are rebuilt when they move), so the kept results are dropped least recently
-used first, and those whose caster was freed before any: a still column beside a
-walker stays kept for the whole bake.
+used first: a still column beside a walker, found again every frame, stays kept for
+the whole bake.  (Dropping the freed casters' results first instead cost CesiumMan's
+frame 5 % more: their arrays freed and allocated again every frame.)
 """
 
 from __future__ import annotations
@@ -46,17 +47,15 @@ def _slot(key: tuple) -> tuple:
 
 def kept(key: tuple):
     """Copies of the kept result of the same inputs ``key`` (caster first), or None."""
-    kept = _GROUND.get(_slot(key))
-    if kept is None or kept[0][0]() is not key[0] or not _same(kept[0][1:], key[1:]):
+    entry = _GROUND.get(_slot(key))
+    if entry is None or entry[0][0]() is not key[0] or not _same(entry[0][1:], key[1:]):
         return None
     _GROUND[_slot(key)] = _GROUND.pop(_slot(key))  # the least recently used go first
-    return tuple(x.copy() for x in kept[1])
+    return tuple(x.copy() for x in entry[1])
 
 
 def keep(key: tuple, result: tuple) -> tuple:
     """Keep copies of ``result`` (the inputs as copies too: a caller may reuse its arrays)."""
-    for slot in [k for k, v in _GROUND.items() if v[0][0]() is None]:
-        del _GROUND[slot]  # freed casters (a moving object's last frames) go first
     if len(_GROUND) >= GROUND_KEPT:
         _GROUND.pop(next(iter(_GROUND)))
     try:
