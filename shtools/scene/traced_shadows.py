@@ -169,7 +169,7 @@ def light_weights(points, axis, cos_half, center, radius, position, light_radius
 
 
 def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: int,
-                   offset: float | None = None, around=None, first_only=None) -> np.ndarray:
+                   offset: float | None = None, around=None) -> np.ndarray:
     """Binary visibility of the caster on the shared set's directions in each cone, in SH.
 
     Parameters
@@ -193,9 +193,6 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
         then cast in strata (:func:`set_strata`), every :data:`COARSE_STRIDE`-th
         direction first and the rest only in the strata where a first ray of the
         receiver or of a neighbour was blocked, and next to them.
-    first_only : ndarray of bool, shape (V,), optional
-        With ``around``: receivers that cast the first rays only (what they find still
-        decides their neighbours' strata).
 
     Returns
     -------
@@ -265,10 +262,7 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
                               (np.nonzero(ok)[0], around[ok])), shape=(len(p), len(p)))
     active = (sparse.csr_matrix(touching).T @ (near @ found).T).T > 0
     for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
-        keep = take & ~coarse[lo:hi] & active[start:stop][:, cell[lo:hi]]
-        if first_only is not None:
-            keep &= ~first_only[start:stop, None]
-        cast(start, stop, lo, hi, keep)
+        cast(start, stop, lo, hi, take & ~coarse[lo:hi] & active[start:stop][:, cell[lo:hi]])
     return g
 
 
@@ -490,30 +484,19 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     where = np.full(len(p) + 1, -1)
     where[rows] = np.arange(len(rows))
     local = where[idx[rows]]  # idx -1 (facing away) reads the sentinel
-
-    def widths(at):
-        """The surface filter's width at the receivers ``at`` (the set's spacing times
-        the distance to the mesh)."""
-        if spheres is not None and len(spheres[1]):
-            near = sphere_distance(p[at], *spheres)
-        else:
-            near = nearest_distance(p[at], v, faces, caster)
-        return FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
-
-    # object receivers whose shared set the denser one will replace whole (their filter
-    # narrower than half their spacing: most, next to what they trace) cast its first
-    # rays only, which find the shadow; the rest would be thrown away
-    replaced = (refine_weights(widths(rows), receiver_spacing(idx[rows], dist[rows])) >= 1.0
-                if strata and not still else None)
     g = set_visibility(p[rows], nrm[rows], caster, axis[rows], cos_half[rows], order, n_dirs,
-                       around=local if strata else None, first_only=replaced)
+                       around=local if strata else None)
     # receivers with no blocked ray around them keep the exact constant
     hit = np.zeros(len(rows) + 1, dtype=bool)
     hit[:-1] = g[:, 1:].any(axis=1) | (g[:, 0] != SQRT_4PI)
     busy = np.flatnonzero(hit[local].any(axis=1))
     if busy.size:
         at = rows[busy]
-        width = widths(at)
+        if spheres is not None and len(spheres[1]):
+            near = sphere_distance(p[at], *spheres)
+        else:
+            near = nearest_distance(p[at], v, faces, caster)
+        width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
         fine = (np.ones(len(at)) if still
                 else refine_weights(width, receiver_spacing(idx[at], dist[at])))
         sparse = np.flatnonzero(fine > 0)

@@ -102,9 +102,12 @@ def _leg(z):
     return leg
 
 
-def _legs():
-    """A leg under the other leg and buried in the hip (a walker's), the ray tracer's
-    visibility on its vertices and its shadowed ones."""
+def test_contact_receivers_cast_the_denser_set_in_strata(monkeypatch):
+    """A walker's leg under the other leg and buried in the hip: the contact receivers
+    (``strata``) trace their denser set in strata too, at the error against the ray
+    tracer of the same trace with the whole denser set, for fewer rays."""
+    from shtools.scene import traced_shadows
+
     hip = trimesh.creation.capsule(height=0.3, radius=0.17, count=[20, 20])
     hip.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
     receiver = _leg(-0.1)
@@ -112,29 +115,16 @@ def _legs():
     p, nrm = np.asarray(receiver.vertices), np.asarray(receiver.vertex_normals)
     v, f = np.asarray(others.vertices), np.asarray(others.faces)
     ref = raytrace_visibility(p, nrm, [others], 4, 3200)
-    return p, nrm, v, f, ref, ref[:, 0] < 0.98 * math.sqrt(4 * math.pi)
-
-
-def _error(ref, shadowed, rows, g):
-    """Relative RMS error of a trace on ``rows`` over the shadowed receivers."""
-    full = np.zeros_like(ref)
-    full[:, 0] = math.sqrt(4 * math.pi)
-    full[rows] = g
-    d = (full - ref)[shadowed]
-    return float(np.sqrt((d ** 2).sum(axis=1).mean() / (ref[shadowed] ** 2).sum(axis=1).mean()))
-
-
-def test_contact_receivers_cast_the_denser_set_in_strata(monkeypatch):
-    """A walker's leg under the other leg and buried in the hip: the contact receivers
-    (``strata``) trace their denser set in strata too, at the error against the ray
-    tracer of the same trace with the whole denser set, for fewer rays."""
-    from shtools.scene import traced_shadows
-
-    p, nrm, v, f, ref, shadowed = _legs()
+    shadowed = ref[:, 0] < 0.98 * math.sqrt(4 * math.pi)
     assert shadowed.mean() > 0.3
 
     def error(rows, g):
-        return _error(ref, shadowed, rows, g)
+        full = np.zeros_like(ref)
+        full[:, 0] = math.sqrt(4 * math.pi)
+        full[rows] = g
+        d = (full - ref)[shadowed]
+        return float(np.sqrt((d ** 2).sum(axis=1).mean()
+                             / (ref[shadowed] ** 2).sum(axis=1).mean()))
 
     strata = _Counting(v, f, robust=False)
     rows, weight, g = traced_ground(p, nrm, v, f, strata, 4, 120, strata=True)
@@ -152,28 +142,5 @@ def test_contact_receivers_cast_the_denser_set_in_strata(monkeypatch):
     # against 3.49 %
     assert error(rows, g) < 1.02 * error(rows_w, g_whole) + 0.001, (
         error(rows, g), error(rows_w, g_whole))
-    # measured 0.87 of the rays (most of this leg's receivers are filtered, not refined)
+    # measured 0.88 of the rays (most of this leg's receivers are filtered, not refined)
     assert strata.rays < 0.95 * whole.rays, strata.rays / whole.rays
-
-
-def test_receivers_the_denser_set_replaces_cast_the_shared_sets_first_rays_only(monkeypatch):
-    """Where the denser set replaces the shared one whole (the contact receivers next to
-    what they trace), the shared set's rest is not cast: fewer rays, the same error
-    against the ray tracer as with the whole shared pass."""
-    from shtools.scene import traced_shadows
-
-    p, nrm, v, f, ref, shadowed = _legs()
-    strata = _Counting(v, f, robust=False)
-    rows, _, g = traced_ground(p, nrm, v, f, strata, 4, 120, strata=True)
-
-    def whole_shared(*args, first_only=None, **kwargs):  # every receiver casts its rest
-        return set_visibility(*args, **kwargs)
-
-    monkeypatch.setattr(traced_shadows, "set_visibility", whole_shared)
-    whole = _Counting(v, f, robust=False)
-    rows_w, _, g_whole = traced_ground(p, nrm, v, f, whole, 4, 120, strata=True)
-    # the rows without a blocked ray around them may differ at the shadow's fringe only
-    # (a neighbour's rest found the mesh where no first ray did): measured 3.50 % both
-    # ways, 0.92 of the rays (this leg's receivers are mostly filtered, not replaced)
-    assert _error(ref, shadowed, rows, g) < 1.02 * _error(ref, shadowed, rows_w, g_whole) + 0.001
-    assert strata.rays < whole.rays
