@@ -45,10 +45,7 @@ filter finds no neighbour and the steps stay; there the receiver is traced with 
 set ``REFINE_FACTOR`` times denser (:func:`refine_weights`: blended in as the
 filter's width falls from one receiver spacing to half of it, so no seam where the
 density changes).  Only receivers in the shadow near the object qualify, a few
-hundred on a coarse ground, none on most of a dense one; object receivers, next to
-what they trace (the filter narrow: nearly all of them qualify), cast the denser
-set in strata too (the same errors as the whole set on ``make demo``'s walker for
-0.6 of its rays).  A still object over
+hundred on a coarse ground, none on most of a dense one.  A still object over
 still receivers, traced once per bake (the kept result,
 :mod:`shtools.scene.kept_traces`), gets
 the denser set on its whole shadow: every receiver with a blocked ray of the
@@ -503,22 +500,12 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         if sparse.size:  # too few neighbours inside the filter: the denser set there
             rs = rows[busy[sparse]]
             dense = set_visibility(p[rs], nrm[rs], caster, axis[rs], cos_half[rs], order,
-                                   REFINE_FACTOR * int(n_dirs),
-                                   around=_subset(local, busy[sparse]) if strata else None)
+                                   REFINE_FACTOR * int(n_dirs))
             w = fine[sparse, None]
             g[busy[sparse]] = w * dense + (1.0 - w) * g[busy[sparse]]
         around = local[busy]
         g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
     return _keep_ground(key, (rows, weight, g))
-
-
-def _subset(around, take) -> np.ndarray:
-    """Neighbour lists ``around`` ``(R, K)`` (indices into the R rows, -1 for none) of
-    the rows ``take`` ``(T,)``, as indices into ``take`` (-1 where the neighbour is not
-    taken)."""
-    where = np.full(len(around) + 1, -1)
-    where[take] = np.arange(len(take))
-    return where[around[take]]  # -1 (none) reads the sentinel
 
 
 def receiver_spacing(idx, dist) -> np.ndarray:

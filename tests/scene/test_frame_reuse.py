@@ -1,11 +1,8 @@
 """What a frame reuses instead of redoing (shtools.scene.traced_shadows,
-shtools.scene.contact_shadows): a rigid object's neighbours from its rest geometry, a
-still object's kept trace among moving ones, the contact receivers' denser set in
-strata."""
+shtools.scene.contact_shadows, shtools.scene.kept_traces): a rigid object's neighbours
+from its rest geometry, a still object's kept trace among moving ones."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 import trimesh
@@ -13,15 +10,12 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from shtools.geometry.raycast import RayCaster
-from shtools.reference import raytrace_visibility
 from shtools.scene.contact_shadows import similarity_scale
 from shtools.scene.kept_traces import GROUND_KEPT, kept
 from shtools.scene.traced_shadows import (
     FILTER_MIN_COS,
     FILTER_NEIGHBOURS,
-    REFINE_FACTOR,
     neighbours,
-    set_visibility,
     traced_ground,
 )
 
@@ -83,64 +77,3 @@ def test_a_still_trace_outlives_moving_ones():
                       3, 48)
         assert traced_ground(*args, still=True)[0].size  # the still object's, kept
     assert kept(key) is not None
-
-
-class _Counting(RayCaster):
-    """A caster that counts the rays cast through it."""
-
-    rays = 0
-
-    def occluded_embree(self, origins, directions):
-        self.rays += len(origins)
-        return super().occluded_embree(origins, directions)
-
-
-def _leg(z):
-    leg = trimesh.creation.capsule(height=0.55, radius=0.085, count=[16, 16])
-    leg.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
-    leg.apply_translation([0.0, -0.36, z])
-    return leg
-
-
-def test_contact_receivers_cast_the_denser_set_in_strata(monkeypatch):
-    """A walker's leg under the other leg and buried in the hip: the contact receivers
-    (``strata``) trace their denser set in strata too, at the error against the ray
-    tracer of the same trace with the whole denser set, for fewer rays."""
-    from shtools.scene import traced_shadows
-
-    hip = trimesh.creation.capsule(height=0.3, radius=0.17, count=[20, 20])
-    hip.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
-    receiver = _leg(-0.1)
-    others = trimesh.util.concatenate([_leg(0.1), hip])
-    p, nrm = np.asarray(receiver.vertices), np.asarray(receiver.vertex_normals)
-    v, f = np.asarray(others.vertices), np.asarray(others.faces)
-    ref = raytrace_visibility(p, nrm, [others], 4, 3200)
-    shadowed = ref[:, 0] < 0.98 * math.sqrt(4 * math.pi)
-    assert shadowed.mean() > 0.3
-
-    def error(rows, g):
-        full = np.zeros_like(ref)
-        full[:, 0] = math.sqrt(4 * math.pi)
-        full[rows] = g
-        d = (full - ref)[shadowed]
-        return float(np.sqrt((d ** 2).sum(axis=1).mean()
-                             / (ref[shadowed] ** 2).sum(axis=1).mean()))
-
-    strata = _Counting(v, f, robust=False)
-    rows, weight, g = traced_ground(p, nrm, v, f, strata, 4, 120, strata=True)
-    assert np.all(weight == 1.0)  # touching: the traced mesh's whole weight
-
-    def whole_denser(*args, around=None, **kwargs):  # the denser set cast whole
-        dense = args[6] == REFINE_FACTOR * 120
-        return set_visibility(*args, around=None if dense else around, **kwargs)
-
-    monkeypatch.setattr(traced_shadows, "set_visibility", whole_denser)
-    whole = _Counting(v, f, robust=False)
-    rows_w, _, g_whole = traced_ground(p, nrm, v, f, whole, 4, 120, strata=True)
-    # both are the denser set's quadrature, filtered alike (the strata skip a blocker only
-    # where no first ray of the receiver or of a neighbour found it): measured 3.50 %
-    # against 3.49 %
-    assert error(rows, g) < 1.02 * error(rows_w, g_whole) + 0.001, (
-        error(rows, g), error(rows_w, g_whole))
-    # measured 0.88 of the rays (most of this leg's receivers are filtered, not refined)
-    assert strata.rays < 0.95 * whole.rays, strata.rays / whole.rays
