@@ -15,8 +15,9 @@ tracer of the posed real meshes (:func:`shtools.reference.raytrace_visibility`,
   reference as shown, with the scene's de-ringing (``deringing = "desaturate"``, the
   default: negative radiance, the order-n truncation's ringing, cannot be displayed),
   and the raw reference's shadowed error beside (``shadowed raw``),
-* CPU per frame (one process, the set-up frame left out) and its ratio to the baseline,
-  and the CPU of that set-up frame.
+* CPU per frame (one process and one frame baker, as a bake's worker; the set-up
+  frame left out) and its ratio to the baseline, and the CPU of that set-up frame
+  (receiver clusters, runtime, the first frame's per-bake state).
 
 Scenes from ``../shared/data`` (never committed; the assets are built with
 ``benchmarks/bench_fidelity.py``'s helpers and cached there): the bunny under the
@@ -28,8 +29,9 @@ other (objects that both receive and block).
 ``--quick``: spot on a 3 x 3 ground of 40 subdivisions, one frame.
 
 ``--baseline DIR`` bakes the same scenes with the code in DIR (e.g. the worktree of
-the previous release) in the same run, each bake in its own process (the two
-alternated, the fastest repeat kept), and prints both side by side.
+the previous release) in the same run, each bake in its own process (the codes
+alternated, the fastest repeat kept), and prints them side by side; given again, it
+adds more codes (the CPU ratios are against the first).
 
 ``python benchmarks/bench_look.py [--quick] [--baseline DIR] [--demo DIR]``
 """
@@ -143,32 +145,45 @@ blocker = {{ field = "{field}" }}
 
 
 def bake_worker(scene_path: str, first: int, stop: int, out_path: str) -> None:
-    """Bake frames ``first..stop-1`` in this process (one runtime process): radiance, CPU."""
-    from shtools.scene.bake import bake_scene, prepare_scene
+    """Bake frames ``first..stop-1`` in this process as a bake's worker does: radiance, CPU.
+
+    One :class:`~shtools.scene.bake.FrameBaker` for all frames, the receiver clusters
+    computed once (what ``bake_scene`` does once per bake, not per frame).  The set-up
+    (clusters, runtime and a first frame, which builds the per-bake state: casters,
+    kept traces) is timed apart, its frame posed half a frame before ``first``: a
+    pose none of the measured frames repeats (a repeated pose would find a moving
+    object's trace kept and time nothing).
+    """
+    from shtools.scene.bake import FrameBaker, bake_clusters, prepare_scene
     from shtools.scene.scene import load_scene
 
     scene = load_scene(scene_path)
     prepared = prepare_scene(scene)
-    frames = range(first, stop)
+    method = scene.settings.method
+    times = scene.frame_times(range(first, stop))
     cpu = []
     radiance = []
-    # a frame before the measured ones sets the per-bake state up (clusters, casters)
     setup_start = time.process_time()
-    list(bake_scene(scene, prepared=prepared, frames=range(first, first + 1), processes=1,
-                    scheduler="inline"))
+    baker = FrameBaker(prepared, method, bake_clusters(prepared, method, 0.0), processes=1)
+    baker.frame(first, float(times[0]) - 0.5 / scene.settings.fps)
     setup = time.process_time() - setup_start
-    for k in frames:
+    for k, t in zip(range(first, stop), times, strict=True):
         t0 = time.process_time()
-        (frame,) = bake_scene(scene, prepared=prepared, frames=range(k, k + 1), processes=1,
-                              scheduler="inline")
+        frame = baker.frame(k, float(t))
         cpu.append(time.process_time() - t0)
         radiance.append(frame.radiance.astype(np.float64))
+    baker.close()
     np.savez(out_path, radiance=np.stack(radiance), cpu=np.array(cpu), setup=setup)
 
 
 def _bake(code: Path, scene: dict, tag: str) -> dict:
+    tag = "".join(c if c.isalnum() else "_" for c in tag)  # a file name's
     out = CACHE / f"{scene['path'].stem}.{tag}.npz"
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code)}
+    # the bytecode kept out of the code's folder: a set-up frame's imports compile no
+    # source after the first repeat (an installed package has its bytecode)
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code),
+           "PYTHONPYCACHEPREFIX": str(CACHE / "pycache" / tag)}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
                     str(scene["path"]), str(scene["frames"].start), str(scene["frames"].stop),
                     str(out)], check=True, env=env, cwd=str(code))
@@ -323,7 +338,9 @@ def score(radiance: np.ndarray, refs: dict) -> list[dict]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="spot, one small ground")
-    parser.add_argument("--baseline", type=Path, help="code to compare with (a worktree)")
+    parser.add_argument("--baseline", type=Path, action="append",
+                        help="code to compare with (a worktree); again for more codes, the "
+                             "ratios against the first")
     parser.add_argument("--demo", type=Path, help="make demo's output folder (its scene.toml)")
     parser.add_argument("--scenes", help="comma-separated scene names (default all)")
     parser.add_argument("--field", type=Path, help="a field asset of teapot.obj (order 4): "
@@ -341,8 +358,9 @@ def main(argv=None) -> int:
         print(f"no data in {DATA}: nothing to measure")
         return 0
     codes = {"this": REPO}
-    if args.baseline is not None:
-        codes = {"baseline": args.baseline.resolve(), **codes}
+    if args.baseline:
+        codes = {("baseline" if i == 0 else f"baseline {i + 1} ({b.name})"): b.resolve()
+                 for i, b in enumerate(args.baseline)} | codes
     n_dirs = 800 if args.quick else 3200
     smooth_dirs = 0 if args.quick else args.smooth_dirs
     print(f"\n### Look at the default settings vs a {n_dirs}-direction ray tracer of the real "

@@ -129,8 +129,9 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
     Returns
     -------
     list of (receivers, caster_of)
-        ``receivers`` is ``(rows (R,), points (R, 3), normals (R, 3))`` of the object
-        receivers traced against one scene that skip the same blockers; ``caster_of``
+        ``receivers`` is ``(rows (R,), points (R, 3), normals (R, 3), rest)`` of the
+        object receivers traced against one scene that skip the same blockers (``rest``
+        the rest geometry of a lone rigid receiver, :func:`_rest`, else None); ``caster_of``
         is ``(caster, vertices (Vc, 3), faces (Fc, 3), blocker indices tuple)`` of that
         scene and those blockers.
     """
@@ -165,13 +166,69 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
         caster, vertices, faces, _ = built[key]
         joint = tuple(np.concatenate(a) for a in zip(
             *((r.rows, r.vertices, r.normals) for r in receivers), strict=True))
-        calls.append((joint, (caster, vertices, faces, skipped)))
+        calls.append(((*joint, _rest(receivers)), (caster, vertices, faces, skipped)))
     return calls
+
+
+def similarity_scale(matrix) -> float | None:
+    """The uniform scale of a rotation, translation and uniform scale ``(4, 4)``; None for
+    any other transform (a shear or an unequal scale changes distances unequally)."""
+    m = np.asarray(matrix, dtype=np.float64)[:3, :3]
+    gram = m.T @ m
+    s2 = float(np.trace(gram)) / 3.0
+    if not s2 > 0 or np.abs(gram - s2 * np.eye(3)).max() > 1e-9 * s2:
+        return None
+    return float(np.sqrt(s2))
+
+
+def _rest(receivers: list[ContactPart]):
+    """``(rest vertices, rest normals, scale)`` of a lone rigid receiver posed by a
+    similarity (its neighbours are its rest geometry's:
+    :func:`~shtools.scene.traced_shadows.neighbours`), else None."""
+    if len(receivers) != 1 or receivers[0].obj.motion is not None:
+        return None
+    obj = receivers[0].obj
+    scale = similarity_scale(receivers[0].matrix)
+    if scale is None or obj.normals is None or len(obj.vertices) != len(receivers[0].rows):
+        return None
+    return obj.vertices, obj.normals, scale
 
 
 #: Embree scenes of rigid objects' meshes in world space, per process: ids of the
 #: objects -> (pid, their faces, their matrices, caster); rebuilt when a transform changes.
+#: Shared by the contact shadows and the ground's traced rigid groups
+#: (:func:`shtools.scene.pose.pose_frame`): a walker's parts are one scene for both.
 _CASTERS: dict = {}
+
+
+def rigid_caster(objects: list, matrices: list, vertices: np.ndarray, faces: np.ndarray):
+    """The Embree scene of rigid objects' meshes posed at ``matrices``, kept while their
+    transforms hold (a static scene is built once per bake).
+
+    Parameters
+    ----------
+    objects : list
+        The prepared objects (identity and ``faces``), in the order of ``vertices``.
+    matrices : list of ndarray, shape (4, 4)
+        Their world transforms this frame.
+    vertices, faces : ndarray, shapes (V, 3) and (F, 3)
+        Their posed meshes concatenated (faces indexing the concatenation).
+    """
+    from shtools.scene.transfer import posed_caster
+
+    key = tuple(id(o) for o in objects)
+    hit = _CASTERS.get(key)
+    # the entry holds the faces arrays themselves: an id alone can be reused once freed
+    if (hit is not None and hit[0] == os.getpid()
+            and all(a is o.faces for a, o in zip(hit[1], objects, strict=True))
+            and all(np.array_equal(a, m) for a, m in zip(hit[2], matrices, strict=True))):
+        return hit[3]
+    if len(_CASTERS) >= 64:
+        _CASTERS.clear()
+    caster = posed_caster(vertices, faces)
+    _CASTERS[key] = (os.getpid(), [o.faces for o in objects],
+                     [np.array(m, copy=True) for m in matrices], caster)
+    return caster
 
 
 def _joint_caster(members: list[ContactPart]) -> tuple:
@@ -186,16 +243,6 @@ def _joint_caster(members: list[ContactPart]) -> tuple:
         return members[0].caster, vertices, faces, index
     if any(m.obj.motion is not None for m in members):  # a skinned mesh moves every frame
         return posed_caster(vertices, faces), vertices, faces, index
-    key = tuple(id(m.obj) for m in members)
-    hit = _CASTERS.get(key)
-    # the entry holds the faces arrays themselves: an id alone can be reused once freed
-    if (hit is not None and hit[0] == os.getpid()
-            and all(a is m.obj.faces for a, m in zip(hit[1], members, strict=True))
-            and all(np.array_equal(a, m.matrix) for a, m in zip(hit[2], members, strict=True))):
-        return hit[3], vertices, faces, index
-    if len(_CASTERS) >= 64:
-        _CASTERS.clear()
-    caster = posed_caster(vertices, faces)
-    _CASTERS[key] = (os.getpid(), [m.obj.faces for m in members],
-                     [np.array(m.matrix, copy=True) for m in members], caster)
+    caster = rigid_caster([m.obj for m in members], [m.matrix for m in members], vertices,
+                          faces)
     return caster, vertices, faces, index

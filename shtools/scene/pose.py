@@ -15,7 +15,12 @@ from shtools.scene.animation import (
     vertex_normals,
     world_matrices,
 )
-from shtools.scene.contact_shadows import ContactPart, contact_casters, contact_directions
+from shtools.scene.contact_shadows import (
+    ContactPart,
+    contact_casters,
+    contact_directions,
+    rigid_caster,
+)
 from shtools.scene.kinds import BLOCKER_KINDS
 from shtools.scene.prepare import PreparedScene
 
@@ -231,7 +236,9 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     ``bench_fidelity``'s rigid scenes).
 
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
-    ``(R,)``, ``(R, 3)``, ``(R, 3)`` (or of one object receiver, for contact shadows);
+    ``(R,)``, ``(R, 3)``, ``(R, 3)`` (or of object receivers, for contact shadows, with
+    a lone rigid receiver's rest geometry fourth: ``rest`` of
+    :func:`~shtools.scene.traced_shadows.neighbours`);
     ``n_dirs`` the rays of a cone filling the hemisphere (default
     ``traced_shadow_directions``); ``still`` when the object and the receivers never
     move (its whole shadow traced with the denser set, once per bake); returns None
@@ -240,7 +247,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     from shtools.scene.traced_shadows import traced_ground
 
     caster, mesh_v, faces, index = caster_of
-    rows, points, normals = receivers
+    rows, points, normals = receivers[:3]
     labels = None if clusters is None else clusters.labels[rows]
     indices = index if isinstance(index, tuple) else (index,)
     # the blocker alone on the hand-over rows: a field's own skipped rows are another
@@ -252,7 +259,8 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                       spheres=_bounding_spheres(own),
                                       lights=[(x.position, x.radius) for x in lights
                                               if isinstance(x, SphereLight)],
-                                      strata=strata, still=still)
+                                      strata=strata, still=still,
+                                      rest=receivers[3] if len(receivers) > 3 else None)
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)
@@ -325,36 +333,16 @@ def _handover_runtime(prepared):
     return runtime
 
 
-#: Embree scenes of rigid objects in world space, per process (a forked worker builds its
-#: own): ids of the objects -> (pid, their faces, their matrices, caster).  Rebuilt only
-#: when a transform changes, so a static object's scene is built once per bake.
-_RIGID_CASTERS: dict = {}
-
-
 def _rigid_caster(rigid: list):
     """``(caster, vertices, faces, blocker indices)``: one Embree scene of rigid objects'
-    real meshes at their transforms (cached while the transforms hold); ``rigid`` holds
+    real meshes at their transforms (kept while the transforms hold:
+    :func:`~shtools.scene.contact_shadows.rigid_caster`); ``rigid`` holds
     ``(object, transform, posed vertices, blocker index)``."""
-    import os
-
-    from shtools.scene.transfer import posed_caster
-
-    key = tuple(id(o) for o, _, _, _ in rigid)
-    hit = _RIGID_CASTERS.get(key)
     vertices = np.concatenate([v for _, _, v, _ in rigid])
-    index = tuple(k for _, _, _, k in rigid)
-    # the entry holds the faces arrays themselves: an id alone can be reused once freed
-    if (hit is not None and hit[0] == os.getpid()
-            and all(a is o.faces for a, (o, _, _, _) in zip(hit[1], rigid, strict=True))
-            and all(np.array_equal(a, m) for a, (_, m, _, _) in zip(hit[2], rigid, strict=True))):
-        return hit[3], vertices, _joint_faces(rigid), index
-    if len(_RIGID_CASTERS) >= 64:
-        _RIGID_CASTERS.clear()
     faces = _joint_faces(rigid)
-    caster = posed_caster(vertices, faces)
-    _RIGID_CASTERS[key] = (os.getpid(), [o.faces for o, _, _, _ in rigid],
-                           [np.array(m, copy=True) for _, m, _, _ in rigid], caster)
-    return caster, vertices, faces, index
+    caster = rigid_caster([o for o, _, _, _ in rigid], [m for _, m, _, _ in rigid], vertices,
+                          faces)
+    return caster, vertices, faces, tuple(k for _, _, _, k in rigid)
 
 
 def _overlapping(rigid: list) -> list[list]:

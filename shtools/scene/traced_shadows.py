@@ -46,7 +46,8 @@ set ``REFINE_FACTOR`` times denser (:func:`refine_weights`: blended in as the
 filter's width falls from one receiver spacing to half of it, so no seam where the
 density changes).  Only receivers in the shadow near the object qualify, a few
 hundred on a coarse ground, none on most of a dense one.  A still object over
-still receivers, traced once per bake (the kept result, :data:`_GROUND`), gets
+still receivers, traced once per bake (the kept result,
+:mod:`shtools.scene.kept_traces`), gets
 the denser set on its whole shadow: every receiver with a blocked ray of the
 shared set at or around it, which costs the set-up frame only.
 
@@ -69,11 +70,13 @@ from __future__ import annotations
 
 import functools
 import math
-import weakref
 
 import numpy as np
 
 from shtools.geometry.visibility import RAY_OFFSET
+from shtools.scene.kept_traces import _GROUND  # noqa: F401  the kept traces (tests clear it)
+from shtools.scene.kept_traces import keep as _keep_ground
+from shtools.scene.kept_traces import kept as _kept_ground
 from shtools.sh.basis import SQRT_4PI
 
 #: Ray counts (at the hemisphere density ``n_dirs``) of a receiver's cone where the
@@ -217,12 +220,13 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
         if hi > lo:
             chunks.append((start, stop, lo, hi))
 
-    def cast(start, stop, lo, hi, keep=None):
+    def cone(start, stop, lo, hi):
+        """The directions of the chunk's run inside each cone and above the tangent plane."""
         d = dirs[lo:hi]
-        # directions of the set inside the cone and above the tangent plane
-        take = (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
-        if keep is not None:
-            take &= keep
+        return (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
+
+    def cast(start, stop, lo, hi, take):
+        d = dirs[lo:hi]
         flat = np.flatnonzero(take)
         if not flat.size:
             return None
@@ -232,31 +236,30 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
                                          np.take(d, qi, axis=0))
         hits = np.zeros(take.size, dtype=np.float32)
         hits[flat[blocked]] = 1.0
-        hits = hits.reshape(take.shape)
-        g[start:stop] -= hits @ proj[lo:hi]
-        return hits
+        g[start:stop] -= hits.reshape(take.shape) @ proj[lo:hi]
+        return np.divmod(flat[blocked], take.shape[1])  # (receiver, direction) of each hit
 
     if around is None:
         for chunk in chunks:
-            cast(*chunk)
+            cast(*chunk, cone(*chunk))
         return g
-    coarse, cell, touching = set_strata(n)
-    found = np.zeros((p.shape[0] + 1, touching.shape[0]), dtype=np.float32)
-    for start, stop, lo, hi in chunks:
-        hits = cast(start, stop, lo, hi, keep=coarse[lo:hi])
-        if hits is not None:  # the strata of the blocked first rays
-            found[start:stop] = hits @ (cell[lo:hi, None] == np.arange(touching.shape[0]))
-    # a receiver's strata and its neighbours' (around holds itself first)
     from scipy import sparse
 
+    coarse, cell, touching = set_strata(n)
+    found = np.zeros((p.shape[0], touching.shape[0]), dtype=np.float32)
+    cones = [cone(*chunk) for chunk in chunks]  # both passes' (a chunk's run is small)
+    for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
+        hits = cast(start, stop, lo, hi, take & coarse[lo:hi])
+        if hits is not None:  # the strata of the blocked first rays (only > 0 counts below)
+            found[start + hits[0], cell[lo + hits[1]]] = 1.0
+    # a receiver's strata and its neighbours' (around holds itself first), and those
+    # touching them (a sparse product: a stratum touches a few)
     ok = around >= 0
     near = sparse.csr_matrix((np.ones(int(ok.sum()), dtype=np.float32),
                               (np.nonzero(ok)[0], around[ok])), shape=(len(p), len(p)))
-    active = ((near @ found[:-1]) @ touching) > 0
-    for start, stop, lo, hi in chunks:
-        keep = ~coarse[lo:hi] & np.take_along_axis(
-            active[start:stop], np.broadcast_to(cell[lo:hi], (stop - start, hi - lo)), axis=1)
-        cast(start, stop, lo, hi, keep=keep)
+    active = (sparse.csr_matrix(touching).T @ (near @ found).T).T > 0
+    for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
+        cast(start, stop, lo, hi, take & ~coarse[lo:hi] & active[start:stop][:, cell[lo:hi]])
     return g
 
 
@@ -340,13 +343,22 @@ def sphere_distance(points, centers, radii) -> np.ndarray:
     return np.maximum(0.0, d.min(axis=1)).astype(np.float64)
 
 
-def neighbours(points, normals) -> tuple[np.ndarray, np.ndarray]:
+def neighbours(points, normals, rest=None) -> tuple[np.ndarray, np.ndarray]:
     """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
     (-1 for a neighbour facing away by more than ``FILTER_MIN_COS``: a wall's receivers
     are not a floor's) and distances, kept while the same receivers come back (the last
-    ``NEIGHBOUR_ENTRIES`` sets: the ground and the objects a frame traces)."""
+    ``NEIGHBOUR_ENTRIES`` sets: the ground and the objects a frame traces).
+
+    ``rest`` is ``(points (V, 3), normals (V, 3), scale)`` when the receivers are one
+    rigid object posed by a rotation, a translation and a uniform ``scale``: its
+    neighbours are those of its rest geometry (the distances times ``scale``), so a
+    moving rigid object is searched once per bake, not once per frame.
+    """
     from scipy.spatial import cKDTree
 
+    if rest is not None:
+        idx, dist = neighbours(rest[0], rest[1])
+        return idx, dist * float(rest[2])
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     for k, entry in enumerate(_NEIGHBOURS):  # the ground and the objects of a frame
@@ -399,8 +411,8 @@ def surface_filter(values, width, idx, dist) -> np.ndarray:
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  spheres=None, lights=(), strata: bool = False, still: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  spheres=None, lights=(), strata: bool = False, still: bool = False,
+                  rest=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -430,6 +442,9 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         The object and the receivers never move (traced once per bake, the result
         kept): the whole shadow is traced with the denser set (:func:`refine_weights`
         gives weight 1 to every receiver with a blocked ray around it).
+    rest : tuple, optional
+        The receivers' rest geometry when they are one rigid object (``rest`` of
+        :func:`neighbours`).
 
     Returns
     -------
@@ -461,7 +476,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     weight = weight[rows]
     if not rows.size:
         return _keep_ground(key, (rows, weight, np.zeros((0, order * order))))
-    idx, dist = neighbours(p, nrm)
+    idx, dist = neighbours(p, nrm, rest)
     # neighbours among the traced receivers only (row of each in ``rows``, -1 if none)
     where = np.full(len(p) + 1, -1)
     where[rows] = np.arange(len(rows))
@@ -525,55 +540,3 @@ def refine_weights(width, spacing) -> np.ndarray:
     ratio = np.where(w > 0, s / np.where(w > 0, w, 1.0), np.inf)
     t = np.clip(ratio - 1.0, 0.0, 1.0)
     return np.where(np.isfinite(s), t * t * (3.0 - 2.0 * t), 0.0)
-
-
-#: Per process: the last results of :func:`traced_ground`, by caster (a weak reference
-#: to it and copies of the other inputs kept beside them).  A rigid object's Embree scene
-#: is reused while it stays put, so an object and receivers that do not move are traced
-#: once per bake, not once per frame.
-_GROUND: dict = {}
-#: Casters whose last result :data:`_GROUND` keeps (a scene's traced objects).
-GROUND_KEPT = 16
-
-
-def _same(a, b) -> bool:
-    """Equal inputs of :func:`traced_ground` (arrays by value, the caster by identity)."""
-    if a is b:
-        return True
-    if isinstance(a, tuple | list) and isinstance(b, tuple | list):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        a, b = np.asarray(a), np.asarray(b)
-        return a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
-    if isinstance(a, int | float | np.number) and isinstance(b, int | float | np.number):
-        return a == b
-    return False
-
-
-def _kept_ground(key: tuple):
-    """Copies of the kept result of the same inputs ``key`` (caster first), or None."""
-    kept = _GROUND.get(id(key[0]))
-    if kept is None or kept[0][0]() is not key[0] or not _same(kept[0][1:], key[1:]):
-        return None
-    return tuple(x.copy() for x in kept[1])
-
-
-def _keep_ground(key: tuple, result: tuple) -> tuple:
-    """Keep copies of ``result`` (the inputs as copies too: a caller may reuse its arrays)."""
-    if len(_GROUND) >= GROUND_KEPT:
-        _GROUND.pop(next(iter(_GROUND)))
-    try:
-        ref = weakref.ref(key[0])  # a skinned mesh's per-frame caster is not kept alive
-    except TypeError:
-        return result
-    _GROUND.pop(id(key[0]), None)
-    _GROUND[id(key[0])] = ((ref, *(_copied(x) for x in key[1:])),
-                           tuple(x.copy() for x in result))
-    return result
-
-
-def _copied(x):
-    """Nested tuples/lists of arrays, the arrays copied."""
-    if isinstance(x, tuple | list):
-        return tuple(_copied(y) for y in x)
-    return np.array(x, copy=True) if isinstance(x, np.ndarray) else x

@@ -122,9 +122,11 @@ def _part(vertices, rows=None, blocker=None, convex=False):
     from shtools.scene.contact_shadows import ContactPart
 
     v = np.asarray(vertices, dtype=float)
-    obj = SimpleNamespace(faces=np.array([[0, 1, 2]]), motion=None)
-    return ContactPart(obj, v, np.eye(4), rows=rows, normals=None if rows is None else
-                       np.tile([0.0, 1.0, 0.0], (len(v), 1)), blocker=blocker, convex=convex)
+    up = np.tile([0.0, 1.0, 0.0], (len(v), 1))
+    # a rigid object at the identity: its rest geometry is its posed one
+    obj = SimpleNamespace(faces=np.array([[0, 1, 2]]), motion=None, vertices=v, normals=up)
+    return ContactPart(obj, v, np.eye(4), rows=rows, normals=None if rows is None else up,
+                       blocker=blocker, convex=convex)
 
 
 def test_who_is_traced_on_whom():
