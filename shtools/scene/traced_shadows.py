@@ -415,8 +415,8 @@ def surface_filter(values, width, idx, dist, rows=None, passes: int = 1) -> np.n
     m = sparse.csr_matrix((w.ravel(), np.maximum(idx, 0).ravel(), np.arange(0, w.size + 1, k)),
                           shape=(len(w), len(x)))
     out = (m @ x) / total
-    if passes > 1:
-        x = x.copy()
+    if passes > 1:  # the passes between in float32 (the weights' precision)
+        x = x.astype(np.float32)
         for _ in range(passes - 1):
             x[rows] = out
             out = (m @ x) / total
