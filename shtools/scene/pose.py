@@ -79,10 +79,6 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
     rigid = []  # (object, transform, posed vertices, blocker index) of rigid traced objects
     parts = []  # ContactPart of the objects that receive and block (contact shadows)
-    # every receiver-only object never moves, nor does a spherical light (its traced reach)
-    ground_still = all(spec.srf is not None or all(
-        np.array_equal(k.position, spec.keys[0].position) and k.radius == spec.keys[0].radius
-        for k in spec.keys) for spec in prepared.scene.lights)
     has_ground = any(o.spec.receives and not o.spec.blocks for o in prepared.objects)
     # a lamp's field leaves out the blockers beyond it by the blocker a traced shadow
     # names (shtools.scene.field_light), which a field's traced shadow cannot name
@@ -125,7 +121,6 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             casters.append((caster, world_v, o.faces, len(blockers)))
         if o.spec.receives and not o.spec.blocks:
             ground.append((np.arange(n_rows, n_rows + len(world_v)), world_v, world_n))
-            ground_still = ground_still and o.spec.name in still
         if o.local_log is not None and joints is not None:
             selfs.append(SelfVisibility(
                 posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m), own))
@@ -168,18 +163,14 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     # the others each in its own cone, the visibilities multiplied: one trace, filter
     # and hand-over for the parts instead of one each, at the same ray density (the
     # shared direction set), and no product of visibilities that overlap
-    # a posed (skinned or traced) object's caster is new each frame: never traced once
-    kept = [False] * len(casters)
     for group in _overlapping(rigid):
         casters.append(_rigid_caster(group))
-        kept.append(ground_still and all(o.spec.name in still for o, _, _, _ in group))
     lights = pose_lights(prepared.scene, t)
     if casters and ground and st.traced_shadows:
         # (rows, points, normals) of every receiver-only object, once for all casters
         receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
         selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
-                                                lights, still=s)
-                                 for c, s in zip(casters, kept, strict=True)) if v is not None)
+                                                lights) for c in casters) if v is not None)
     if trace and st.traced_shadows and field_traced:
         # the other objects' real meshes on each object receiver near them (contact)
         n_contact = contact_directions(st.traced_shadow_directions)
@@ -226,8 +217,7 @@ def pose_lights(scene, t: float) -> list:
 
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
-                   lights=(), n_dirs: int | None = None, strata: bool = False,
-                   still: bool = False):
+                   lights=(), n_dirs: int | None = None, strata: bool = False):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -240,9 +230,8 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     a lone rigid receiver's rest geometry fourth: ``rest`` of
     :func:`~shtools.scene.traced_shadows.neighbours`);
     ``n_dirs`` the rays of a cone filling the hemisphere (default
-    ``traced_shadow_directions``); ``still`` when the object and the receivers never
-    move (its whole shadow traced with the denser set, once per bake); returns None
-    when none is within the object's reach."""
+    ``traced_shadow_directions``); returns None when none is within the object's
+    reach."""
     from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
     from shtools.scene.traced_shadows import traced_ground
 
@@ -259,7 +248,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                       spheres=_bounding_spheres(own),
                                       lights=[(x.position, x.radius) for x in lights
                                               if isinstance(x, SphereLight)],
-                                      strata=strata, still=still,
+                                      strata=strata,
                                       rest=receivers[3] if len(receivers) > 3 else None)
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None

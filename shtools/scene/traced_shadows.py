@@ -3,7 +3,7 @@ r"""A traced object's shadow on the receiver-only objects, continuous over the s
 The ground under a traced object (a skinned character's posed mesh, a rigid
 sphere-set or shadow-field blocker's real mesh; ``traced_shadows``) is shadowed
 by the object's real mesh near it and by its spheres (or its field) far from it.
-Three things keep that shadow free of seams, rings and per-vertex noise:
+Four things keep that shadow free of seams, rings and per-vertex noise:
 
 **One direction set for every receiver.**  A spherical Fibonacci set of
 ``2 n_dirs`` world directions (:func:`world_directions`) is shared by all
@@ -30,26 +30,28 @@ silhouette is thin in a wide cone, the strata missed it: 2.0 % instead of 1.5 % 
 CesiumMan's shadow, and no faster).
 
 **A surface filter of the traced visibility** (:func:`surface_filter`).  A
-silhouette crossing a direction is still a step of ``4π / 2n`` in the
-estimate.  The steps come every ``d α`` of receiver motion, ``d`` the distance
-to the nearest point of the mesh and ``α`` the set's angular spacing; the
-true visibility projected to order ``n`` changes on the scale ``d π / n``.
-A Gaussian of width ``d α`` over the neighbouring receivers (same facing)
-smooths the steps and leaves the order-``n`` visibility: where the mesh touches
-the receiver (``d -> 0``) nothing is filtered, so contact shadows stay sharp.
-The filter is linear in the SH vector, so it holds for any light.
+silhouette crossing a direction is a step of ``4π / 2n`` in the estimate.  The steps
+come every ``d α`` of receiver motion, ``d`` the distance to the nearest point of the
+mesh and ``α`` the set's angular spacing; the true visibility projected to order
+``n`` changes on the scale ``d π / n``.  A Gaussian of width ``d α`` over the
+neighbouring receivers (same facing) smooths the steps and leaves the order-``n``
+visibility: where the mesh touches the receiver (``d -> 0``) nothing is filtered, so
+contact shadows stay sharp.  Far from the object that width spans more receivers than
+a receiver's ``FILTER_NEIGHBOURS`` nearest: the filter is applied ``FILTER_PASSES``
+times at ``1 / sqrt(FILTER_PASSES)`` of its width (the same variance), each pass
+reading the last, so its reach grows as many times.  The filter is linear in the SH
+vector, so it holds for any light.
 
-**A denser set where the receivers are sparse.**  Where the receivers are
-farther apart than the filter is wide (a coarse ground near its object) the
-filter finds no neighbour and the steps stay; there the receiver is traced with a
-set ``REFINE_FACTOR`` times denser (:func:`refine_weights`: blended in as the
-filter's width falls from one receiver spacing to half of it, so no seam where the
-density changes).  Only receivers in the shadow near the object qualify, a few
-hundred on a coarse ground, none on most of a dense one.  A still object over
-still receivers, traced once per bake (the kept result,
-:mod:`shtools.scene.kept_traces`), gets
-the denser set on its whole shadow: every receiver with a blocked ray of the
-shared set at or around it, which costs the set-up frame only.
+**A denser set where the receivers are sparse.**  Where the receivers are not well
+inside a step of each other (a coarse ground, or any ground near its object) the
+filter cannot smooth the steps without blurring the shadow, and a step between two
+receivers is noise.  There the receiver is traced with a set ``REFINE_FACTOR`` times
+denser (:func:`refine_weights`: blended in as the step falls from ``REFINE_STEPS``
+receiver spacings to half of that, so no seam where the density changes).  Only
+receivers in the shadow near the object qualify: a band around a character's feet,
+a few hundred receivers on a coarse ground.  An object and receivers that do not move
+are traced the same way, once per bake (the kept result,
+:mod:`shtools.scene.kept_traces`).
 
 **A per-vertex hand-over to the spheres** (:func:`handover_weights`).  The
 cone's expected ray count ``k = n_dirs (1 - cos θ)`` decides: beyond
@@ -89,11 +91,21 @@ HANDOVER_RAYS = (2.0, 4.0)
 LIGHT_MARGIN = 0.5
 #: Width of the surface filter, in the set's angular spacing times the distance to
 #: the nearest point of the mesh: one spacing (a step per width) smooths the steps
-#: and keeps the order-n visibility, whose angular scale is several spacings.
+#: and keeps the order-n visibility, whose angular scale is several spacings (1.5
+#: blurs a coarse ground: 0.77 % off the ray tracer under a torus against 0.47 %).
 FILTER_SPACING = 1.0
-#: Rays of the denser direction set a receiver traces where its neighbours are too far
-#: for the surface filter (:func:`refine_weights`), in multiples of the shared set's.
-REFINE_FACTOR = 4
+#: Passes of the surface filter, each at ``1 / sqrt(FILTER_PASSES)`` of its width: a far
+#: receiver's width spans more than its ``FILTER_NEIGHBOURS`` (6 receiver spacings a
+#: unit from CesiumMan on the benchmark's ground, the neighbours about 3).
+FILTER_PASSES = 3
+#: Rays of the denser set where the receivers are too sparse for the filter
+#: (:func:`refine_weights`), in multiples of the shared set's (the noise left falls as
+#: the set's spacing to the power 1.5); 4 where the set is cast in strata (object
+#: receivers, sparse in most of a touching mesh's cone: 8 costs the demo 1.7x the rays).
+REFINE_FACTOR = 8
+STRATA_REFINE_FACTOR = 4
+#: The denser set starts where a step (``d α``) is below this many receiver spacings.
+REFINE_STEPS = 1.5
 #: The neighbour (by rank, self excluded) whose distance is a receiver's spacing.
 SPACING_NEIGHBOUR = 4
 #: Receivers whose normals differ by more than this cosine are not filtered together.
@@ -298,8 +310,8 @@ def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
     return d32, proj
 
 
-#: Neighbours each receiver's filter may take (the nearest ones; caps its width at about
-#: 1.5 receiver spacings where the receivers are dense enough).
+#: Neighbours each receiver's filter may take per pass (the nearest ones: about 3
+#: receiver spacings on a grid).
 FILTER_NEIGHBOURS = 24
 
 #: Receiver sets whose neighbour lists a process keeps (the newest first).
@@ -379,7 +391,7 @@ def neighbours(points, normals, rest=None) -> tuple[np.ndarray, np.ndarray]:
     return idx, dist
 
 
-def surface_filter(values, width, idx, dist) -> np.ndarray:
+def surface_filter(values, width, idx, dist, rows=None, passes: int = 1) -> np.ndarray:
     """Gaussian filter of per-vertex values over neighbouring receivers, ``(R, C)``.
 
     Each filtered receiver ``v`` averages the values of its neighbours within
@@ -394,6 +406,12 @@ def surface_filter(values, width, idx, dist) -> np.ndarray:
     idx, dist : ndarray, shape (R, K)
         Each filtered receiver's neighbours (indices into the ``N`` rows, -1 for none)
         and their distances, itself first (:func:`neighbours`).
+    rows : ndarray of int, shape (R,), optional
+        The filtered receivers' own rows of ``values`` (needed when ``passes > 1``).
+    passes : int
+        Times the filter is applied, each pass reading the last one's values on
+        ``rows`` (the other rows keep theirs): the variances add up, and the support
+        grows ``passes`` times past the ``K`` neighbours.
     """
     from scipy import sparse
 
@@ -404,15 +422,22 @@ def surface_filter(values, width, idx, dist) -> np.ndarray:
     # lowered to 0 at the cut (2 widths): no step where a neighbour enters the window
     w = np.where(inside, np.maximum(np.exp(-0.5 * u * u) - np.float32(_CUT), 0.0), 0.0)
     w[sigma[:, 0] <= 0, 0] = 1.0  # a receiver of width 0 keeps its own value
+    total = w.sum(axis=1, dtype=np.float64)[:, None]
     k = idx.shape[1]
     m = sparse.csr_matrix((w.ravel(), np.maximum(idx, 0).ravel(), np.arange(0, w.size + 1, k)),
                           shape=(len(w), len(x)))
-    return (m @ x) / w.sum(axis=1, dtype=np.float64)[:, None]
+    out = (m @ x) / total
+    if passes > 1:  # the passes between in float32 (the weights' precision)
+        x = x.astype(np.float32)
+        for _ in range(passes - 1):
+            x[rows] = out
+            out = (m @ x) / total
+    return out
 
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  spheres=None, lights=(), strata: bool = False, still: bool = False,
-                  rest=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  spheres=None, lights=(), strata: bool = False, rest=None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -438,10 +463,6 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     strata : bool
         Cast the set in strata (``around`` of :func:`set_visibility`: the receivers'
         neighbours share what their first rays found).
-    still : bool
-        The object and the receivers never move (traced once per bake, the result
-        kept): the whole shadow is traced with the denser set (:func:`refine_weights`
-        gives weight 1 to every receiver with a blocked ray around it).
     rest : tuple, optional
         The receivers' rest geometry when they are one rigid object (``rest`` of
         :func:`neighbours`).
@@ -458,7 +479,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     from shtools.geometry.visibility import bounding_cones
 
     key = (caster, points, normals, vertices, faces, order, n_dirs, spheres, tuple(lights),
-           strata, bool(still))
+           strata)
     kept = _kept_ground(key)
     if kept is not None:  # a static object over static receivers: the last frame's result
         return kept
@@ -493,18 +514,20 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
             near = sphere_distance(p[at], *spheres)
         else:
             near = nearest_distance(p[at], v, faces, caster)
-        width = FILTER_SPACING * math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
-        fine = (np.ones(len(at)) if still
-                else refine_weights(width, receiver_spacing(idx[at], dist[at])))
+        step = math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
+        fine = refine_weights(step / REFINE_STEPS, receiver_spacing(idx[at], dist[at]))
         sparse = np.flatnonzero(fine > 0)
         if sparse.size:  # too few neighbours inside the filter: the denser set there
             rs = rows[busy[sparse]]
+            factor = STRATA_REFINE_FACTOR if strata else REFINE_FACTOR
             dense = set_visibility(p[rs], nrm[rs], caster, axis[rs], cos_half[rs], order,
-                                   REFINE_FACTOR * int(n_dirs))
+                                   factor * int(n_dirs))
             w = fine[sparse, None]
             g[busy[sparse]] = w * dense + (1.0 - w) * g[busy[sparse]]
         around = local[busy]
-        g[busy] = surface_filter(g, width, around, np.where(around >= 0, dist[at], np.inf))
+        g[busy] = surface_filter(g, FILTER_SPACING / math.sqrt(FILTER_PASSES) * step, around,
+                                 np.where(around >= 0, dist[at], np.inf), rows=busy,
+                                 passes=FILTER_PASSES)
     return _keep_ground(key, (rows, weight, g))
 
 
@@ -524,19 +547,16 @@ def receiver_spacing(idx, dist) -> np.ndarray:
     return d[:, k] if k >= 0 else np.full(len(d), np.inf)
 
 
-def refine_weights(width, spacing) -> np.ndarray:
+def refine_weights(step, spacing) -> np.ndarray:
     """Weight ``(R,)`` of the ``REFINE_FACTOR`` times denser direction set per receiver.
 
-    The surface filter averages a receiver's estimate with the neighbours within
-    two widths; where the receivers are sparser than the filter is wide (a coarse
-    ground near its object) it finds none and the per-direction steps stay.
-    There the denser set replaces the shared one: 0 where the width is at least
-    the spacing, 1 where it is at most half of it, a smoothstep of
-    ``spacing / width`` between (so a receiver mixes the two estimates, each
-    unbiased, and the shadow has no seam where the density changes).
+    0 where ``step`` ``(R,)`` (in the caller's units of one direction's step spacing)
+    is at least the receivers' ``spacing`` ``(R,)`` (:func:`receiver_spacing`), 1 where
+    at most half of it, a smoothstep of ``spacing / step`` between (a receiver mixes the
+    two estimates, each unbiased: no seam where the density changes).
     """
     s = np.asarray(spacing, dtype=np.float64)
-    w = np.asarray(width, dtype=np.float64)
+    w = np.asarray(step, dtype=np.float64)
     ratio = np.where(w > 0, s / np.where(w > 0, w, 1.0), np.inf)
     t = np.clip(ratio - 1.0, 0.0, 1.0)
     return np.where(np.isfinite(s), t * t * (3.0 - 2.0 * t), 0.0)
