@@ -68,12 +68,12 @@ def test_a_still_trace_outlives_moving_ones():
     normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
     still = RayCaster(v, faces, robust=False)
     args = (points, normals, v, faces, still, 3, 48)
-    traced_ground(*args, still=True)
-    key = (still, points, normals, v, faces, 3, 48, None, (), False, True)
+    traced_ground(*args)
+    key = (still, points, normals, v, faces, 3, 48, None, (), False)
     assert kept(key) is not None
     for step in range(GROUND_KEPT + 4):  # moving objects: a new scene each frame
         moved = v + np.array([0.05 * step, 0.0, 0.0])
         traced_ground(points, normals, moved, faces, RayCaster(moved, faces, robust=False),
                       3, 48)
-        assert traced_ground(*args, still=True)[0].size  # the still object's, kept
+        assert traced_ground(*args)[0].size  # the still object's, kept
     assert kept(key) is not None
