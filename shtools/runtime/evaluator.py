@@ -598,4 +598,3 @@ def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
         return a
     return a + b
 
-
