@@ -186,8 +186,6 @@ def _changed_rows(old: np.ndarray, new: np.ndarray) -> np.ndarray:
 def _whole_blocks(rows: np.ndarray, n_rows: int) -> np.ndarray:
     """Every row ``(R',)`` of the blocks of :data:`PRODUCT_BLOCK_ROWS` (from row 0 of
     ``n_rows``) that hold one of the sorted ``rows``, in order."""
-    if not rows.size:
-        return rows
-    starts = np.unique(rows // PRODUCT_BLOCK_ROWS) * PRODUCT_BLOCK_ROWS
-    return np.concatenate([np.arange(a, min(a + PRODUCT_BLOCK_ROWS, n_rows))
-                           for a in starts.tolist()])
+    touched = np.zeros(-(-n_rows // PRODUCT_BLOCK_ROWS), dtype=bool)
+    touched[rows // PRODUCT_BLOCK_ROWS] = True
+    return np.flatnonzero(np.repeat(touched, PRODUCT_BLOCK_ROWS)[:n_rows])
