@@ -522,11 +522,11 @@ class ShadowRuntime:
 
     def _exp(self, log_vis) -> np.ndarray:
         """:meth:`exponentiate` of every row."""
-        kwargs = {}
-        if self.exp_method in ("ol", "hyb"):
-            kwargs["tables"] = self.tables
+        kwargs = {"tables": self.tables} if self.exp_method in ("ol", "hyb") else {}
         if self.settings.exp_degree is not None and self.exp_method in ("ps", "ps*"):
             kwargs["degree"] = self.settings.exp_degree
+        if self.exp_method in ("ps*", "hyb"):
+            kwargs["margin"] = self.settings.resolved_exp_margin()
         if self.exp_method in FAST_METHODS:
             # the last squaring projects onto the shading order only
             g = fast_exp(log_vis, self.exp_method, threads=self.settings.threads,

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from shtools.sh import basis
-from shtools.sh.exponential import exp_batched, volterra
+from shtools.sh.exponential import SQUARING_MARGIN, exp_batched, volterra
 from shtools.sh.quadrature import quarter_sphere_quadrature, sphere_quadrature
 
 #: Methods implemented here; others fall back to :func:`shtools.sh.exp`.
@@ -403,7 +403,7 @@ def row_matmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> n
 
 def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None = None,
              chunk: int = 2048, threads: int = 1, out_order: int | None = None,
-             workspaces: list | None = None) -> np.ndarray:
+             workspaces: list | None = None, margin: int = SQUARING_MARGIN) -> np.ndarray:
     """SH exponential of many vectors (``"hyb"``, ``"ps*"``, ``"ol"`` or ``"volterra"``).
 
     The driver of :func:`shtools.sh.exponential.exp_batched` on
@@ -433,6 +433,9 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
         Scratch kept by the caller between calls (one entry per thread, filled
         on first use).  Fresh multi-100-KB scratch is page-faulted on every
         call, which costs a third of the exp of a few thousand vectors.
+    margin : int
+        Squaring-count margin of PS* and HYB
+        (:func:`shtools.sh.exponential.squarings`).
 
     Returns
     -------
@@ -452,4 +455,4 @@ def fast_exp(f, method: str, tables: dict | None = None, *, degree: int | None =
                         chunk=chunk)
     return exp_batched(f, method, QuadratureProducts(order, dtype), tables, degree=degree,
                        chunk=chunk, threads=threads, out_order=out_order,
-                       workspaces=workspaces)
+                       workspaces=workspaces, margin=margin)

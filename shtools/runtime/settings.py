@@ -26,7 +26,7 @@ from enum import StrEnum
 from typing import Any
 
 from shtools.errors import InputError
-from shtools.sh.exponential import ExpMethod
+from shtools.sh.exponential import SQUARING_MARGIN, ExpMethod
 from shtools.sh.zonal import WindowKind
 
 #: Shading SH orders the runtime supports (tables, products and the cap log
@@ -48,6 +48,15 @@ DEFAULT_EXTRA_ACC_ORDERS = 2
 MAX_DEFAULT_ACC_ORDER = 6
 #: "auto" exp: HYB up to this order (OL is an order-4 model, Sec. 4.2), PS*-p above.
 HYB_MAX_ORDER = 4
+#: Squaring-count margin ``c`` (:func:`shtools.sh.exponential.squarings`) of the
+#: runtime's PS*-p when ``exp_margin`` is None: the scaled vector's norm below 1
+#: instead of the paper's 1/4, two squarings fewer.  Measured against ray tracing of
+#: the sphere sets, the radiance is no further off (tests/runtime/
+#: test_runtime_accuracy.py) and the battle frame's visibility slightly closer
+#: (``benchmarks/bench_runtime.py``); against the exact product-series exp the
+#: series' own error grows from ~0.1 % to ~0.5 % (median).  HYB keeps the paper's
+#: margin: OL's error grows fast with the scaled norm.
+RUNTIME_PS_STAR_MARGIN = 1
 #: ``theta_min`` when left None (eq. 37 leaf cut-off).
 DEFAULT_THETA_MIN = math.radians(1.0)
 
@@ -258,6 +267,11 @@ class ShadowSettings:
         :class:`shtools.sh.ExpMethod`.
     exp_degree : int or None
         Series degree ``p`` of PS-p / PS*-p (None: the library default).
+    exp_margin : int or None
+        Squaring-count margin ``c`` of PS*-p and HYB,
+        ``q = max(0, floor(log2 |f_hat|) + c)`` (Sec. 4.1); None:
+        :data:`RUNTIME_PS_STAR_MARGIN` for PS*-p, the paper's 3 for HYB
+        (:meth:`resolved_exp_margin`).
     window : str or None
         Window applied to lighting and visibility when shading (``"cosine"``,
         ``"hann"``, ``"lanczos"``, ``"none"`` or None).
@@ -317,6 +331,9 @@ class ShadowSettings:
                               doc="SH exponential (auto: HYB at n_acc <= 4, PS*-p above)")
     exp_degree: int | None = setting(None, "int", lo=1, none_means="the method's default",
                                      doc="series degree p of PS-p / PS*-p")
+    exp_margin: int | None = setting(None, "int", lo=0, hi=8,
+                                     none_means="1 for PS*-p, 3 for HYB",
+                                     doc="squaring-count margin c of PS*-p and HYB")
     window: str | None = setting("cosine", "choice", choices=WINDOW_CHOICES,
                                  none_means="no window", doc="window applied when shading")
     window_h: float | None = setting(None, "float", lo=0, lo_open=True,
@@ -365,6 +382,13 @@ class ShadowSettings:
         if self.exp_method != "auto":
             return self.exp_method
         return "hyb" if self.resolved_acc_order() <= HYB_MAX_ORDER else "ps*"
+
+    def resolved_exp_margin(self) -> int:
+        """The squaring-count margin actually used (:data:`RUNTIME_PS_STAR_MARGIN` for
+        PS*-p, the paper's :data:`~shtools.sh.exponential.SQUARING_MARGIN` otherwise)."""
+        if self.exp_margin is not None:
+            return int(self.exp_margin)
+        return RUNTIME_PS_STAR_MARGIN if self.resolved_exp_method() == "ps*" else SQUARING_MARGIN
 
     def resolved_window(self) -> str | None:
         """Window kind for :func:`shtools.sh.window` (``"none"`` becomes None)."""

@@ -7,7 +7,8 @@ SH product of :mod:`shtools.sh.triple`):
 right, :math:`f^{(k+1)*} = f^{k*} * f`.
 
 ``"ps*"`` — PS*-p: DC isolation (eqs. 19–20), scaling/squaring (eq. 21) with
-:math:`q = \max(0, \lfloor\log_2\|\hat f\|\rfloor + 3)` squarings, and the
+:math:`q = \max(0, \lfloor\log_2\|\hat f\|\rfloor + c)` squarings (the paper's
+margin :math:`c = 3` by default), and the
 factored series of degree ``p`` (eq. 22), even powers built as
 :math:`f^{2*}=f*f`, :math:`f^{2k*} = f^{(2k-2)*} * f^{2*}`.
 
@@ -69,13 +70,17 @@ class ExpMethod(StrEnum):
 EXP_METHODS = tuple(m.value for m in ExpMethod)
 DEFAULT_DEGREE = {"ps": 8, "ps*": 2}
 """Series degree ``p`` of PS-p and PS*-p when not given."""
+#: The margin ``c`` of the squaring count ``q = max(0, floor(log2 |f_hat|) + c)`` of
+#: Sec. 4.1: the scaled vector's norm is below ``2^(1 - c)`` (1/4 at the paper's 3).
+SQUARING_MARGIN = 3
 
 
-def squarings(norm) -> np.ndarray:
-    """Number of squarings ``max(0, floor(log2 norm) + 3)`` (Sec. 4.1), shape of ``norm``."""
+def squarings(norm, margin: int = SQUARING_MARGIN) -> np.ndarray:
+    """Number of squarings ``max(0, floor(log2 norm) + margin)`` (Sec. 4.1), shape of
+    ``norm``."""
     norm = np.asarray(norm, dtype=np.float64)
     with np.errstate(divide="ignore"):
-        q = np.floor(np.log2(np.where(norm > 0, norm, 1e-300))) + 3
+        q = np.floor(np.log2(np.where(norm > 0, norm, 1e-300))) + int(margin)
     return np.maximum(q, 0).astype(np.int64)
 
 
@@ -109,7 +114,8 @@ def _exact(f: np.ndarray) -> np.ndarray:
 
 
 def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | None = None,
-        tables: dict | None = None, quad_degree: int | None = None) -> np.ndarray:
+        tables: dict | None = None, quad_degree: int | None = None,
+        margin: int = SQUARING_MARGIN) -> np.ndarray:
     """SH exponential of log-visibility vectors.
 
     Parameters
@@ -132,6 +138,8 @@ def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | N
         ``"ol"``/``"hyb"``; built and cached per order when omitted.
     quad_degree : int, optional
         Quadrature degree of ``"volterra"`` (default ``6*n + 18``).
+    margin : int
+        Squaring-count margin of PS* and HYB (:func:`squarings`).
 
     Returns
     -------
@@ -159,7 +167,7 @@ def exp(f, method: str = "hyb", *, degree: int | None = None, acc_order: int | N
         tables = default_tables(n)
     if method in ("ps*", "hyb", "ol"):  # the one driver, on triple-tensor products
         g = exp_batched(_pad(flat, work), method, TensorProducts(work, dtype), tables,
-                        degree=int(degree), out_order=n)
+                        degree=int(degree), out_order=n, margin=margin)
         return g.reshape(*lead, n * n)
     # bytes of working memory per vector: product matrices for "exact", nodes of the
     # quadrature for "volterra", a dozen SH vectors otherwise
@@ -269,7 +277,8 @@ class TensorProducts:
 # --------------------------------------------------------------------------- driver
 def exp_batched(f, method: str, backend: ProductBackend, tables: dict | None = None, *,
                 degree: int | None = None, chunk: int = 4096, threads: int = 1,
-                out_order: int | None = None, workspaces: list | None = None) -> np.ndarray:
+                out_order: int | None = None, workspaces: list | None = None,
+                margin: int = SQUARING_MARGIN) -> np.ndarray:
     """PS*-p, HYB or OL exponential of many vectors on a product backend (the one driver).
 
     DC isolation, the squaring count ``q`` of Sec. 4.1, the OL model or the
@@ -297,6 +306,8 @@ def exp_batched(f, method: str, backend: ProductBackend, tables: dict | None = N
         Order of the result (default ``n``).
     workspaces : list, optional
         Backend scratch kept by the caller between calls (one per thread).
+    margin : int
+        Squaring-count margin (:func:`squarings`).
 
     Returns
     -------
@@ -326,7 +337,7 @@ def exp_batched(f, method: str, backend: ProductBackend, tables: dict | None = N
     def work(k):
         for s in starts[k::n_workers]:
             _exp_block(f[s : s + chunk], method, tables, p, backend, n_out,
-                       out[s : s + chunk], spaces[k])
+                       out[s : s + chunk], spaces[k], margin)
 
     if n_workers > 1:
         with ThreadPoolExecutor(max_workers=n_workers) as pool:
@@ -397,11 +408,14 @@ def _factored_series(parts, degree: int, ops, ws=None):
     return [e + x for e, x in zip(even, ops.product_split(parts, odd), strict=True)]
 
 
-def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None) -> None:
+def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
+               margin: int = SQUARING_MARGIN) -> None:
     """exp of ``f (B, n*n)`` truncated to ``n_out``, written into ``out (B, n_out^2)``."""
     dc = np.exp(f[:, 0].astype(np.float64) / SQRT_4PI)
-    # |f_hat| of the coefficients after the DC (DC isolated), in float64
-    norm = np.sqrt(np.einsum("bi,bi->b", f[:, 1:], f[:, 1:], dtype=np.float64))
+    # |f_hat| of the coefficients after the DC (DC isolated), summed in f's precision
+    # (float32 has ample for the squaring count: its rounding moves q only where
+    # |f_hat| is within 1e-7 of a power of 2) and then kept in float64
+    norm = np.sqrt(np.einsum("bi,bi->b", f[:, 1:], f[:, 1:]).astype(np.float64))
     if method == "ol":
         parts = ops.split(f)
         parts[0][:, 0] = 0.0
@@ -411,7 +425,7 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None) -> None
     # vectors sorted by norm (descending), so those still needing a square at
     # each step are a prefix, squared in place without gathers; f_hat = 0 rows
     # (no blocker in view) come last and are exactly exp(dc)
-    q = squarings(norm)
+    q = squarings(norm, margin)
     key = np.where(norm > 0, q + 1, 0)  # small ints: a fast radix argsort
     by_norm = np.argsort(-key, kind="stable")
     live = int(np.count_nonzero(key))
