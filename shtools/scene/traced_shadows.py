@@ -101,7 +101,8 @@ FILTER_PASSES = 3
 #: Rays of the denser set where the receivers are too sparse for the filter
 #: (:func:`refine_weights`), in multiples of the shared set's (the noise left falls as
 #: the set's spacing to the power 1.5); 4 where the set is cast in strata (object
-#: receivers, sparse in most of a touching mesh's cone: 8 costs the demo 1.7x the rays).
+#: receivers, sparse in most of a touching mesh's cone: 8 costs the demo 1.7x the rays),
+#: the denser set then in strata too.
 REFINE_FACTOR = 8
 STRATA_REFINE_FACTOR = 4
 #: The denser set starts where a step (``d α``) is below this many receiver spacings.
@@ -520,8 +521,13 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         if sparse.size:  # too few neighbours inside the filter: the denser set there
             rs = rows[busy[sparse]]
             factor = STRATA_REFINE_FACTOR if strata else REFINE_FACTOR
+            sub = None
+            if strata:  # the denser set in strata too, among the refined receivers
+                at_sub = np.full(len(rows) + 1, -1)
+                at_sub[busy[sparse]] = np.arange(sparse.size)
+                sub = at_sub[local[busy[sparse]]]
             dense = set_visibility(p[rs], nrm[rs], caster, axis[rs], cos_half[rs], order,
-                                   factor * int(n_dirs))
+                                   factor * int(n_dirs), around=sub)
             w = fine[sparse, None]
             g[busy[sparse]] = w * dense + (1.0 - w) * g[busy[sparse]]
         around = local[busy]
