@@ -67,9 +67,10 @@ class ReceiverClusters:
         first = labels[self.order[self.offsets[:-1]]]
         if np.array_equal(labels[self.order], np.repeat(first, counts)):
             return self
-        _, pair = np.unique(np.stack([self.labels, labels], axis=1), axis=0,
-                            return_inverse=True)
-        return ReceiverClusters.from_labels(pair.reshape(-1))
+        # one int64 key per (cluster, label) pair, ordered as the pairs are
+        # lexicographically (a 1-D unique: many times faster than unique rows)
+        lab = labels.astype(np.int64) - int(labels.min())
+        return ReceiverClusters.from_labels(self.labels * (int(lab.max()) + 1) + lab)
 
     def bounds(self, vertices) -> tuple[np.ndarray, np.ndarray]:
         """Bounding sphere of every cluster at the given positions.

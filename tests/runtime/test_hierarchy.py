@@ -136,3 +136,20 @@ def test_clusters_respect_groups_and_size():
     centers, radii = cl.bounds(v)
     dist = np.linalg.norm(v - centers[cl.labels], axis=1)
     assert np.all(dist <= radii[cl.labels] + 1e-12)
+
+
+def test_cluster_split_groups_each_cluster_by_label():
+    """``ReceiverClusters.split`` against the definition: one cluster per distinct
+    (cluster, label) pair, numbered in the pairs' lexicographic order (NumPy's unique
+    rows), vertices of a cluster in ascending order."""
+    from shtools.runtime.clusters import ReceiverClusters
+
+    rng = np.random.default_rng(3)
+    clusters = ReceiverClusters.from_labels(rng.integers(0, 40, 5000))
+    labels = rng.integers(-2, 5, 5000)
+    got = clusters.split(labels)
+    _, want = np.unique(np.stack([clusters.labels, labels], axis=1), axis=0,
+                        return_inverse=True)
+    np.testing.assert_array_equal(got.labels, want.reshape(-1))
+    np.testing.assert_array_equal(got.order, np.argsort(want.reshape(-1), kind="stable"))
+    assert clusters.split(np.zeros(5000, int)) is clusters
