@@ -50,7 +50,9 @@ MAX_DEFAULT_ACC_ORDER = 6
 HYB_MAX_ORDER = 4
 #: Squaring-count margin ``c`` (:func:`shtools.sh.exponential.squarings`) of the
 #: runtime's PS*-p when ``exp_margin`` is None: the scaled vector's norm below 1
-#: instead of the paper's 1/4, two squarings fewer.  Measured against ray tracing of
+#: instead of the paper's 1/4, two squarings fewer (the exp blends the two counts
+#: where the count steps, :data:`shtools.sh.exponential.SQUARING_BLEND`, so the
+#: larger series error makes no ring).  Measured against ray tracing of
 #: the sphere sets, the radiance is no further off (tests/runtime/
 #: test_runtime_accuracy.py) and the battle frame's visibility slightly closer
 #: (``benchmarks/bench_runtime.py``); against the exact product-series exp the

@@ -12,7 +12,7 @@ from shtools.sh.basis import (
     order_from_size,
     sh_index,
 )
-from shtools.sh.exponential import EXP_METHODS, ExpMethod, exp, squarings
+from shtools.sh.exponential import EXP_METHODS, ExpMethod, exp, squaring_weights, squarings
 from shtools.sh.logarithm import LOG_EPS, log
 from shtools.sh.quadrature import project, reconstruct, sphere_quadrature
 from shtools.sh.rotation import rotate, rotation_matrix
@@ -58,6 +58,7 @@ __all__ = [
     "sh_index",
     "sphere_quadrature",
     "square",
+    "squaring_weights",
     "squarings",
     "triple",
     "triple_tensor",
