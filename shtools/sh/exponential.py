@@ -80,7 +80,7 @@ SQUARING_MARGIN = 3
 #: where ``|f_hat|`` crosses a power of 2, and the scaled series' error with it: a
 #: jump of up to 0.2 % of the visibility at the paper's margin, 3 % at margin 1, a
 #: ring on a receiver surface.  Blended, the exp is continuous in ``f``; the rows of
-#: the band (this share of them, about) are exponentiated twice.
+#: the band (this share of them, about) take one series and one square more.
 SQUARING_BLEND = 0.25
 
 
@@ -89,8 +89,10 @@ def squaring_weights(norm, margin: int = SQUARING_MARGIN) -> tuple[np.ndarray, n
     ``q + 1`` of each vector, shapes of ``norm``.
 
     With ``u = log2 |f_hat| + margin``, ``w`` rises by a smoothstep from 0 to 1 over the
-    last :data:`SQUARING_BLEND` of each unit of ``u``, so ``(1 - w) exp_q + w exp_{q+1}``
-    meets ``exp_{q+1}`` where ``q`` steps up; ``w = 0`` where ``q`` stays 0 (``u < 0``).
+    last :data:`SQUARING_BLEND` of each unit of ``u``.  The scaled exp ``e(x)``,
+    ``x = f_hat / 2^q``, is blended as ``(1 - w) e(x) + w e(x/2)^2`` before the ``q``
+    squarings, which meets the result of ``q + 1`` squarings where ``q`` steps up;
+    ``w = 0`` where ``q`` stays 0 (``u < 0``).
     """
     norm = np.asarray(norm, dtype=np.float64)
     q = squarings(norm, margin)
@@ -359,8 +361,7 @@ def exp_batched(f, method: str, backend: ProductBackend, tables: dict | None = N
     out = np.empty((f.shape[0], n_out * n_out), dtype=dtype)
     starts = range(0, f.shape[0], chunk)
     n_workers = max(1, min(int(threads), len(starts)))
-    # a block's rows in a blend band of the squaring count are exponentiated twice
-    spaces = _workspaces(backend, 2 * min(chunk, f.shape[0]), n_workers,
+    spaces = _workspaces(backend, min(chunk, f.shape[0]), n_workers,
                          [] if workspaces is None else workspaces)
 
     def work(k):
@@ -451,15 +452,7 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
         ops.merge(_ol_split(parts, norm, tables), n_out, out=out)
         out *= dc[:, None].astype(out.dtype)
         return
-    # rows in a blend band of the squaring count are exponentiated twice, with q and
-    # q + 1 squarings (rows ``n_rows + k`` hold the second of ``twin[k]``)
     q, w = squaring_weights(norm, margin)
-    twin = np.flatnonzero(w > 0)
-    n_rows = f.shape[0]
-    if twin.size:
-        f = np.concatenate([f, f[twin]])
-        q = np.concatenate([q, q[twin] + 1])
-        norm = np.concatenate([norm, norm[twin]])
     # vectors sorted by squaring count (descending), so those still needing a square
     # at each step are a prefix, squared in place without gathers; f_hat = 0 rows
     # (no blocker in view) come last and are exactly exp(dc)
@@ -474,10 +467,19 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
     scaled[:, 0] = 0.0  # f_hat: DC isolated
     scaled *= column
     scaled = ops.split(scaled, copy=False)
-    if method == "hyb":
-        g = _ol_split(scaled, norm_sorted * scale, tables)
-    else:
-        g = _factored_series(scaled, degree, ops, ws)
+    g = _scaled_exp(scaled, method, norm_sorted * scale, tables, degree, ops, ws)
+    # in a blend band of the squaring count, the scaled exp e(x) blends toward
+    # e(x/2)^2: after the row's q squarings that is the result of q + 1 squarings,
+    # where the next octave starts (the exp is continuous in f)
+    w_sorted = w[by_norm[:live]]
+    band = np.flatnonzero(w_sorted > 0)
+    if band.size:
+        half = [np.take(p, band, axis=0) * p.dtype.type(0.5) for p in scaled]
+        twice = ops.square_split(_scaled_exp(half, method, 0.5 * norm_sorted[band] * scale[band],
+                                             tables, degree, ops, ws), ws=ws)
+        wb = w_sorted[band, None].astype(out.dtype)
+        for p, t in zip(g, twice, strict=True):
+            p[band] += wb * (t[:, : p.shape[1]] - p[band])
     # each row's result, in class parts (sorted rows), merged once at the end
     res = [np.zeros((f.shape[0], k), dtype=out.dtype) for k in ops.class_sizes(n_out)]
     res[0][live:, 0] = SQRT_4PI
@@ -495,14 +497,15 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
                            out=[r[done:count] for r in res])
         if done:
             ops.project_square(vals, slice(0, done), out=[p[:done] for p in g])
-    if not twin.size:
-        out[by_norm] = ops.merge(res, n_out)
-    else:
-        both = np.empty((f.shape[0], out.shape[1]), dtype=out.dtype)
-        both[by_norm] = ops.merge(res, n_out)
-        out[...] = both[:n_rows]
-        out[twin] += w[twin, None].astype(out.dtype) * (both[n_rows:] - out[twin])
+    out[by_norm] = ops.merge(res, n_out)
     out *= dc[:, None].astype(out.dtype)
+
+
+def _scaled_exp(parts, method, norm, tables, degree, ops, ws=None):
+    """exp of scaled, DC-isolated vectors (class parts): OL for HYB, else PS*-p's series."""
+    if method == "hyb":
+        return _ol_split(parts, norm, tables)
+    return _factored_series(parts, degree, ops, ws)
 
 
 # --------------------------------------------------------------------------- volterra
