@@ -515,9 +515,9 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         else:
             near = nearest_distance(p[at], v, faces, caster)
         step = math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
-        # object receivers (strata) take no denser set: the shared set's strata cost
-        # what they buy there (the demo's frame 1.5x instead of 2.3x 98bedba's, its
-        # parts 1.9-3.1 % off over their shadows instead of 0.8-2.8 %)
+        # object receivers (strata) take no denser set: near a touching mesh nearly all
+        # of them would, at more than the rest of a frame's cost, for an error already
+        # within the objects' target (measured: CHANGELOG, bench_look --demo)
         fine = (np.zeros(busy.size) if strata else
                 refine_weights(step / REFINE_STEPS, receiver_spacing(idx[at], dist[at])))
         sparse = np.flatnonzero(fine > 0)

@@ -94,22 +94,24 @@ def squaring_weights(norm, margin: int = SQUARING_MARGIN) -> tuple[np.ndarray, n
     squarings, which meets the result of ``q + 1`` squarings where ``q`` steps up;
     ``w = 0`` where ``q`` stays 0 (``u < 0``).
     """
-    norm = np.asarray(norm, dtype=np.float64)
-    q = squarings(norm, margin)
-    with np.errstate(divide="ignore"):
-        u = np.log2(np.where(norm > 0, norm, 1e-300)) + int(margin)
-    t = np.clip((u - np.floor(u) - (1.0 - SQUARING_BLEND)) / SQUARING_BLEND, 0.0, 1.0)
+    u = _log_count(norm, margin)
+    floor = np.floor(u)
+    t = np.clip((u - floor - (1.0 - SQUARING_BLEND)) / SQUARING_BLEND, 0.0, 1.0)
     w = np.where(u >= 0, t * t * (3.0 - 2.0 * t), 0.0)
-    return q, w
+    return np.maximum(floor, 0).astype(np.int64), w
 
 
 def squarings(norm, margin: int = SQUARING_MARGIN) -> np.ndarray:
     """Number of squarings ``max(0, floor(log2 norm) + margin)`` (Sec. 4.1), shape of
     ``norm``."""
+    return np.maximum(np.floor(_log_count(norm, margin)), 0).astype(np.int64)
+
+
+def _log_count(norm, margin: int) -> np.ndarray:
+    """``log2 norm + margin`` in float64 (a very negative number for norm 0)."""
     norm = np.asarray(norm, dtype=np.float64)
     with np.errstate(divide="ignore"):
-        q = np.floor(np.log2(np.where(norm > 0, norm, 1e-300))) + int(margin)
-    return np.maximum(q, 0).astype(np.int64)
+        return np.log2(np.where(norm > 0, norm, 1e-300)) + int(margin)
 
 
 def _one(batch: int, size: int, dtype) -> np.ndarray:
