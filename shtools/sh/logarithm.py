@@ -51,6 +51,48 @@ def _log_eigen(g: np.ndarray, eps: float) -> np.ndarray:
     return out
 
 
+def log_zonal(g, eps: float = LOG_EPS) -> np.ndarray:
+    r"""The ``"eigen"`` :func:`log` of zonal vectors (symmetric about ``+z``), ``(B, n*n)``.
+
+    The product matrix of a zonal vector maps each ``m`` to itself (the Gaunt
+    coefficients of two ``m`` and a zonal ``0`` vanish unless the ``m`` match), so
+    :math:`M_g` is block diagonal by ``m`` and the log of a zonal vector, which only
+    reads the ``m = 0`` block, is zonal.  Only the eigenvalues of the other blocks
+    are needed (the floor of eq. 32 is relative to the largest of all); the result
+    equals :func:`log`'s to rounding, for ``n`` eigenproblems of size ``n - |m|``
+    instead of one of size ``n^2``.
+
+    Parameters
+    ----------
+    g : array_like, shape (B, n*n)
+        Zonal vectors (only the ``m = 0`` coefficients are read).
+    eps : float
+        Relative eigenvalue floor (eq. 32).
+    """
+    g = np.asarray(g, dtype=np.float64)
+    n = order_from_size(g.shape[-1])
+    flat = g.reshape(-1, n * n)
+    zonal = np.zeros_like(flat)
+    l = np.arange(n)
+    m0 = l * l + l  # flat index of (l, 0)
+    zonal[:, m0] = flat[:, m0]
+    m = product_matrix(zonal)  # (B, n^2, n^2), block diagonal by m
+    lam, vec = np.linalg.eigh(m[:, m0][:, :, m0])
+    lam_max = lam[:, -1]
+    for k in range(1, n):  # the other blocks (+k and -k are the same matrix)
+        idx = l[k:] * l[k:] + l[k:] + k
+        lam_max = np.maximum(lam_max, np.linalg.eigvalsh(m[:, idx][:, :, idx])[:, -1])
+    floor = (eps * lam_max)[:, None]
+    floor = np.where(floor > 0, floor, np.finfo(np.float64).tiny)
+    lam = np.maximum(lam, floor)  # eq. 32
+    rhs = flat[:, m0].copy()
+    rhs[:, 0] -= SQRT_4PI  # g - 1
+    c = np.einsum("bji,bj->bi", vec, rhs) * _q_prime(lam)
+    out = np.zeros_like(flat)
+    out[:, m0] = np.einsum("bij,bj->bi", vec, c)
+    return out.reshape(g.shape)
+
+
 def log(g, method: str = "eigen", eps: float = LOG_EPS, *, quad_degree: int | None = None):
     """SH logarithm of visibility vectors.
 
@@ -96,4 +138,4 @@ def log(g, method: str = "eigen", eps: float = LOG_EPS, *, quad_degree: int | No
     return out.reshape(*lead, n * n)
 
 
-__all__ = ["LOG_EPS", "log"]
+__all__ = ["LOG_EPS", "log", "log_zonal"]

@@ -23,7 +23,7 @@ import functools
 import numpy as np
 
 from shtools.sh.basis import SQRT_4PI, check_order
-from shtools.sh.logarithm import LOG_EPS, log
+from shtools.sh.logarithm import LOG_EPS, log_zonal
 from shtools.sh.zonal import cap_zh, zonal_to_sh
 
 
@@ -57,7 +57,7 @@ def build_log_tables(order: int, samples: int = 256, eps: float = LOG_EPS) -> di
     theta = (np.arange(samples) + 1.0) / samples * (0.5 * np.pi)
     vis = cap_zh(theta, order)  # (T, n)
     g = zonal_to_sh(vis, np.array([0.0, 0.0, 1.0]))  # (T, n^2), zonal about +z
-    f = log(g, "eigen", eps)
+    f = log_zonal(g, eps)  # the eigen log (eqs. 30-32) of the zonal caps
     m0 = np.arange(order) * (np.arange(order) + 1)  # flat index of (l, 0)
     scale = _zonal_scale(order)
     norm, a, b = _ol_coefficients(f, g)

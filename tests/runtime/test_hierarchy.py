@@ -138,6 +138,39 @@ def test_clusters_respect_groups_and_size():
     assert np.all(dist <= radii[cl.labels] + 1e-12)
 
 
+@pytest.mark.parametrize("shape", ["blobs", "grid"])
+def test_clusters_are_lloyds_with_every_point_compared_to_every_centre(shape):
+    """The pruned assignment against plain Lloyd written out here: every point to
+    every centre (scipy's cdist), the same seeded start and stopping rule, on blobs
+    and on a grid jittered by 1e-4 of its spacing (near-ties, where the bounds' slack
+    matters; an exact grid's ties go either way with the rounding)."""
+    from scipy.spatial.distance import cdist
+
+    from shtools.runtime.clusters import LLOYD_ITERATIONS
+
+    rng = np.random.default_rng(5)
+    if shape == "blobs":
+        v = np.concatenate([c + rng.normal(size=(700, 3)) * s for c, s in
+                            [((0, 0, 0), 0.3), ((2, 1, 0), 0.6), ((-1, 3, 1), 0.2)]])
+    else:
+        x = np.linspace(-2.0, 2.0, 61)
+        v = np.stack(np.meshgrid(x, [0.0], x), axis=-1).reshape(-1, 3)
+        v += rng.uniform(-1e-4, 1e-4, v.shape) * (x[1] - x[0])
+    k = int(np.ceil(len(v) / 50))
+    start = np.random.default_rng(0)  # lloyd_clusters' seed, one group
+    centers = v[start.choice(len(v), size=k, replace=False)].copy()
+    labels = np.argmin(cdist(v, centers), axis=1)
+    for _ in range(LLOYD_ITERATIONS):
+        for c in range(k):
+            if np.any(labels == c):
+                centers[c] = v[labels == c].mean(axis=0)
+        new = np.argmin(cdist(v, centers), axis=1)
+        if np.array_equal(new, labels):
+            break
+        labels = new
+    np.testing.assert_array_equal(lloyd_clusters(v, 50).labels, labels)
+
+
 def test_cluster_split_groups_each_cluster_by_label():
     """``ReceiverClusters.split`` against the definition: one cluster per distinct
     (cluster, label) pair, numbered in the pairs' lexicographic order (NumPy's unique
