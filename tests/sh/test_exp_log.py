@@ -194,7 +194,8 @@ def test_log_zonal_equals_the_full_eigen_log(order):
     noise[:, 0] += 2.0 * SQRT_4PI
     g = np.concatenate([caps, noise])
     full = log(g)
-    assert np.abs(full.reshape(-1, order * order)[:, np.setdiff1d(np.arange(order**2), m0)]).max() < 1e-10
+    off_zonal = np.setdiff1d(np.arange(order**2), m0)
+    assert np.abs(full[:, off_zonal]).max() < 1e-10  # the full log of a zonal vector is zonal
     np.testing.assert_allclose(log_zonal(g), full, rtol=0, atol=1e-12 * np.abs(full).max())
 
 
