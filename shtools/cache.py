@@ -187,6 +187,8 @@ class SetupCache:
     ----------
     hits, misses : int
         Entries read back / computed (and stored) by :meth:`fetch`.
+    kinds : dict
+        The same per kind of entry: ``{kind: {"hits": int, "misses": int}}``.
     """
 
     def __init__(self, location=None, *, max_bytes: int | None = None, enabled: bool = True,
@@ -195,6 +197,7 @@ class SetupCache:
             else default_location()
         self.enabled = bool(enabled)
         self.hits = self.misses = 0
+        self.kinds: dict[str, dict[str, int]] = {}
         self._warn = warn or _stderr_warning
         self._warned: set[str] = set()
         if max_bytes is None:
@@ -291,10 +294,13 @@ class SetupCache:
             return compute()
         key = cache_key(kind, version, parts)
         arrays = self.get(kind, key)
+        counts = self.kinds.setdefault(kind, {"hits": 0, "misses": 0})
         if arrays is not None:
             self.hits += 1
+            counts["hits"] += 1
             return arrays
         self.misses += 1
+        counts["misses"] += 1
         arrays = {k: np.asarray(v) for k, v in compute().items()}
         self.put(kind, key, arrays)
         return arrays
@@ -369,9 +375,11 @@ class SetupCache:
         return removed
 
     def summary(self) -> dict:
-        """What a bake reports (``bake --json``): location, enabled, hits, misses."""
+        """What a bake reports (``bake --json``): location, enabled, hits, misses (in all
+        and per kind of entry)."""
         return {"location": os.fspath(self.location), "enabled": self.enabled,
-                "hits": self.hits, "misses": self.misses}
+                "hits": self.hits, "misses": self.misses,
+                "kinds": {k: dict(v) for k, v in sorted(self.kinds.items())}}
 
 
 _HEX = frozenset("0123456789abcdef")

@@ -223,9 +223,9 @@ def test_a_second_bake_reads_its_self_visibility_and_writes_the_same_bytes(
     calls = _count_transfers(monkeypatch)
     cache = tmp_path / "cache"
     first, _ = _bake(run_cli, scene, tmp_path / "a.h5", "--cache", cache)
-    assert (first["cache"]["hits"], first["cache"]["misses"]) == (0, 1) and len(calls) == 1
+    assert first["cache"]["kinds"]["self_log"] == {"hits": 0, "misses": 1} and len(calls) == 1
     second, _ = _bake(run_cli, scene, tmp_path / "b.h5", "--cache", cache)
-    assert (second["cache"]["hits"], second["cache"]["misses"]) == (1, 0) and len(calls) == 1
+    assert second["cache"]["kinds"]["self_log"] == {"hits": 1, "misses": 0} and len(calls) == 1
     none, _ = _bake(run_cli, scene, tmp_path / "c.h5", "--cache", cache, "--no-cache")
     assert none["cache"]["enabled"] is False and len(calls) == 2
     assert (none["cache"]["hits"], none["cache"]["misses"]) == (0, 0)
@@ -236,13 +236,56 @@ def test_a_second_bake_reads_its_self_visibility_and_writes_the_same_bytes(
     scene_text = scene.read_text().replace("frames = 1\n", "frames = 1\nacc_order = 4\n")
     scene.write_text(scene_text)
     third, _ = _bake(run_cli, scene, tmp_path / "d.h5", "--cache", cache)
-    assert (third["cache"]["hits"], third["cache"]["misses"]) == (1, 0) and len(calls) == 2
+    assert third["cache"]["kinds"]["self_log"] == {"hits": 1, "misses": 0} and len(calls) == 2
     # other mesh bytes under the same file name are another entry
     mesh = trimesh.load(tmp_path / "torus.obj", process=False)
     mesh.vertices[0] += 1e-3
     mesh.export(tmp_path / "torus.obj")
     fourth, _ = _bake(run_cli, scene, tmp_path / "e.h5", "--cache", cache)
-    assert fourth["cache"]["misses"] == 1 and len(calls) == 3
+    assert fourth["cache"]["kinds"]["self_log"]["misses"] == 1 and len(calls) == 3
+
+
+def test_a_still_scene_traces_its_ground_shadow_once_for_all_bakes(tmp_path, run_cli,
+                                                                   monkeypatch):
+    """A still object over a still ground: its traced shadow and the ground's neighbour
+    lists come from the cache on the second bake (no trace, no Embree scene built), the
+    same bytes; a moving object's trace is never stored."""
+    import shtools.geometry.raycast as rc
+    import shtools.scene.kept_traces as kept
+    import shtools.scene.receiver_filter as rf
+    import shtools.scene.traced_shadows as ts
+
+    monkeypatch.setattr(rf, "_NEIGHBOURS", [])  # what this process searched before
+    monkeypatch.setattr(kept, "_GROUND", {})
+    traces = count_calls(monkeypatch, ts, "_trace_ground")
+    built = count_calls(monkeypatch, rc.RayCaster, "__init__")
+    scene = _torus_scene(tmp_path)
+    cache = tmp_path / "cache"
+    first, _ = _bake(run_cli, scene, tmp_path / "a.h5", "--cache", cache)
+    kinds = first["cache"]["kinds"]
+    assert kinds["traced_ground"] == kinds["filter_neighbours"] == {"hits": 0, "misses": 1}
+    assert len(traces) == 1 and len(built) >= 1
+    kept._GROUND.clear()  # a new process keeps nothing (run_cli runs in this one)
+    rf._NEIGHBOURS.clear()
+    n_built = len(built)
+    second, _ = _bake(run_cli, scene, tmp_path / "b.h5", "--cache", cache)
+    assert second["cache"]["kinds"]["traced_ground"] == {"hits": 1, "misses": 0}
+    assert second["cache"]["misses"] == 0 and len(traces) == 1
+    assert (tmp_path / "a.h5").read_bytes() == (tmp_path / "b.h5").read_bytes()
+    # the caster of the torus over the ground is not built on a hit (the self-visibility
+    # came from the cache too)
+    assert len(built) == n_built
+    text = scene.read_text().replace('translate = [0.0, 0.7, 0.0]\n', """translate = [0.0, 0.7, 0.0]
+[[objects.keyframes]]
+time = 0.0
+translate = [0.0, 0.7, 0.0]
+[[objects.keyframes]]
+time = 1.0
+translate = [0.2, 0.7, 0.0]
+""")
+    scene.write_text(text)
+    moving, _ = _bake(run_cli, scene, tmp_path / "c.h5", "--cache", cache)
+    assert "traced_ground" not in moving["cache"]["kinds"] and len(traces) == 2
 
 
 def test_the_default_cache_folder_comes_from_the_environment(tmp_path, run_cli, monkeypatch,
@@ -253,12 +296,14 @@ def test_the_default_cache_folder_comes_from_the_environment(tmp_path, run_cli, 
     assert code == 0, err
     info = json.loads(out)
     assert Path(info["location"]) == _setup_cache
-    assert info["entries"] == 1 and info["kinds"] == {"self_log": 1} and info["bytes"] > 0
+    # (the ground's neighbour lists too, unless this process searched them already)
+    assert info["kinds"]["self_log"] == info["kinds"]["traced_ground"] == 1
+    assert info["entries"] == sum(info["kinds"].values()) and info["bytes"] > 0
     monkeypatch.setenv("SHTOOLS_NO_CACHE", "1")
     summary, _ = _bake(run_cli, scene, tmp_path / "b.h5")
     assert summary["cache"]["enabled"] is False
     code, out, err = run_cli("cache", "clear")
-    assert code == 0 and "removed 1 entries" in out, (out, err)
+    assert code == 0 and f"removed {info['entries']} entries" in out, (out, err)
     code, out, _ = run_cli("cache", "info")
     assert "0 entries" in out
 
@@ -279,7 +324,8 @@ def test_a_fit_on_the_fly_is_fitted_once(tmp_path, run_cli, monkeypatch):
     first, _ = _bake(run_cli, scene, tmp_path / "a.h5", "--cache", cache)
     second, _ = _bake(run_cli, scene, tmp_path / "b.h5", "--cache", cache)
     assert len(calls) == 1
-    assert first["cache"]["misses"] == 1 and second["cache"]["hits"] == 1
+    assert first["cache"]["kinds"]["fit"]["misses"] == 1
+    assert second["cache"]["kinds"]["fit"]["hits"] == 1
     assert (tmp_path / "a.h5").read_bytes() == (tmp_path / "b.h5").read_bytes()
     scene.write_text(scene.read_text().replace("fit = 6", "fit = 6, seed = 1"))
     _bake(run_cli, scene, tmp_path / "c.h5", "--cache", cache)
@@ -301,10 +347,10 @@ def test_a_corrupt_entry_in_a_bake_is_recomputed_with_one_warning(tmp_path, run_
     scene = _torus_scene(tmp_path)
     cache = tmp_path / "cache"
     _bake(run_cli, scene, tmp_path / "a.h5", "--cache", cache)
-    (entry,) = cache.rglob("*.entry")
+    (entry,) = cache.rglob("*-self_log.entry")
     entry.write_bytes(entry.read_bytes()[:-100])
     summary, err = _bake(run_cli, scene, tmp_path / "b.h5", "--cache", cache)
-    assert summary["cache"]["misses"] == 1
+    assert summary["cache"]["kinds"]["self_log"]["misses"] == 1
     assert sum(line.startswith("warning:") for line in err.splitlines()) == 1, err
     assert (tmp_path / "a.h5").read_bytes() == (tmp_path / "b.h5").read_bytes()
 

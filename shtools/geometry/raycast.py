@@ -76,6 +76,11 @@ class RayCaster:
             base += len(mesh.vertices)
         return cls(np.concatenate(vertices), np.concatenate(faces))
 
+    @classmethod
+    def deferred(cls, vertices, faces, *, robust: bool = True) -> DeferredCaster:
+        """A caster built on its first use (:class:`DeferredCaster`)."""
+        return DeferredCaster(vertices, faces, robust=robust)
+
     def _prepare(self, origins, directions):
         o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
@@ -215,3 +220,31 @@ class RayCaster:
             blocked = self.occluded(origins, dirs[qi], t_far=t_far)
             vis[s + vi[blocked], qi[blocked]] = False
         return vis
+
+
+class DeferredCaster:
+    """A :class:`RayCaster` of the given triangles, built when a query first needs it.
+
+    Building an Embree scene costs as much as tracing a few hundred thousand rays; a
+    caster whose results may all come from the set-up cache
+    (:func:`shtools.scene.traced_shadows.traced_ground` of a still object) is only
+    built on a miss.  Every attribute of :class:`RayCaster` is forwarded.
+    """
+
+    def __init__(self, vertices, faces, *, robust: bool = True):
+        self._args = (vertices, faces, bool(robust))
+        self._caster: RayCaster | None = None
+
+    @property
+    def built(self) -> bool:
+        """Whether the Embree scene exists yet."""
+        return self._caster is not None
+
+    def __getattr__(self, name: str):
+        if name.startswith("_"):  # (pickling, copying: not the caster's)
+            raise AttributeError(name)
+        if self._caster is None:
+            vertices, faces, robust = self._args
+            self._caster = RayCaster(vertices, faces, robust=robust)
+        return getattr(self._caster, name)
+

@@ -184,7 +184,7 @@ def similarity_scale(matrix) -> float | None:
 def _rest(receivers: list[ContactPart]):
     """``(rest vertices, rest normals, scale)`` of a lone rigid receiver posed by a
     similarity (its neighbours are its rest geometry's:
-    :func:`~shtools.scene.traced_shadows.neighbours`), else None."""
+    :func:`~shtools.scene.receiver_filter.neighbours`), else None."""
     if len(receivers) != 1 or receivers[0].obj.motion is not None:
         return None
     obj = receivers[0].obj
@@ -225,7 +225,8 @@ def rigid_caster(objects: list, matrices: list, vertices: np.ndarray, faces: np.
         return hit[3]
     if len(_CASTERS) >= 64:
         _CASTERS.clear()
-    caster = posed_caster(vertices, faces)
+    # built on its first query: a still scene's traces may all come from the set-up cache
+    caster = posed_caster(vertices, faces, deferred=True)
     _CASTERS[key] = (os.getpid(), [o.faces for o in objects],
                      [np.array(m, copy=True) for m in matrices], caster)
     return caster

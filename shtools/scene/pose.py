@@ -76,6 +76,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     static_rows = []
     n_rows = 0
     ground = []  # (rows, vertices, normals) of receiver-only objects
+    ground_still = True  # none of them moves
     casters = []  # (caster, posed vertices, blocker index) of the objects traced on the ground
     rigid = []  # (object, transform, posed vertices, blocker index) of rigid traced objects
     parts = []  # ContactPart of the objects that receive and block (contact shadows)
@@ -121,6 +122,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
             casters.append((caster, world_v, o.faces, len(blockers)))
         if o.spec.receives and not o.spec.blocks:
             ground.append((np.arange(n_rows, n_rows + len(world_v)), world_v, world_n))
+            ground_still = ground_still and o.spec.name in still
         if o.local_log is not None and joints is not None:
             selfs.append(SelfVisibility(
                 posed_local_log(o.local_log, o.motion.model.blend_matrices(joints), m), own))
@@ -163,14 +165,21 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     # the others each in its own cone, the visibilities multiplied: one trace, filter
     # and hand-over for the parts instead of one each, at the same ray density (the
     # shared direction set), and no product of visibilities that overlap
+    still_casters = [False] * len(casters)  # the skinned ones move; then the rigid groups
     for group in _overlapping(rigid):
         casters.append(_rigid_caster(group))
+        still_casters.append(all(o.spec.name in still for o, _, _, _ in group))
     lights = pose_lights(prepared.scene, t)
     if casters and ground and st.traced_shadows:
         # (rows, points, normals) of every receiver-only object, once for all casters
         receivers = tuple(np.concatenate(a) for a in zip(*ground, strict=True))
-        selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
-                                                lights) for c in casters) if v is not None)
+        # a still group over a still ground under still lights: the same trace every
+        # frame and every bake of these inputs (kept in the set-up cache)
+        calm = ground_still and not any(len(spec.keys) > 1 for spec in prepared.scene.lights)
+        selfs.extend(v for v in (
+            _traced_shadow(c, receivers, st, clusters, blockers, prepared, lights,
+                           still=calm and c_still)
+            for c, c_still in zip(casters, still_casters, strict=True)) if v is not None)
     if trace and st.traced_shadows and field_traced:
         # the other objects' real meshes on each object receiver near them (contact)
         n_contact = contact_directions(st.traced_shadow_directions)
@@ -217,7 +226,8 @@ def pose_lights(scene, t: float) -> list:
 
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
-                   lights=(), n_dirs: int | None = None, strata: bool = False):
+                   lights=(), n_dirs: int | None = None, strata: bool = False,
+                   still: bool = False):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -228,10 +238,12 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     ``receivers`` is ``(rows, points, normals)`` of all receiver-only vertices, shapes
     ``(R,)``, ``(R, 3)``, ``(R, 3)`` (or of object receivers, for contact shadows, with
     a lone rigid receiver's rest geometry fourth: ``rest`` of
-    :func:`~shtools.scene.traced_shadows.neighbours`);
+    :func:`~shtools.scene.receiver_filter.neighbours`);
     ``n_dirs`` the rays of a cone filling the hemisphere (default
-    ``traced_shadow_directions``); returns None when none is within the object's
-    reach."""
+    ``traced_shadow_directions``); ``still`` when the object, the receivers and the
+    lights never move (``still`` of
+    :func:`~shtools.scene.traced_shadows.traced_ground`); returns None when none is
+    within the object's reach."""
     from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
     from shtools.scene.traced_shadows import traced_ground
 
@@ -249,7 +261,8 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                       lights=[(x.position, x.radius) for x in lights
                                               if isinstance(x, SphereLight)],
                                       strata=strata,
-                                      rest=receivers[3] if len(receivers) > 3 else None)
+                                      rest=receivers[3] if len(receivers) > 3 else None,
+                                      cache=prepared.cache, still=still)
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)

@@ -29,10 +29,11 @@ neighbouring receiver was blocked, and next to them (on the ground, where the
 silhouette is thin in a wide cone, the strata missed it: 2.0 % instead of 1.5 % over
 CesiumMan's shadow, and no faster).
 
-**A surface filter of the traced visibility** (:func:`surface_filter`).  A
-silhouette crossing a direction is a step of ``4π / 2n`` in the estimate.  The steps
-come every ``d α`` of receiver motion, ``d`` the distance to the nearest point of the
-mesh and ``α`` the set's angular spacing; the true visibility projected to order
+**A surface filter of the traced visibility**
+(:func:`~shtools.scene.receiver_filter.surface_filter`).  A silhouette crossing a
+direction is a step of ``4π / 2n`` in the estimate.  The steps come every ``d α``
+of receiver motion, ``d`` the distance to the nearest point of the mesh and ``α``
+the set's angular spacing; the true visibility projected to order
 ``n`` changes on the scale ``d π / n``.  A Gaussian of width ``d α`` over the
 neighbouring receivers (same facing) smooths the steps and leaves the order-``n``
 visibility: where the mesh touches the receiver (``d -> 0``) nothing is filtered, so
@@ -80,6 +81,13 @@ from shtools.geometry.visibility import RAY_OFFSET
 from shtools.scene.kept_traces import _GROUND  # noqa: F401  the kept traces (tests clear it)
 from shtools.scene.kept_traces import keep as _keep_ground
 from shtools.scene.kept_traces import kept as _kept_ground
+from shtools.scene.receiver_filter import (
+    nearest_distance,
+    neighbours,
+    receiver_spacing,
+    sphere_distance,
+    surface_filter,
+)
 from shtools.sh.basis import SQRT_4PI
 
 #: Ray counts (at the hemisphere density ``n_dirs``) of a receiver's cone where the
@@ -106,15 +114,9 @@ FILTER_PASSES = 3
 REFINE_FACTOR = 8
 #: The denser set starts where a step (``d α``) is below this many receiver spacings.
 REFINE_STEPS = 1.5
-#: The neighbour (by rank, self excluded) whose distance is a receiver's spacing.
-SPACING_NEIGHBOUR = 4
-#: Receivers whose normals differ by more than this cosine are not filtered together.
-FILTER_MIN_COS = 0.9
 #: Receivers per block of :func:`set_visibility` (neighbours in the receivers' order
 #: see nearby runs of the set: the block tests only the run its cones span).
 SET_CHUNK = 256
-
-_CUT = math.exp(-2.0)  # the filter's Gaussian at its cut, 2 widths
 
 
 @functools.lru_cache(maxsize=8)
@@ -238,18 +240,8 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
         return (a32[start:stop] @ d.T >= cos32[start:stop]) & (n32[start:stop] @ d.T > 0)
 
     def cast(start, stop, lo, hi, take):
-        d = dirs[lo:hi]
-        flat = np.flatnonzero(take)
-        if not flat.size:
-            return None
-        vi, qi = np.divmod(flat, take.shape[1])
-        # np.take gathers rows several times faster than fancy indexing
-        blocked = caster.occluded_embree(np.take(origins, start + vi, axis=0),
-                                         np.take(d, qi, axis=0))
-        hits = np.zeros(take.size, dtype=np.float32)
-        hits[flat[blocked]] = 1.0
-        g[start:stop] -= hits.reshape(take.shape) @ proj[lo:hi]
-        return np.divmod(flat[blocked], take.shape[1])  # (receiver, direction) of each hit
+        return _cast_chunk(caster, origins[start:stop], dirs[lo:hi], proj[lo:hi],
+                           g[start:stop], take)
 
     if around is None:
         for chunk in chunks:
@@ -273,6 +265,22 @@ def set_visibility(points, normals, caster, axis, cos_half, order: int, n_dirs: 
     for (start, stop, lo, hi), take in zip(chunks, cones, strict=True):
         cast(start, stop, lo, hi, take & ~coarse[lo:hi] & active[start:stop][:, cell[lo:hi]])
     return g
+
+
+def _cast_chunk(caster, origins, dirs, proj, g, take):
+    """Cast a chunk's rays ``take`` ``(B, Q)`` (receivers x directions of its run) and
+    subtract the blocked ones' projection from ``g`` ``(B, n*n)`` in place; returns the
+    (receiver, direction) of each blocked ray, or None when nothing was cast."""
+    flat = np.flatnonzero(take)
+    if not flat.size:
+        return None
+    vi, qi = np.divmod(flat, take.shape[1])
+    # np.take gathers rows several times faster than fancy indexing
+    blocked = caster.occluded_embree(np.take(origins, vi, axis=0), np.take(dirs, qi, axis=0))
+    hits = np.zeros(take.size, dtype=np.float32)
+    hits[flat[blocked]] = 1.0
+    g -= hits.reshape(take.shape) @ proj
+    return vi[blocked], qi[blocked]
 
 
 #: Every this-th direction of the shared set is cast first where it is cast in strata
@@ -310,134 +318,9 @@ def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
     return d32, proj
 
 
-#: Neighbours each receiver's filter may take per pass (the nearest ones: about 3
-#: receiver spacings on a grid).
-FILTER_NEIGHBOURS = 24
-
-#: Receiver sets whose neighbour lists a process keeps (the newest first).
-NEIGHBOUR_ENTRIES = 16
-#: Per process: the last receivers' neighbour lists and the last meshes' search trees
-#: (a static ground and a rigid object are searched once per bake).
-_NEIGHBOURS: list = []
-_SITES: list = []
-
-
-def nearest_distance(points, mesh_vertices, faces, caster=None) -> np.ndarray:
-    """Distance ``(V,)`` from each point to the nearest vertex or face centroid of a mesh.
-
-    A cheap stand-in for the distance to the surface: exact enough for the
-    filter's width, which only needs its scale.  The search tree is kept while
-    ``caster`` (the mesh's Embree scene, rebuilt whenever the mesh moves) is the same
-    object.
-    """
-    from scipy.spatial import cKDTree
-
-    if caster is not None and _SITES and _SITES[0][0] is caster:
-        tree = _SITES[0][1]
-    else:
-        v = np.asarray(mesh_vertices, dtype=np.float64)
-        tree = cKDTree(np.concatenate([v, v[np.asarray(faces)].mean(axis=1)]))
-        _SITES[:] = [(caster, tree)] if caster is not None else []
-    d, _ = tree.query(np.asarray(points, dtype=np.float64), k=1)
-    return d
-
-
-def sphere_distance(points, centers, radii) -> np.ndarray:
-    """Distance ``(V,)`` from each point to a union of spheres (0 inside one)."""
-    # relative to the spheres' centroid, in float32 (a filter width needs no more)
-    c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
-    o = c.mean(axis=0)
-    p = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - o).astype(np.float32)
-    c = (c - o).astype(np.float32)
-    r = np.asarray(radii, dtype=np.float32).reshape(-1)
-    d2 = np.einsum("vk,vk->v", p, p)[:, None] - 2.0 * (p @ c.T) + np.einsum("sk,sk->s", c, c)
-    d = np.sqrt(np.maximum(d2, 0.0)) - r[None, :]
-    return np.maximum(0.0, d.min(axis=1)).astype(np.float64)
-
-
-def neighbours(points, normals, rest=None) -> tuple[np.ndarray, np.ndarray]:
-    """The ``FILTER_NEIGHBOURS`` nearest receivers of each, self first: ``(V, K)`` indices
-    (-1 for a neighbour facing away by more than ``FILTER_MIN_COS``: a wall's receivers
-    are not a floor's) and distances, kept while the same receivers come back (the last
-    ``NEIGHBOUR_ENTRIES`` sets: the ground and the objects a frame traces).
-
-    ``rest`` is ``(points (V, 3), normals (V, 3), scale)`` when the receivers are one
-    rigid object posed by a rotation, a translation and a uniform ``scale``: its
-    neighbours are those of its rest geometry (the distances times ``scale``), so a
-    moving rigid object is searched once per bake, not once per frame.
-    """
-    from scipy.spatial import cKDTree
-
-    if rest is not None:
-        idx, dist = neighbours(rest[0], rest[1])
-        return idx, dist * float(rest[2])
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    for k, entry in enumerate(_NEIGHBOURS):  # the ground and the objects of a frame
-        if entry[0].shape == p.shape and np.array_equal(entry[0], p) and np.array_equal(
-                entry[1], nrm):
-            _NEIGHBOURS.insert(0, _NEIGHBOURS.pop(k))  # the least recently used go first
-            return entry[2:]
-    k = min(FILTER_NEIGHBOURS, len(p))
-    dist, idx = cKDTree(p).query(p, k=k)
-    dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
-    # self first even where a coincident vertex (a mesh's split normals) came first
-    r = np.arange(len(p))
-    at = np.argmax(idx == r[:, None], axis=1)  # 0 where self is first or missing
-    idx[r, at], dist[r, at] = idx[:, 0], dist[:, 0]
-    idx[:, 0], dist[:, 0] = r, 0.0
-    idx = np.where(np.einsum("vk,vnk->vn", nrm, nrm[idx]) >= FILTER_MIN_COS, idx, -1)
-    _NEIGHBOURS[:] = [(p.copy(), nrm.copy(), idx, dist), *_NEIGHBOURS[:NEIGHBOUR_ENTRIES - 1]]
-    return idx, dist
-
-
-def surface_filter(values, width, idx, dist, rows=None, passes: int = 1) -> np.ndarray:
-    """Gaussian filter of per-vertex values over neighbouring receivers, ``(R, C)``.
-
-    Each filtered receiver ``v`` averages the values of its neighbours within
-    ``2 width_v``, weighted by ``exp(-|p_u - p_v|^2 / 2 width_v^2) - exp(-2)`` (a
-    Gaussian lowered to 0 at the cut); a receiver of width 0 keeps its value.
-
-    Parameters
-    ----------
-    values : array_like, shape (N, C)
-    width : array_like, shape (R,)
-        Standard deviation of each filtered receiver's Gaussian (world units).
-    idx, dist : ndarray, shape (R, K)
-        Each filtered receiver's neighbours (indices into the ``N`` rows, -1 for none)
-        and their distances, itself first (:func:`neighbours`).
-    rows : ndarray of int, shape (R,), optional
-        The filtered receivers' own rows of ``values`` (needed when ``passes > 1``).
-    passes : int
-        Times the filter is applied, each pass reading the last one's values on
-        ``rows`` (the other rows keep theirs): the variances add up, and the support
-        grows ``passes`` times past the ``K`` neighbours.
-    """
-    from scipy import sparse
-
-    x = np.asarray(values, dtype=np.float64)
-    sigma = np.asarray(width, dtype=np.float32).reshape(-1, 1)
-    inside = (idx >= 0) & (dist <= 2.0 * sigma) & (sigma > 0)
-    u = np.where(inside, dist, 0.0).astype(np.float32) / np.where(sigma > 0, sigma, 1.0)
-    # lowered to 0 at the cut (2 widths): no step where a neighbour enters the window
-    w = np.where(inside, np.maximum(np.exp(-0.5 * u * u) - np.float32(_CUT), 0.0), 0.0)
-    w[sigma[:, 0] <= 0, 0] = 1.0  # a receiver of width 0 keeps its own value
-    total = w.sum(axis=1, dtype=np.float64)[:, None]
-    k = idx.shape[1]
-    m = sparse.csr_matrix((w.ravel(), np.maximum(idx, 0).ravel(), np.arange(0, w.size + 1, k)),
-                          shape=(len(w), len(x)))
-    out = (m @ x) / total
-    if passes > 1:  # the passes between in float32 (the weights' precision)
-        x = x.astype(np.float32)
-        for _ in range(passes - 1):
-            x[rows] = out
-            out = (m @ x) / total
-    return out
-
-
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
-                  spheres=None, lights=(), strata: bool = False, rest=None
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  spheres=None, lights=(), strata: bool = False, rest=None, *, cache=None,
+                  still: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -465,7 +348,15 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         neighbours share what their first rays found).
     rest : tuple, optional
         The receivers' rest geometry when they are one rigid object (``rest`` of
-        :func:`neighbours`).
+        :func:`~shtools.scene.receiver_filter.neighbours`).
+    cache : SetupCache, optional
+        The set-up cache (:mod:`shtools.cache`): the receivers' neighbour lists, and
+        with ``still`` the whole result, are computed once for all bakes of the same
+        inputs.
+    still : bool
+        The object, the receivers and the lights never move in this bake (the result
+        is the same every frame: worth a cache entry, and the caster is not used on a
+        hit).
 
     Returns
     -------
@@ -476,13 +367,38 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     visibility : ndarray, shape (T, order^2) float64
         The filtered traced visibility.
     """
-    from shtools.geometry.visibility import bounding_cones
-
     key = (caster, points, normals, vertices, faces, order, n_dirs, spheres, tuple(lights),
            strata)
     kept = _kept_ground(key)
     if kept is not None:  # a static object over static receivers: the last frame's result
         return kept
+    args = (points, normals, vertices, faces, caster, order, n_dirs, spheres, lights, strata,
+            rest, cache)
+    if still and cache is not None:
+        parts = {"points": np.asarray(points, dtype=np.float64),
+                 "normals": np.asarray(normals, dtype=np.float64),
+                 "vertices": np.asarray(vertices, dtype=np.float64),
+                 "faces": np.asarray(faces, dtype=np.int64), "order": int(order),
+                 "n_dirs": int(n_dirs), "strata": bool(strata),
+                 "spheres": None if spheres is None else [np.asarray(x) for x in spheres],
+                 "lights": [[np.asarray(c, dtype=np.float64), float(r)] for c, r in lights],
+                 "rest": None if rest is None else [np.asarray(rest[0]), np.asarray(rest[1]),
+                                                    float(rest[2])]}
+        got = cache.fetch("traced_ground", TRACED_GROUND_VERSION, parts, lambda: dict(
+            zip(("rows", "weight", "visibility"), _trace_ground(*args), strict=True)))
+        return _keep_ground(key, (got["rows"], got["weight"], got["visibility"]))
+    return _keep_ground(key, _trace_ground(*args))
+
+
+#: Version of :func:`traced_ground`'s results in the set-up cache.
+TRACED_GROUND_VERSION = 1
+
+
+def _trace_ground(points, normals, vertices, faces, caster, order, n_dirs, spheres, lights,
+                  strata, rest, cache) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`traced_ground` computed (its parameters, in order)."""
+    from shtools.geometry.visibility import bounding_cones
+
     v = np.asarray(vertices, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -496,8 +412,8 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     rows = np.flatnonzero(weight > 0)
     weight = weight[rows]
     if not rows.size:
-        return _keep_ground(key, (rows, weight, np.zeros((0, order * order))))
-    idx, dist = neighbours(p, nrm, rest)
+        return rows, weight, np.zeros((0, order * order))
+    idx, dist = neighbours(p, nrm, rest, cache)
     # neighbours among the traced receivers only (row of each in ``rows``, -1 if none)
     where = np.full(len(p) + 1, -1)
     where[rows] = np.arange(len(rows))
@@ -531,23 +447,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         g[busy] = surface_filter(g, FILTER_SPACING / math.sqrt(FILTER_PASSES) * step, around,
                                  np.where(around >= 0, dist[at], np.inf), rows=busy,
                                  passes=FILTER_PASSES)
-    return _keep_ground(key, (rows, weight, g))
-
-
-def receiver_spacing(idx, dist) -> np.ndarray:
-    """Each receiver's spacing ``(R,)``: the distance to its ``SPACING_NEIGHBOUR``-th
-    nearest neighbour facing the same way (a grid's edge neighbours; robust to a
-    coincident duplicate vertex), infinite when it has none.
-
-    Parameters
-    ----------
-    idx, dist : ndarray, shape (R, K)
-        Neighbours and their distances, self first (:func:`neighbours`).
-    """
-    d = np.where((idx >= 0) & (dist > 0), dist, np.inf)
-    d.sort(axis=1)
-    k = min(SPACING_NEIGHBOUR, d.shape[1]) - 1
-    return d[:, k] if k >= 0 else np.full(len(d), np.inf)
+    return rows, weight, g
 
 
 def refine_weights(step, spacing) -> np.ndarray:

@@ -224,11 +224,15 @@ def uses_local_visibility(obj, default: bool) -> bool:
     return bool(default) and _skinned_both(obj)
 
 
-def posed_caster(vertices, faces):
-    """The per-frame Embree scene of a posed mesh (:class:`~shtools.geometry.raycast.RayCaster`)."""
+def posed_caster(vertices, faces, *, deferred: bool = False):
+    """The per-frame Embree scene of a posed mesh (:class:`~shtools.geometry.raycast.RayCaster`;
+    with ``deferred``, built on its first query)."""
     from shtools.geometry.raycast import RayCaster
 
-    return RayCaster(vertices, faces, robust=False)  # ~20 % faster; see RayCaster
+    # not robust: ~20 % faster; see RayCaster
+    if deferred:
+        return RayCaster.deferred(vertices, faces, robust=False)
+    return RayCaster(vertices, faces, robust=False)
 
 
 def traced_self_visibility(vertices, normals, faces, order: int, n_dirs: int, *,

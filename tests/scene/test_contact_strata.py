@@ -12,7 +12,8 @@ import trimesh
 from shtools.geometry.raycast import RayCaster
 from shtools.geometry.visibility import bounding_cones
 from shtools.reference import raytrace_visibility
-from shtools.scene.traced_shadows import neighbours, set_strata, set_visibility
+from shtools.scene.receiver_filter import neighbours
+from shtools.scene.traced_shadows import set_strata, set_visibility
 
 
 class _Counting(RayCaster):

@@ -12,12 +12,8 @@ from scipy.spatial.transform import Rotation
 from shtools.geometry.raycast import RayCaster
 from shtools.scene.contact_shadows import similarity_scale
 from shtools.scene.kept_traces import GROUND_KEPT, kept
-from shtools.scene.traced_shadows import (
-    FILTER_MIN_COS,
-    FILTER_NEIGHBOURS,
-    neighbours,
-    traced_ground,
-)
+from shtools.scene.receiver_filter import FILTER_MIN_COS, FILTER_NEIGHBOURS, neighbours
+from shtools.scene.traced_shadows import traced_ground
 
 
 def _blob(seed=3):

@@ -10,13 +10,11 @@ import pytest
 import trimesh
 
 from shtools.geometry.raycast import RayCaster
+from shtools.scene.receiver_filter import FILTER_NEIGHBOURS, neighbours, surface_filter
 from shtools.scene.traced_shadows import (
-    FILTER_NEIGHBOURS,
     HANDOVER_RAYS,
     handover_weights,
-    neighbours,
     set_visibility,
-    surface_filter,
     traced_ground,
     world_directions,
 )
@@ -177,7 +175,8 @@ def test_receiver_spacing_of_a_grid_and_the_refine_weights():
     at h (a coincident duplicate vertex does not count); the denser set's weight is 0
     where the filter is at least one spacing wide, 1 where at most half of it (or 0
     wide: a contact) and the smoothstep of spacing / width - 1 between."""
-    from shtools.scene.traced_shadows import receiver_spacing, refine_weights
+    from shtools.scene.receiver_filter import receiver_spacing
+    from shtools.scene.traced_shadows import refine_weights
 
     h, n = 0.3, 9
     i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
