@@ -284,8 +284,18 @@ time = 1.0
 translate = [0.2, 0.7, 0.0]
 """)
     scene.write_text(text)
+    rf._NEIGHBOURS.clear()
     moving, _ = _bake(run_cli, scene, tmp_path / "c.h5", "--cache", cache)
     assert "traced_ground" not in moving["cache"]["kinds"] and len(traces) == 2
+    assert moving["cache"]["kinds"]["filter_neighbours"] == {"hits": 1, "misses": 0}
+    # a moving ground's neighbour lists would be a new entry every frame: none is stored
+    scene.write_text(text.replace('role = "receiver"\n', 'role = "receiver"\n'
+                                  "[[objects.keyframes]]\ntime = 0.0\n"
+                                  "[[objects.keyframes]]\ntime = 1.0\n"
+                                  "translate = [0.0, 0.1, 0.0]\n", 1))
+    rf._NEIGHBOURS.clear()
+    ground_moves, _ = _bake(run_cli, scene, tmp_path / "d.h5", "--cache", cache)
+    assert "filter_neighbours" not in ground_moves["cache"]["kinds"]
 
 
 def test_the_default_cache_folder_comes_from_the_environment(tmp_path, run_cli, monkeypatch,

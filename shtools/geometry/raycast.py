@@ -235,11 +235,6 @@ class DeferredCaster:
         self._args = (vertices, faces, bool(robust))
         self._caster: RayCaster | None = None
 
-    @property
-    def built(self) -> bool:
-        """Whether the Embree scene exists yet."""
-        return self._caster is not None
-
     def __getattr__(self, name: str):
         if name.startswith("_"):  # (pickling, copying: not the caster's)
             raise AttributeError(name)

@@ -178,7 +178,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         calm = ground_still and not any(len(spec.keys) > 1 for spec in prepared.scene.lights)
         selfs.extend(v for v in (
             _traced_shadow(c, receivers, st, clusters, blockers, prepared, lights,
-                           still=calm and c_still)
+                           receivers_still=ground_still, still=calm and c_still)
             for c, c_still in zip(casters, still_casters, strict=True)) if v is not None)
     if trace and st.traced_shadows and field_traced:
         # the other objects' real meshes on each object receiver near them (contact)
@@ -227,7 +227,7 @@ def pose_lights(scene, t: float) -> list:
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
                    lights=(), n_dirs: int | None = None, strata: bool = False,
-                   still: bool = False):
+                   receivers_still: bool = False, still: bool = False):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -240,8 +240,10 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     a lone rigid receiver's rest geometry fourth: ``rest`` of
     :func:`~shtools.scene.receiver_filter.neighbours`);
     ``n_dirs`` the rays of a cone filling the hemisphere (default
-    ``traced_shadow_directions``); ``still`` when the object, the receivers and the
-    lights never move (``still`` of
+    ``traced_shadow_directions``); ``receivers_still`` when the receivers never move
+    (their neighbour lists, or a lone rigid receiver's rest ones, are then entries of
+    the set-up cache: a moving receiver's would be a new entry every frame), ``still``
+    when the object and the lights do not either (``still`` of
     :func:`~shtools.scene.traced_shadows.traced_ground`); returns None when none is
     within the object's reach."""
     from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
@@ -249,6 +251,8 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
 
     caster, mesh_v, faces, index = caster_of
     rows, points, normals = receivers[:3]
+    rest = receivers[3] if len(receivers) > 3 else None
+    cache = prepared.cache if receivers_still or rest is not None else None
     labels = None if clusters is None else clusters.labels[rows]
     indices = index if isinstance(index, tuple) else (index,)
     # the blocker alone on the hand-over rows: a field's own skipped rows are another
@@ -261,8 +265,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                       lights=[(x.position, x.radius) for x in lights
                                               if isinstance(x, SphereLight)],
                                       strata=strata,
-                                      rest=receivers[3] if len(receivers) > 3 else None,
-                                      cache=prepared.cache, still=still)
+                                      rest=rest, cache=cache, still=still)
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)

@@ -350,9 +350,10 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         The receivers' rest geometry when they are one rigid object (``rest`` of
         :func:`~shtools.scene.receiver_filter.neighbours`).
     cache : SetupCache, optional
-        The set-up cache (:mod:`shtools.cache`): the receivers' neighbour lists, and
-        with ``still`` the whole result, are computed once for all bakes of the same
-        inputs.
+        The set-up cache (:mod:`shtools.cache`): the receivers' neighbour lists (or
+        those of ``rest``), and with ``still`` the whole result, are computed once for
+        all bakes of the same inputs.  Only for receivers that do not move: a moving
+        receiver's lists would be a new entry every frame.
     still : bool
         The object, the receivers and the lights never move in this bake (the result
         is the same every frame: worth a cache entry, and the caster is not used on a
