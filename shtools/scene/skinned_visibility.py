@@ -211,6 +211,8 @@ def adaptive_self_visibility(points, normals, faces, caster, order: int,
         flat = np.flatnonzero(take)
         d = np.take(np.matmul(local[rest][None], frames[at]).reshape(-1, 3), flat, axis=0)
         hit = caster.occluded_embree(np.repeat(origins[at], take.sum(axis=1), axis=0), d)
-        # flat is sorted: the blocked rays come in one run per vertex
-        _subtract_blocked(g, at[flat[hit] // rest.size], d[hit], weight, order)
+        # flat is sorted: the blocked rays come in one run per vertex (np.compress:
+        # several times faster than a boolean index on a mask without runs)
+        _subtract_blocked(g, at[np.compress(hit, flat) // rest.size],
+                          np.compress(hit, d, axis=0), weight, order)
     return g

