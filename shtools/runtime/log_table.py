@@ -74,6 +74,8 @@ class CapLogTable:
         values = np.stack([np.interp(x, x_src, f_src[:, l]) for l in range(order)])
         self.values64 = values
         self._rows64 = np.ascontiguousarray(values.T)  # (K, n): one row per sample
+        # each sample's step to the next (the last row unused): one gather fewer a lookup
+        self._steps64 = np.diff(self._rows64, axis=0, append=self._rows64[-1:])
         self.values = values.astype(np.float32)
         slopes = np.zeros_like(values)
         slopes[:, :-1] = np.diff(values, axis=1)
@@ -142,5 +144,8 @@ class CapLogTable:
         t = np.clip(x * (self.samples - 1), 0.0, self.samples - 1)
         idx = np.minimum(t.astype(np.intp), self.samples - 2)
         frac = (t - idx)[..., None]
-        lo = self._rows64[idx]  # (..., n)
-        return lo + frac * (self._rows64[idx + 1] - lo)
+        # np.take gathers rows several times faster than fancy indexing
+        out = np.take(self._steps64, idx, axis=0)  # (..., n)
+        out *= frac
+        out += np.take(self._rows64, idx, axis=0)
+        return out
