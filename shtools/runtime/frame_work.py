@@ -82,7 +82,8 @@ class FrameWork:
             if rows.size == 0:
                 continue
             offsets = np.concatenate([[0], np.cumsum(counts[group])])
-            out.append((rows, ("clusters", pts32[rows], nrm32[rows], np.arange(rows.size),
+            out.append((rows, ("clusters", np.take(pts32, rows, axis=0),
+                               np.take(nrm32, rows, axis=0), np.arange(rows.size),
                                offsets, self.centers[group], self.radii[group],
                                None if self.weights is None else self.weights[group],
                                self.sizes[group])))

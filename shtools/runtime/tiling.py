@@ -134,7 +134,8 @@ def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_
                               rad[cl, sph], np.float32(0.0))
             r = rows[tiles]
             res = accumulate_blocks(
-                pts[r], nrm[r], cen[cl, sph], radius, table,
+                # np.take gathers rows several times faster than fancy indexing
+                np.take(pts, r, axis=0), np.take(nrm, r, axis=0), cen[cl, sph], radius, table,
                 weights=None if wts is None else wts[cl, sph], self_shadow=self_shadow,
                 kernel=kern, rule_rows=int(rule_sizes[tiles].max()))
             # padded rows repeat a vertex of the same cluster: identical values
