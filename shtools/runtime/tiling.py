@@ -189,7 +189,7 @@ def _tile_sphere_lists(pts, nrm, rows, tile_cluster, cen, rad, cut_sizes, self_s
     if self_shadow and n_s:
         # h = N . P - N . p for every (receiver, sphere of its tile's cut)
         height = np.einsum("vi,vi->v", pts, nrm)
-        tile_n = nrm[rows]  # (NT, T, 3)
+        tile_n = np.take(nrm, rows, axis=0)  # (NT, T, 3); faster than nrm[rows]
         flat = (tile_n == tile_n[:, :1]).all(axis=(1, 2))
         # tiles whose receivers share one normal (flat ground): h ranges exactly over
         # N . P - [max, min] of N . p, per (tile, sphere)
