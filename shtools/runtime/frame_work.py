@@ -78,7 +78,8 @@ class FrameWork:
         slot_part = part_of[cluster_of]
         out = []
         for k, group in enumerate(groups):
-            rows = self.order[slot_part == k]  # cluster by cluster, ascending
+            # cluster by cluster, ascending (np.compress: faster than a boolean index)
+            rows = np.compress(slot_part == k, self.order)
             if rows.size == 0:
                 continue
             offsets = np.concatenate([[0], np.cumsum(counts[group])])
