@@ -457,8 +457,7 @@ class ShadowRuntime:
         """
         parts = work.split(pts, nrm, FRAME_PARTS, receiver_cost)
         if extra is not None or blocks is not None:  # each part's rows of them
-            parts = [(rows, ("with_log", task,
-                             None if extra is None else np.take(extra, rows, axis=0),
+            parts = [(rows, ("with_log", task, None if extra is None else np.take(extra, rows, 0),
                              None if blocks is None else blocks.take(rows)))
                      for rows, task in parts]
         g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
