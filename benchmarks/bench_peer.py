@@ -153,14 +153,20 @@ def scenes(quick: bool, only=None) -> dict[str, tuple[Path, int]]:
     return out
 
 
+def _timed(fn):
+    """(result, CPU seconds of one call)."""
+    start = time.process_time()
+    result = fn()
+    return result, time.process_time() - start
+
+
 def _cpu(fn, repeats: int = 2):
     """(result, smallest CPU seconds of ``repeats`` calls after one warm-up call)."""
     result = fn()
     best = math.inf
     for _ in range(repeats):
-        start = time.process_time()
-        result = fn()
-        best = min(best, time.process_time() - start)
+        result, seconds = _timed(fn)
+        best = min(best, seconds)
     return result, best
 
 
@@ -247,15 +253,9 @@ def evaluate(name: str, path: Path, frame: int, rays, subset: int) -> list[dict]
         # not seen: a repeated pose would find a moving object's trace kept and time
         # nothing.  The peer keeps nothing between frames.
         dt = 0.5 / scene.settings.fps
-        start = time.process_time()
-        baker.frame(frame, t - dt)
-        first = time.process_time() - start
-        start = time.process_time()
-        result = baker.frame(frame, t)
-        cpu = time.process_time() - start
-        start = time.process_time()
-        baker.frame(frame, t + dt)
-        cpu = min(cpu, time.process_time() - start)
+        _, first = _timed(lambda: baker.frame(frame, t - dt))
+        result, cpu = _timed(lambda: baker.frame(frame, t))
+        cpu = min(cpu, _timed(lambda: baker.frame(frame, t + dt))[1])
         out.append(score(np.asarray(result.radiance, dtype=np.float64), cpu, "default"))
         out[-1]["first_ms"] = 1e3 * first
         for n_rays in rays:
