@@ -32,9 +32,10 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import threading
 import time
 import weakref
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
@@ -42,6 +43,7 @@ import numpy as np
 
 from shtools.errors import ShtoolsError
 from shtools.tasks import (
+    abandon_futures,
     blas_threads,
     can_start_workers,
     die_with_parent,
@@ -153,7 +155,8 @@ class VertexWorkers:
             raise _worker_died() from exc
 
     def close(self, *, kill: bool = False) -> None:
-        """Stop the workers (idempotent); ``kill=True`` does not wait for running parts.
+        """Stop the workers (idempotent); ``kill=True`` does not wait for running parts
+        (nor resolves their futures: it is for a frame that was interrupted).
 
         A call interrupted by a stop signal (the CLI re-sends it every 0.2 s) is
         finished by the next call, or at exit; once asked, every later call kills.
@@ -253,11 +256,12 @@ class _PoolStop:
 def _shutdown(stop: _PoolStop, kill: bool = False) -> None:
     """Stop a pool's workers: wait for running parts, or kill them (a stop signal).
 
-    Never ``Thread.join``: CPython 3.11 marks a thread stopped when a signal
-    handler's exception interrupts ``join`` while it runs (the bpo-45274 fix); the
+    Never ``Thread.join`` or ``Thread.is_alive``: CPython 3.11 marks a running
+    thread stopped when a signal handler's exception interrupts either (the
+    bpo-45274 fix, in ``Thread._wait_for_tstate_lock``, which both call); the
     pool's manager thread is then not waited for at exit, and the exit deadlocks
     with a worker left waiting for work (seen as a bake that printed "stopped by"
-    and never exited).  Polling ``is_alive`` can be interrupted harmlessly.
+    and never exited).  :func:`_running` asks ``threading.enumerate`` instead.
     """
     stop.kill = stop.kill or kill  # first: an interrupted kill is still a kill next time
     if stop.manager is None:  # ProcessPoolExecutor.shutdown drops these references
@@ -268,13 +272,8 @@ def _shutdown(stop: _PoolStop, kill: bool = False) -> None:
     if stop.kill:
         # ProcessPoolExecutor has no public way to stop busy workers (3.14 adds
         # terminate_workers); its internals used here are stable across 3.11-3.13.
-        # Its manager thread fails a killed pool's work items with set_exception,
-        # which raises on the parts we cancelled (taken back, ShadowRuntime._split_visibility) in
-        # CPython 3.11: the thread dies, and the exit waits for its queue's thread
-        # forever.  Those items get a stand-in future nobody waits for.
-        for item in list((getattr(stop.pool, "_pending_work_items", None) or {}).values()):
-            if item.future.cancelled():
-                item.future = Future()
+        # a kill comes from an interrupted frame, which waits for none of its parts
+        abandon_futures(stop.pool)
         for proc in stop.processes:
             with contextlib.suppress(Exception):
                 proc.kill()
@@ -294,10 +293,20 @@ def _shutdown(stop: _PoolStop, kill: bool = False) -> None:
     # as long as the running parts take; killed: bounded (SIGKILL ends a worker
     # at once, and its parent-death signal ends it at our exit at the latest)
     deadline = time.monotonic() + KILL_WAIT_SECONDS
-    while stop.manager is not None and stop.manager.is_alive():
+    while stop.manager is not None and _running(stop.manager):
         if stop.kill and time.monotonic() > deadline:
             break
         time.sleep(0.005)
+
+
+def _running(thread) -> bool:
+    """Whether ``thread`` still runs; safe to interrupt (see :func:`_shutdown`).
+
+    ``threading.enumerate`` lists a thread until its run has returned, and only
+    takes a lock that its ``with`` releases, so a stop raised inside it changes
+    nothing.
+    """
+    return thread in threading.enumerate()
 
 
 def _init_worker(runtime_type, settings, tables, parent_pid, blas) -> None:

@@ -35,7 +35,8 @@ by the number of tasks.
 Faults.  A local worker that dies (killed, out of memory) breaks the process
 pool; the pool is rebuilt and the unfinished tasks are submitted again, up to
 :data:`MAX_RESUBMITS` times.  On Dask the scheduler itself reruns the tasks of
-a worker that died (its ``allowed-failures``).  Tasks are pure functions of
+a worker that died (its ``allowed-failures``), and shared state lost with its
+workers is scattered again.  Tasks are pure functions of
 their inputs, so a rerun gives the same bytes.  Ctrl-C or SIGTERM in the
 caller cancels the pending tasks and stops the local workers (and a
 ``LocalCluster`` started here) before the exception propagates.
@@ -66,6 +67,7 @@ _LAZY = {
     "MAX_LOCAL_WORKERS": "shtools.tasks.workers",
     "TRACKER_WARNINGS": "shtools.tasks.workers",
     "WORKER_PRELOAD": "shtools.tasks.workers",
+    "abandon_futures": "shtools.tasks.workers",
     "blas_threads": "shtools.tasks.workers",
     "can_start_workers": "shtools.tasks.workers",
     "default_workers": "shtools.tasks.workers",
@@ -93,6 +95,7 @@ __all__ = [
     "Shared",
     "TaskPool",
     "WorkerStats",
+    "abandon_futures",
     "blas_threads",
     "can_start_workers",
     "check_scheduler",

@@ -127,6 +127,7 @@ class TaskPool:
 
         client = self.client
         ref = None if shared is None else client.scatter(shared, broadcast=True, hash=False)
+        handle = None
         try:
             if setup is not None:
                 # One set-up task per worker; loose restrictions so a worker
@@ -135,10 +136,13 @@ class TaskPool:
                                     allow_other_workers=True, pure=False)
                       for w in client.scheduler_info().get("workers", {})])
             self.setup_seconds += time.perf_counter() - start
-            yield Shared(shared, ref, setup)
+            handle = Shared(shared, ref, setup)
+            yield handle
         finally:
             if ref is not None:
                 ref.release()
+                if handle is not None and handle.ref is not ref:  # scattered again (_dask)
+                    handle.ref.release()
 
     def map_ordered(self, fn: Callable[[Any, Any], Any], items: Iterable, *,
                     shared: Any = None, window: int | None = None,
@@ -175,7 +179,7 @@ class TaskPool:
         elif self.scheduler == "processes":
             yield from self._processes(fn, items, shared.value, window, shared.setup)
         else:
-            yield from self._dask(fn, items, shared.ref, window)
+            yield from self._dask(fn, items, shared, window)
 
     # ------------------------------------------------------------------ schedulers
     def _record(self, worker: str, seconds: float, cpu: float) -> None:
@@ -254,11 +258,14 @@ class TaskPool:
         finally:
             _terminate(pool)
 
-    def _dask(self, fn, items, shared_ref, window):
+    def _dask(self, fn, items, shared: Shared, window):
+        from concurrent.futures import CancelledError
+
         client = self.client
         items = iter(items)
-        pending: collections.deque = collections.deque()
+        pending: collections.deque = collections.deque()  # (item, future)
         exhausted = False
+        rescatters = 0
         try:
             while True:
                 while not exhausted and len(pending) < window:
@@ -269,16 +276,32 @@ class TaskPool:
                         break
                     # pure=False: equal items are still separate tasks; the
                     # scheduler reruns a task whose worker died.
-                    pending.append(client.submit(_run_dask, fn, shared_ref, item, pure=False))
+                    pending.append((item, client.submit(_run_dask, fn, shared.ref, item,
+                                                        pure=False)))
                 if not pending:
                     return
-                future = pending.popleft()
-                result, worker, seconds, cpu = future.result()
-                future.release()
+                try:
+                    result, worker, seconds, cpu = pending[0][1].result()
+                except CancelledError:
+                    # The scheduler forgot the shared state, so every task needing it:
+                    # scattered data cannot be recomputed, and a cluster's active
+                    # memory manager keeps one replica of a broadcast (every 2 s by
+                    # default), so the death of the worker holding it loses it.
+                    # Scatter it again and resubmit what is pending.
+                    rescatters += 1
+                    if shared.ref is None or rescatters > MAX_RESUBMITS:
+                        raise
+                    if shared.ref.status != "finished":
+                        shared.ref = client.scatter(shared.value, broadcast=True, hash=False)
+                    pending = collections.deque(
+                        (item, client.submit(_run_dask, fn, shared.ref, item, pure=False))
+                        for item, _ in pending)
+                    continue
+                pending.popleft()[1].release()
                 self._record(worker, seconds, cpu)
                 yield result
         finally:
-            for future in pending:
+            for _, future in pending:
                 future.cancel()
 
     def summary(self) -> dict:

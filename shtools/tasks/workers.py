@@ -243,10 +243,29 @@ def _run_local(fn, item):
     return _timed(fn, _SHARED, item, f"pid {os.getpid()}")
 
 
+def abandon_futures(pool) -> None:
+    """Give every queued or running task of a process pool a stand-in future.
+
+    For a pool stopped because its caller was interrupted, which waits for none
+    of its tasks.  The pool's manager thread fails a stopped pool's tasks
+    through their futures, and two kinds would stop it there, so that the exit
+    waits for it forever: a cancelled future, on which ``set_exception`` raises
+    (CPython 3.11), killing the thread; and a future whose lock a stop signal
+    left held (landing in the Python-level ``Condition.__exit__`` of
+    ``Future.cancel`` or ``Future.result``), on which it blocks.  Stand-ins are
+    futures nobody else holds.
+    """
+    from concurrent.futures import Future
+
+    for item in list((getattr(pool, "_pending_work_items", None) or {}).values()):
+        item.future = Future()
+
+
 def _terminate(pool) -> None:
     """Stop a process pool now: cancel queued tasks and kill running workers."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
     results_writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+    abandon_futures(pool)
     pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         if p.is_alive():

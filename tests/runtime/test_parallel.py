@@ -115,9 +115,35 @@ def test_processes_setting_is_validated():
 
 
 
+#: A close (``KILL``: killing) stopped at each of its spots in turn (see STOPS).
+INTERRUPTED = """
+    from stop_helpers import Stop, stop_at, wait_for
+
+    go = os.path.join(sys.argv[1], "go")
+    part = workers._pool.submit(wait_for, go)  # a part that outlasts the stops
+    # every spot of a killing close, until one runs to its end; a graceful close
+    # waits for the part: its first pass and a few rounds of its wait
+    for landing in range(1, 3000 if KILL else 120):
+        sys.settrace(stop_at(landing))
+        try:
+            workers.close(kill=KILL)
+            finished = True
+        except Stop:
+            finished = False
+        sys.settrace(None)
+        if finished:
+            break
+    # killed (its future abandoned), or still running for the exit to wait for
+    assert finished == KILL and not part.done()
+    open(go, "w").close()
+"""
+
 #: Stops of the workers the way the CLI's stop path meets them, then the exit.
-#: "interrupted": a graceful close interrupted by a stop signal (the CLI re-sends it
-#: every 0.2 s, and Python raises it wherever the main thread is).
+#: "interrupted" / "interrupted-kill": a graceful / killing close interrupted by stop
+#: signals, landing on each of its lines in turn (the CLI re-sends its stop every
+#: 0.2 s, and Python raises it wherever the main thread is).
+#: "cancel-interrupted": a frame's take-back of a queued part (Future.cancel)
+#: interrupted at each of its lines, then close(kill=True), as the frame does.
 #: "half-result": close(kill=True) of a worker killed halfway through sending a result.
 #: "cancelled": close(kill=True) with parts taken back (cancelled) still queued.
 STOPS = {"cancelled": """
@@ -126,21 +152,22 @@ STOPS = {"cancelled": """
         time.sleep(0.01)
     assert all(f.cancel() for f in futures[2:])  # the last two are taken back
     workers.close(kill=True)
-""", "interrupted": """
-    class Stop(BaseException):
-        pass
+""", "interrupted": "\n    KILL = False" + INTERRUPTED,
+         "interrupted-kill": "\n    KILL = True" + INTERRUPTED, "cancel-interrupted": """
+    from stop_helpers import Stop, stop_at
 
-    def stop(*_):
-        raise Stop
-
-    workers._pool.submit(time.sleep, 2)  # a part that outlasts the first stop
-    signal.signal(signal.SIGALRM, stop)
-    signal.setitimer(signal.ITIMER_REAL, 0.2, 0.2)
-    try:
-        workers.close()
-    except Stop:
-        pass
-    signal.setitimer(signal.ITIMER_REAL, 0)
+    futures = [workers._pool.submit(time.sleep, 60) for _ in range(6)]
+    while not futures[0].running():
+        time.sleep(0.01)
+    for future in reversed(futures):  # queued ones, then those with the worker
+        for landing in range(1, 20):  # past the end of cancel()
+            sys.settrace(stop_at(landing))
+            try:
+                future.cancel()
+            except Stop:
+                pass
+            sys.settrace(None)
+    workers.close(kill=True)
 """, "half-result": """
     from stop_helpers import half_a_result  # a task must be importable in a worker
 
@@ -152,9 +179,44 @@ STOPS = {"cancelled": """
 """}
 
 
-#: The "half-result" stop's task, a module in the test's folder (on the script's path).
+#: The stops' helpers, a module in the test's folder (on the script's path): a
+#: worker's task must be importable there.
 STOP_HELPERS = """
-import struct, sys, time
+import linecache, os, struct, sys, time
+
+
+class Stop(BaseException):
+    pass
+
+
+def stop_at(landing):
+    # A trace function raising at the landing-th line or call under the traced
+    # call: a stop signal lands wherever the main thread is, so every spot is
+    # tried in turn.  Not at a with statement's second line event, its exit: no
+    # signal can land between a with body and its __exit__ (CPython checks for
+    # signals at calls and backward jumps), and a raise there leaks the lock.
+    seen, lines = 0, {}
+
+    def trace(frame, event, arg):
+        nonlocal seen
+        if event == "line":
+            again = frame.f_lineno in lines.setdefault(frame, set())
+            lines[frame].add(frame.f_lineno)
+            code = linecache.getline(frame.f_code.co_filename, frame.f_lineno)
+            if again and code.lstrip().startswith("with "):
+                return trace
+        if event in ("call", "line"):
+            seen += 1
+            if seen == landing:
+                raise Stop
+        return trace
+    return trace
+
+
+def wait_for(path):
+    while not os.path.exists(path):
+        time.sleep(0.01)
+
 
 def half_a_result(marker):
     # in the worker: the header of a result (above 16 KiB, the size of a real
@@ -174,8 +236,10 @@ def test_stopped_workers_let_the_process_exit(stop, tmp_path):
     """Regressions of a bake that printed "stopped by" and never exited: Thread.join
     interrupted by a signal handler's exception marked the pool's manager thread
     stopped (CPython 3.11), so the exit waited forever for a worker no one told to
-    stop; a half-sent result left that thread reading forever; and failing a
-    cancelled part killed that thread (CPython 3.11), leaving a traceback."""
+    stop (Thread.is_alive too, so no stop may land in either); a half-sent result
+    left that thread reading forever; failing a cancelled part killed that
+    thread (CPython 3.11), leaving a traceback; and a stop landing in
+    Future.cancel left the future's lock held, which that thread then waited on."""
     (tmp_path / "stop_helpers.py").write_text(STOP_HELPERS)
     script = textwrap.dedent("""
         import os, signal, struct, sys, time

@@ -299,6 +299,25 @@ def test_dask_worker_killed_mid_bake_still_completes_identically(scene_file, inl
     assert filecmp.cmp(out, inline_bake, shallow=False)
 
 
+def test_dask_shared_state_lost_with_its_workers_is_scattered_again():
+    """Every worker of the cluster restarted mid-run: the shared state, scattered
+    data the scheduler cannot recompute, is lost with them (as when the one worker
+    a cluster's active memory manager left its replica on dies).  The run scatters
+    it again, and every result still comes back, in order."""
+    distributed = pytest.importorskip("distributed",
+                                      reason="the distributed extra is not installed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", silence_logs=50) as cluster, \
+            distributed.Client(cluster) as client, \
+            task_pool(cluster.scheduler_address) as pool:
+        out = []
+        for result in pool.map_ordered(_square, range(12), shared=3, window=4):
+            out.append(result)
+            if len(out) == 2:
+                client.restart()
+    assert out == [3 * i * i for i in range(12)]
+
+
 def _cli(*args, **kwargs):
     return subprocess.run([sys.executable, "-m", "shtools", *args], capture_output=True,
                           text=True, **kwargs)
