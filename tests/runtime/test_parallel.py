@@ -117,20 +117,15 @@ def test_processes_setting_is_validated():
 
 #: A close (``KILL``: killing) stopped at each of its spots in turn (see STOPS).
 INTERRUPTED = """
-    from stop_helpers import Stop, stop_at, wait_for
+    from functools import partial
+    from stop_helpers import runs_to_end, wait_for
 
     go = os.path.join(sys.argv[1], "go")
     part = workers._pool.submit(wait_for, go)  # a part that outlasts the stops
     # every spot of a killing close, until one runs to its end; a graceful close
     # waits for the part: its first pass and a few rounds of its wait
     for landing in range(1, 3000 if KILL else 120):
-        sys.settrace(stop_at(landing))
-        try:
-            workers.close(kill=KILL)
-            finished = True
-        except Stop:
-            finished = False
-        sys.settrace(None)
+        finished = runs_to_end(partial(workers.close, kill=KILL), landing)
         if finished:
             break
     # killed (its future abandoned), or still running for the exit to wait for
@@ -154,19 +149,14 @@ STOPS = {"cancelled": """
     workers.close(kill=True)
 """, "interrupted": "\n    KILL = False" + INTERRUPTED,
          "interrupted-kill": "\n    KILL = True" + INTERRUPTED, "cancel-interrupted": """
-    from stop_helpers import Stop, stop_at
+    from stop_helpers import runs_to_end
 
     futures = [workers._pool.submit(time.sleep, 60) for _ in range(6)]
     while not futures[0].running():
         time.sleep(0.01)
     for future in reversed(futures):  # queued ones, then those with the worker
         for landing in range(1, 20):  # past the end of cancel()
-            sys.settrace(stop_at(landing))
-            try:
-                future.cancel()
-            except Stop:
-                pass
-            sys.settrace(None)
+            runs_to_end(future.cancel, landing)
     workers.close(kill=True)
 """, "half-result": """
     from stop_helpers import half_a_result  # a task must be importable in a worker
@@ -186,7 +176,19 @@ import linecache, os, struct, sys, time
 
 
 class Stop(BaseException):
-    pass
+    '''What a stop signal's handler raises (here: the trace function of stop_at).'''
+
+
+def runs_to_end(call, landing) -> bool:
+    '''Whether ``call()`` ran to its end, with a stop at its landing-th spot.'''
+    sys.settrace(stop_at(landing))
+    try:
+        call()
+        return True
+    except Stop:
+        return False
+    finally:
+        sys.settrace(None)
 
 
 def stop_at(landing):
