@@ -2,10 +2,11 @@
 
 No GPU or display.  Triangles are expanded into covered pixels by
 :func:`shtools.runtime.raster.triangle_fragments` (shared with the runtime's
-shadow maps) and resolved per pixel by a depth sort against the running
-z-buffer.  Vertex colours are interpolated
-perspective-correctly.  Rendering at ``supersample`` times the size and box
-filtering down gives anti-aliased edges.
+shadow maps) and resolved per pixel against a z-buffer (``np.minimum.at``; of
+equally near fragments the lowest face wins, so the picture does not depend on the
+fragments' order).  Vertex colours are interpolated perspective-correctly.
+Rendering at ``supersample`` times the size and box filtering down gives
+anti-aliased edges.
 """
 
 from __future__ import annotations
@@ -148,39 +149,37 @@ def rasterize(
     # drop triangles touching the near plane (a fitted camera has none)
     faces = faces[np.all(z[faces] > near, axis=1)]
     zbuf = np.full(W * H, np.inf)
-    win_tri = np.full(W * H, -1, dtype=np.int64)
-    win_bary = np.zeros((W * H, 3))
+    none = np.iinfo(np.int64).max
+    win_tri = np.full(W * H, none, dtype=np.int64)
+    fine = np.zeros((W * H, C))  # the winner's interpolated colour per sub-pixel
     inv_z = 1.0 / z[faces]  # (F, 3) for perspective-correct interpolation
 
+    # the nearest fragment of each pixel wins; of equally near ones, the lowest face
     for frag_tri, px, py, bary in triangle_fragments(sx[faces], sy[faces], W, H,
                                                      budget=FRAGMENT_BUDGET):
         # screen-space barycentrics interpolate 1/z linearly; depth = 1 / that
         iz = np.einsum("ij,ij->i", bary, inv_z[frag_tri])
         depth = 1.0 / iz
         pid = py * W + px
-        srt = np.lexsort((depth, pid))
-        pid, depth = pid[srt], depth[srt]
-        first = np.ones(pid.size, dtype=bool)
-        first[1:] = pid[1:] != pid[:-1]
-        sel = srt[first]
-        pid, depth = pid[first], depth[first]
-        nearer = depth < zbuf[pid]
-        pid, sel = pid[nearer], sel[nearer]
-        zbuf[pid] = depth[nearer]
-        win_tri[pid] = frag_tri[sel]
+        before = zbuf[pid]
+        np.minimum.at(zbuf, pid, depth)
+        hit = np.flatnonzero(depth == zbuf[pid])
+        pid, frag_tri, bary = pid[hit], frag_tri[hit], bary[hit]
+        win_tri[pid[zbuf[pid] < before[hit]]] = none  # an earlier batch's winner is hidden
+        np.minimum.at(win_tri, pid, frag_tri)
+        won = np.flatnonzero(win_tri[pid] == frag_tri)
+        pid, frag_tri = pid[won], frag_tri[won]
         # perspective-correct weights: (bary_k / z_k) / sum_k(bary_k / z_k)
-        pc = bary[sel] * inv_z[frag_tri[sel]]
-        win_bary[pid] = pc / pc.sum(axis=1, keepdims=True)
+        pc = bary[won] * inv_z[frag_tri]
+        pc /= (pc[:, 0] + pc[:, 1] + pc[:, 2])[:, None]
+        corners = faces[frag_tri]
+        fine[pid] = sum(colors[corners[:, k]] * pc[:, k, None] for k in range(3))
 
-    covered = win_tri >= 0
-    image = np.zeros((W * H, C))
-    if background is not None:
-        bg = np.asarray(background, dtype=float)
-        bg = np.repeat(np.repeat(bg, s, axis=0), s, axis=1).reshape(W * H, C)
-        image[:] = bg
-    idx = np.flatnonzero(covered)
-    corner_colors = colors[faces[win_tri[idx]]]  # (P, 3, C)
-    image[idx] = np.einsum("pk,pkc->pc", win_bary[idx], corner_colors)
-    image = image.reshape(height, s, width, s, C).mean(axis=(1, 3))
-    coverage = covered.reshape(height, s, width, s).mean(axis=(1, 3))
+    covered = (win_tri != none).astype(np.float64)
+    # box filter: the sum of the s x s sub-pixel grids (strided views, no reduction)
+    fine, covered = fine.reshape(H, W, C), covered.reshape(H, W)
+    image = sum(fine[i::s, j::s] for i in range(s) for j in range(s)) / (s * s)
+    coverage = sum(covered[i::s, j::s] for i in range(s) for j in range(s)) / (s * s)
+    if background is not None:  # the uncovered share of each pixel shows the background
+        image += (1.0 - coverage)[..., None] * np.asarray(background, dtype=float)
     return image, coverage
