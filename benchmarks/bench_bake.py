@@ -1,9 +1,13 @@
 """Bake benchmarks: demo wall time, bake throughput (vertex-frames/s) on the demo and on a
 65k-vertex scene, and a skinned real character when ../shared/data is present.
 
-    python benchmarks/bench_bake.py [--quick]
+    python benchmarks/bench_bake.py [--quick] [--baseline DIR]
 
-Target: the demo runs in about a minute on this 2-core machine.
+Target: the demo runs in about a minute on this 2-core machine.  With ``--baseline DIR``
+(or ``SHTOOLS_BASELINE=DIR``; DIR a checkout of an earlier commit, e.g.
+``git worktree add /tmp/base 98bedba``) it first times ``make demo``'s command side by
+side with that checkout: ``python -m shtools.demo`` into a fresh folder with an empty
+set-up cache (as on a fresh clone), the two trees alternated ``DEMO_ROUNDS`` times.
 """
 
 from __future__ import annotations
@@ -142,6 +146,38 @@ def bake_row(name: str, scene_path: Path, out: Path) -> dict:
     }
 
 
+#: Alternated runs of each tree in the side-by-side demo wall time.
+DEMO_ROUNDS = 3
+
+
+def demo_wall(root: Path) -> float:
+    """Wall seconds of ``python -m shtools.demo`` run from ``root`` (a checkout), as
+    ``make demo`` runs it, into a fresh folder with an empty set-up cache."""
+    import subprocess
+
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, OPENBLAS_NUM_THREADS="1", SHTOOLS_CACHE=str(Path(tmp) / "cache"),
+                   PYTHONPATH=os.pathsep.join(filter(None, [str(root),
+                                                            os.environ.get("PYTHONPATH")])))
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "shtools.demo", str(Path(tmp) / "out")],
+                       cwd=root, env=env, check=True, capture_output=True)
+        return time.perf_counter() - start
+
+
+def table_demo_versus(baseline: Path) -> str:
+    """``make demo``'s wall time, this tree and ``baseline`` alternated (fastest kept)."""
+    walls: dict[str, list[float]] = {"this tree": [], "baseline": []}
+    for _ in range(DEMO_ROUNDS):
+        for name, root in (("this tree", REPO), ("baseline", baseline)):
+            walls[name].append(demo_wall(root))
+    base, this = min(walls["baseline"]), min(walls["this tree"])
+    rows = [{"tree": name, "fastest s": min(w), "runs s": " / ".join(f"{x:.1f}" for x in w)}
+            for name, w in walls.items()]
+    return (table(rows) + f"\n\nratio (baseline / this tree, fastest runs): "
+            f"{base / this:.2f}")
+
+
 def table(rows: list[dict]) -> str:
     keys = list(rows[0])
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
@@ -157,8 +193,15 @@ def table(rows: list[dict]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="few frames, seconds not minutes")
+    parser.add_argument("--baseline", metavar="DIR", default=os.environ.get("SHTOOLS_BASELINE"),
+                        help="a checkout of the baseline commit: time make demo side by side")
     args = parser.parse_args(sys.argv[1:])
     from shtools.demo import FRAMES, run_demo
+
+    if args.baseline:
+        print(f"## make demo's wall time side by side with {args.baseline} (fresh folder, "
+              f"empty set-up cache, {DEMO_ROUNDS} alternated runs each)\n")
+        print(table_demo_versus(Path(args.baseline).resolve()) + "\n")
 
     frames = 6 if args.quick else FRAMES
     with tempfile.TemporaryDirectory() as tmp:
