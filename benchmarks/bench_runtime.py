@@ -373,6 +373,56 @@ def table_log_vs_product(quick: bool) -> list[dict]:
     return rows
 
 
+#: ``cluster_blend`` bands the seam table measures (0: the default, no blend).
+BLEND_BANDS = (0.0, 0.25, 0.5, 1.0)
+
+
+def table_cluster_blend(quick: bool) -> list[dict]:
+    """The battle ground's seams and cost with the receivers blended over clusters.
+
+    The ground's luminance under the sky, against the flat sum of every leaf at every
+    receiver (``hierarchy = False``, which has no clusters and so no seam): the
+    smoothness ratio (mean |discrete Laplacian|, as bench_look's) and the relative
+    RMSE, and the visibility's CPU (fastest of 3 frames) and pairs.
+    """
+    grid = 90 if quick else 200
+    scene = BattleScene(grid=grid, mesh_count=14)
+    v, n, groups, blockers = scene.frame(0.3)
+    lum = np.array([0.2126, 0.7152, 0.0722])
+
+    def ground(**kw):
+        with ShadowRuntime(ShadowSettings(order=4, **kw)) as rt:
+            clusters = rt.clusters(v, groups)
+            cpu = math.inf
+            for _ in range(3):
+                t0 = time.process_time()
+                g = rt.visibility(v, n, blockers, clusters)
+                cpu = min(cpu, time.process_time() - t0)
+            radiance = rt.shade(g, v, n, scene.env, [])[:grid * grid]
+            return (radiance @ lum).reshape(grid, grid), cpu, rt.last_stats["pairs"]
+
+    def roughness(x):
+        return np.abs(4 * x[1:-1, 1:-1] - x[:-2, 1:-1] - x[2:, 1:-1] - x[1:-1, :-2]
+                      - x[1:-1, 2:]).mean()
+
+    flat, flat_cpu, flat_pairs = ground(hierarchy=False)
+    rows = [{"cluster_blend": "flat sum (no hierarchy)", "smoothness vs flat": 1.0,
+             "error vs flat %": 0.0, "visibility CPU ms": 1e3 * flat_cpu,
+             "pairs": flat_pairs, "CPU vs no blend": math.nan}]
+    base_cpu = None
+    for band in BLEND_BANDS:
+        lum_b, cpu, pairs = ground(cluster_blend=band)
+        base_cpu = cpu if base_cpu is None else base_cpu
+        rows.append({"cluster_blend": f"{band:g}", "smoothness vs flat":
+                     float(roughness(lum_b) / roughness(flat)),
+                     "error vs flat %": float(100 * np.sqrt(np.mean((lum_b - flat) ** 2)
+                                                            / np.mean(flat ** 2))),
+                     "visibility CPU ms": 1e3 * cpu, "pairs": pairs,
+                     "CPU vs no blend": cpu / base_cpu})
+    rows[0]["CPU vs no blend"] = flat_cpu / base_cpu
+    return rows
+
+
 # -- side by side with a baseline checkout ------------------------------------------
 #: the battle frame the side-by-side comparison times: order 4, accumulation order 6,
 #: the default exp, one thread, one process
@@ -503,6 +553,9 @@ def main(argv=None) -> int:
     print(_markdown(table_accuracy(args.quick)))
     print("\n### Runtime: log space vs product space (60 spheres, no hierarchy)\n")
     print(_markdown(table_log_vs_product(args.quick)))
+    print("\n### Runtime: cluster blend, the battle ground's seams against its cost "
+          "(order 4, default settings but `cluster_blend`; one process)\n")
+    print(_markdown(table_cluster_blend(args.quick)))
     return 0
 
 

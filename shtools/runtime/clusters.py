@@ -31,11 +31,15 @@ class ReceiverClusters:
         Vertex indices sorted by cluster.
     offsets : ndarray of int, shape (C + 1,)
         Cluster ``c`` holds ``order[offsets[c]:offsets[c+1]]``.
+    groups : ndarray of int, shape (C,) or None
+        The object group of each cluster (``groups`` of :func:`lloyd_clusters`);
+        None: unknown (one group).
     """
 
     labels: np.ndarray
     order: np.ndarray
     offsets: np.ndarray
+    groups: np.ndarray | None = None
 
     @property
     def n_clusters(self) -> int:
@@ -70,7 +74,12 @@ class ReceiverClusters:
         # one int64 key per (cluster, label) pair, ordered as the pairs are
         # lexicographically (a 1-D unique: many times faster than unique rows)
         lab = labels.astype(np.int64) - int(labels.min())
-        return ReceiverClusters.from_labels(self.labels * (int(lab.max()) + 1) + lab)
+        out = ReceiverClusters.from_labels(self.labels * (int(lab.max()) + 1) + lab)
+        if self.groups is None:
+            return out
+        first = out.order[out.offsets[:-1]]  # a vertex of each new cluster
+        return ReceiverClusters(out.labels, out.order, out.offsets,
+                                self.groups[self.labels[first]])
 
     def bounds(self, vertices) -> tuple[np.ndarray, np.ndarray]:
         """Bounding sphere of every cluster at the given positions.
@@ -134,13 +143,19 @@ def lloyd_clusters(vertices, vertices_per_cluster: int = 400, *, groups=None,
     labels = np.zeros(v.shape[0], dtype=np.int64)
     next_label = 0
     rng = np.random.default_rng(seed)
-    for g in np.unique(groups):
+    cluster_groups = []
+    for k_group, g in enumerate(np.unique(groups)):
         idx = np.flatnonzero(groups == g)
         k = max(1, int(np.ceil(idx.size / vertices_per_cluster)))
         local = _kmeans(v[idx], k, iterations, rng)
         labels[idx] = local + next_label
         next_label += k
-    return ReceiverClusters.from_labels(labels)
+        cluster_groups.append(np.full(k, k_group, dtype=np.int64))
+    out = ReceiverClusters.from_labels(labels)
+    # (from_labels drops empty clusters: the group of each cluster left)
+    kept = np.unique(labels)
+    return ReceiverClusters(out.labels, out.order, out.offsets,
+                            np.concatenate(cluster_groups)[kept])
 
 
 def _kmeans(points: np.ndarray, k: int, iterations: int, rng) -> np.ndarray:

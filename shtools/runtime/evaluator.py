@@ -151,7 +151,7 @@ class ShadowRuntime:
         own, exclude, skip = self._self.terms(self_visibility, pts.shape[0], blockers)
         work = self._frame_work(pts, spheres, clusters, exclude)
         t1 = time.process_time()
-        f = self._accumulate(work.task(pts, nrm), self.last_stats)
+        f = work.combine(self._accumulate(work.task(pts, nrm), self.last_stats), pts.shape[0])
         extra = _add(self._other_logs(pts, nrm, blockers, skip), own)
         if extra is not None:
             f += extra
@@ -245,7 +245,8 @@ class ShadowRuntime:
         stats["seconds"]["kept_pairs"] = kept_seconds
         parts = self._part_blockers(blockers, skip, pts.shape[0])
         cost = 0 if parts is None else DEFORMABLE_RECEIVER_PAIRS * len(parts.deformables)
-        if stats["pairs"] + cost * pts.shape[0] >= MIN_PARALLEL_PAIRS:
+        # (a blend over clusters exponentiates its entries, then blends: as parts do)
+        if work.blend is not None or stats["pairs"] + cost * len(pts) >= MIN_PARALLEL_PAIRS:
             w0 = time.perf_counter()
             g = self._split_visibility(work, pts, nrm, extra, parts, cost)
             stats["seconds"]["accumulate_exp_wall"] = time.perf_counter() - w0
@@ -263,10 +264,10 @@ class ShadowRuntime:
     def run_part(self, task) -> tuple[np.ndarray, int]:
         """Visibility ``(V', n*n)`` and evaluated pairs of one part of a frame.
 
-        ``task`` comes from :meth:`FrameWork.task` (also what a worker process
-        runs; see :mod:`shtools.runtime.parallel`), or is ``("with_log", task,
-        extra)`` with the part's rows of the other blockers' log sum.
-        """
+        ``task`` comes from :meth:`FrameWork.split` (also what a worker process runs;
+        :mod:`shtools.runtime.parallel`), or is ``("with_log", task, extra)`` with the
+        part's rows of the other blockers' log sum.  The rows are the part's receivers,
+        or its entries of a blend over clusters (:meth:`FrameWork.assemble`)."""
         if task[0] == "fields":
             return self._field_part(task), 0
         extra = parts = None
@@ -420,7 +421,8 @@ class ShadowRuntime:
     def _kept_sum(self, pts, nrm, spheres, clusters, exclude=None) -> np.ndarray:
         """Log sums ``(V, n_acc^2)`` of a kept part of a frame, by its cuts and kernel."""
         work = self._frame_work(pts, spheres, clusters, exclude)
-        return self._accumulate(work.task(pts, nrm), {"pairs_evaluated": 0})
+        return work.combine(self._accumulate(work.task(pts, nrm), {"pairs_evaluated": 0}),
+                            pts.shape[0])
 
     def _accumulate(self, task, stats: dict) -> np.ndarray:
         """Log sums ``(V', n_acc^2)`` of a :meth:`FrameWork.task` in this process."""
@@ -448,50 +450,48 @@ class ShadowRuntime:
                           receiver_cost: float = 0.0) -> np.ndarray:
         """Visibility of a frame evaluated as ``FRAME_PARTS`` independent parts.
 
-        Each part's bytes depend only on the part (its receivers, cuts and
-        blocking), never on which process evaluates it or on the process count.
-        With workers, this process evaluates the first part and then takes the
-        parts no worker has started yet, from the end of the queue.  ``extra``:
-        the other blockers' log sum; ``blocks``: deformable fields each part
-        evaluates on its rows (``receiver_cost`` sphere pairs per receiver).
+        Each part's bytes depend only on the part (its receivers, cuts and blocking),
+        never on the process evaluating it or the process count.  With workers, this
+        process evaluates the first part, then takes the parts no worker has started,
+        from the end of the queue.  ``extra``: the other blockers' log sum; ``blocks``:
+        deformable fields each part evaluates on its rows (``receiver_cost`` pairs each).
         """
-        parts = work.split(pts, nrm, FRAME_PARTS, receiver_cost)
+        split = work.split(pts, nrm, FRAME_PARTS, receiver_cost)
+        parts = [task for _, _, task in split]
         if extra is not None or blocks is not None:  # each part's rows of them
-            parts = [(rows, ("with_log", task, None if extra is None else np.take(extra, rows, 0),
-                             None if blocks is None else blocks.take(rows)))
-                     for rows, task in parts]
-        g = np.empty((pts.shape[0], self.order * self.order), dtype=np.float32)
-        evaluated = 0
-        processes = 1
+            parts = [("with_log", task, None if extra is None else np.take(extra, rows, 0),
+                      None if blocks is None else blocks.take(rows))
+                     for rows, _, task in split]
+        results: list = [None] * len(parts)  # each part's visibility, in part order
+        evaluated, processes = 0, 1
         if self._part_pool is not None and len(parts) > 1:
             if self._pool_parts is None:
                 self._pool_parts = PoolParts(self._part_pool, self.settings, self.tables,
                                              ShadowRuntime)
-            results = self._pool_parts.map([task for _, task in parts])
-            for (rows, _), (g_part, count) in zip(parts, results, strict=True):
-                g[rows] = g_part
+            for k, (g_part, count) in enumerate(self._pool_parts.map(parts)):
+                results[k] = g_part
                 evaluated += count
             processes = min(self._part_pool.workers, len(parts))
         elif self.processes == 1 or len(parts) == 1:
-            for rows, task in parts:
-                g[rows], count = self.run_part(task)
+            for k, task in enumerate(parts):
+                results[k], count = self.run_part(task)
                 evaluated += count
         else:
             if self._workers is None:
                 self._workers = VertexWorkers(min(self.processes, FRAME_PARTS) - 1,
                                               self.settings, self.tables, ShadowRuntime)
             try:
-                queued = [(rows, task, self._workers.submit(task)) for rows, task in parts[1:]]
-                g[parts[0][0]], evaluated = self.run_part(parts[0][1])
+                queued = [(k, t, self._workers.submit(t)) for k, t in enumerate(parts) if k]
+                results[0], evaluated = self.run_part(parts[0])
                 # take back, one at a time from the end, parts no worker has started
-                for rows, task, future in reversed(queued):
+                for k, task, future in reversed(queued):
                     if not future.cancel():
                         break  # this one and every earlier one are with a worker
-                    g[rows], count = self.run_part(task)
+                    results[k], count = self.run_part(task)
                     evaluated += count
-                for rows, _, future in queued:
+                for k, _, future in queued:
                     if not future.cancelled():
-                        g[rows], count = self._workers.result(future)
+                        results[k], count = self._workers.result(future)
                         evaluated += count
                 processes = min(self.processes, FRAME_PARTS, len(parts))
             except ShtoolsError:
@@ -502,7 +502,7 @@ class ShadowRuntime:
                 raise
         self.last_stats["pairs_evaluated"] = evaluated
         self.last_stats["processes"] = processes
-        return g
+        return work.assemble(split, results, pts.shape[0], self.order * self.order)
 
     def exponentiate(self, log_vis) -> np.ndarray:
         """exp at the accumulation order, truncated to the shading order, shape ``(V, n*n)``.

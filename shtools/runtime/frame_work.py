@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shtools.errors import InputError
+from shtools.runtime.cluster_blend import blend_entries, blend_rows
 from shtools.runtime.clusters import ReceiverClusters
 from shtools.runtime.hierarchy import build_forest, leaf_spheres, ratio_weights, tree_cuts
 from shtools.runtime.log_table import CapLogTable
@@ -37,6 +38,10 @@ class FrameWork:
         Valid spheres per cluster.
     weights : ndarray, shape (C, S, n_acc) or None
         Ratio weights (eq. 37) where inner tree nodes are used.
+    blend : ndarray, shape (E,) or None
+        With a blend over clusters (:mod:`shtools.runtime.cluster_blend`), ``order``
+        holds ``E`` entries (a receiver once per cluster it is blended over) and
+        these are their weights; None: each receiver once, in its own cluster.
     """
 
     centers: np.ndarray
@@ -45,17 +50,41 @@ class FrameWork:
     offsets: np.ndarray | None = None
     sizes: np.ndarray | None = None
     weights: np.ndarray | None = None
+    blend: np.ndarray | None = None
 
     def task(self, pts, nrm) -> tuple:
-        """The whole frame as one task for :meth:`ShadowRuntime.run_part`."""
+        """The whole frame as one task for :meth:`ShadowRuntime.run_part` (its result
+        has a row per receiver, or per entry of a blend: :meth:`combine`)."""
         if self.order is None:
             return ("spheres", pts, nrm, self.centers, self.radii)
+        if self.blend is not None:
+            return ("clusters", np.take(pts, self.order, axis=0),
+                    np.take(nrm, self.order, axis=0), np.arange(self.order.size),
+                    self.offsets, self.centers, self.radii, self.weights, self.sizes)
         return ("clusters", pts, nrm, self.order, self.offsets, self.centers, self.radii,
                 self.weights, self.sizes)
 
+    def combine(self, values: np.ndarray, n_rows: int) -> np.ndarray:
+        """A :meth:`task`'s result ``(V or E, K)`` as one row per receiver ``(V, K)``."""
+        if self.blend is None or self.order is None:
+            return values
+        return blend_rows(values, self.order, self.blend, n_rows)
+
+    def assemble(self, split: list, results: list, n_rows: int, n_cols: int) -> np.ndarray:
+        """The results ``(R_k, n_cols)`` of :meth:`split`'s parts (in its order) as one
+        row per receiver ``(n_rows, n_cols)``: placed, or blended over clusters."""
+        if self.blend is not None and results:
+            return blend_rows(np.concatenate(results), np.concatenate([r for r, _, _ in split]),
+                              np.concatenate([w for _, w, _ in split]), n_rows)
+        out = np.empty((n_rows, n_cols), dtype=results[0].dtype if results else np.float32)
+        for (rows, _, _), values in zip(split, results, strict=True):
+            out[rows] = values
+        return out
+
     def split(self, pts, nrm, parts: int, receiver_cost: float = 0.0
-              ) -> list[tuple[np.ndarray, tuple]]:
-        """``parts`` tasks of about equal work, with the receiver rows each covers.
+              ) -> list[tuple[np.ndarray, np.ndarray | None, tuple]]:
+        """``parts`` tasks of about equal work, with the receiver rows each covers
+        and their blend weights (None without a blend over clusters).
 
         Clusters are dealt whole (:func:`split_clusters`, cost = receivers x
         (cut size + ``receiver_cost``, the per-receiver work of other blockers));
@@ -66,8 +95,8 @@ class FrameWork:
         nrm32 = np.asarray(nrm, dtype=np.float32)
         if self.order is None:
             bounds = np.linspace(0, pts.shape[0], parts + 1).astype(np.int64)
-            return [(np.arange(a, b), ("spheres", pts32[a:b], nrm32[a:b], self.centers,
-                                       self.radii))
+            return [(np.arange(a, b), None, ("spheres", pts32[a:b], nrm32[a:b], self.centers,
+                                             self.radii))
                     for a, b in itertools.pairwise(bounds) if b > a]
         counts = np.diff(self.offsets)
         groups = split_clusters(counts * (self.sizes + receiver_cost), parts)
@@ -83,7 +112,8 @@ class FrameWork:
             if rows.size == 0:
                 continue
             offsets = np.concatenate([[0], np.cumsum(counts[group])])
-            out.append((rows, ("clusters", np.take(pts32, rows, axis=0),
+            blend = None if self.blend is None else np.compress(slot_part == k, self.blend)
+            out.append((rows, blend, ("clusters", np.take(pts32, rows, axis=0),
                                np.take(nrm32, rows, axis=0), np.arange(rows.size),
                                offsets, self.centers[group], self.radii[group],
                                None if self.weights is None else self.weights[group],
@@ -119,6 +149,7 @@ def frame_work(settings, table: CapLogTable, pts, blockers, clusters, exclude,
         stats["spheres_per_vertex"] = float(centers.shape[0])
         return FrameWork(centers=centers, radii=radii), stats
     forest = build_forest(blockers)
+    entries = None
     if not s.hierarchy:
         # every leaf everywhere, but per exclusion group: one "cluster" per group
         clusters = ReceiverClusters.from_labels(exclude.labels)
@@ -136,6 +167,15 @@ def frame_work(settings, table: CapLogTable, pts, blockers, clusters, exclude,
         if exclude is not None:  # a cluster's receivers must skip the same blockers
             clusters = clusters.split(exclude.labels)
         cl_centers, cl_radii = clusters.bounds(pts)
+        if s.cluster_blend > 0 and clusters.n_clusters > 1:
+            # blended only within an object group, among receivers skipping the same
+            first = clusters.order[clusters.offsets[:-1]]
+            skips = (np.zeros(first.size, dtype=np.int64) if exclude is None
+                     else exclude.labels[first].astype(np.int64))
+            groups = np.zeros_like(skips) if clusters.groups is None else clusters.groups
+            entries = blend_entries(pts, clusters, cl_centers, cl_radii,
+                                    groups * (int(skips.max()) + 1) + skips, s.cluster_blend)
+            cl_radii = entries.radii  # eq. 36 holds for every receiver a cut evaluates
         cuts = tree_cuts(forest, cl_centers, cl_radii, s.theta_max)
         skipped = None if exclude is None else excluded_nodes(clusters, exclude,
                                                               forest.blocker)
@@ -144,6 +184,9 @@ def frame_work(settings, table: CapLogTable, pts, blockers, clusters, exclude,
         in_cut = cuts.in_cut if skipped is None else cuts.in_cut & ~skipped
     if exclude is not None and not s.hierarchy:
         in_cut = in_cut & ~excluded_nodes(clusters, exclude, forest.blocker)
+    order, offsets, blend = clusters.order, clusters.offsets, None
+    if entries is not None:
+        order, offsets, blend = entries.order, entries.offsets, entries.weights
     sizes = in_cut.sum(axis=1)
     s_max = max(1, int(sizes.max(initial=0)))
     # each cluster's cut nodes first (stable), padded with radius 0
@@ -151,13 +194,13 @@ def frame_work(settings, table: CapLogTable, pts, blockers, clusters, exclude,
     valid = np.arange(s_max)[None, :] < sizes[:, None]
     any_inner = bool((in_cut & ~forest.is_leaf[None, :]).any())
     work = FrameWork(
-        order=clusters.order, offsets=clusters.offsets, sizes=sizes,
+        order=order, offsets=offsets, sizes=sizes, blend=blend,
         centers=forest.centers[node_idx],
         radii=np.where(valid, forest.radii[node_idx], 0.0),
         weights=(np.take_along_axis(weights, node_idx[:, :, None], axis=1)
                  if any_inner else None))
     stats["seconds"]["cuts"] = time.process_time() - t0
-    stats["pairs"] = int((np.diff(clusters.offsets) * sizes).sum())
+    stats["pairs"] = int((np.diff(offsets) * sizes).sum())
     stats["clusters"] = clusters.n_clusters
     stats["spheres_per_vertex"] = stats["pairs"] / max(1, pts.shape[0])
     return work, stats

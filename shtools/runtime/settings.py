@@ -290,6 +290,12 @@ class ShadowSettings:
         accumulates every leaf sphere at every vertex.
     vertices_per_cluster : int
         Average receiver-cluster size of the Lloyd clustering.
+    cluster_blend : float
+        Receivers within this fraction of a cluster's radius of a cluster boundary
+        (in the difference of their distances to the clusters' centres) are
+        evaluated with each nearby cluster's cut and blended with weights continuous
+        over the surface (:mod:`shtools.runtime.cluster_blend`): no seam where two
+        clusters' cuts or ratio vectors differ, for more pairs.  0: no blend.
     self_shadow : bool
         Apply the self-shadowing rules of Sec. 6.2 (tangent-plane culling and
         replacement).
@@ -349,6 +355,11 @@ class ShadowSettings:
     hierarchy: bool = setting(True, "bool", doc="receiver clusters, tree cuts, ratio vectors")
     vertices_per_cluster: int = setting(400, "int", lo=1,
                                         doc="average receiver-cluster size")
+    cluster_blend: float = setting(0.0, "float", lo=0,
+                                   doc="band over which receivers near a cluster boundary "
+                                       "blend the neighbouring clusters' cuts, as a fraction "
+                                       "of a cluster's radius (0: no blend; seams where the "
+                                       "cuts differ)")
     self_shadow: bool = setting(True, "bool", doc="self-shadow rules of Sec. 6.2")
     deringing: str = setting("desaturate", "choice", choices=DERINGING_CHOICES,
                              doc="negative radiance from SH ringing: desaturate toward "

@@ -278,7 +278,8 @@ def test_more_mistakes_give_one_pinned_line(tmp_path, addition, message):
                            "volterra, product, raytrace; did you mean 'raytrace'? got 'raytrac'"),
     ("procesess = 2", "settings: unknown key 'procesess'; allowed: order, acc_order, "
                       "exp_method, exp_degree, exp_margin, window, window_h, theta_max_deg, "
-                      "theta_min_deg, hierarchy, vertices_per_cluster, self_shadow, deringing, "
+                      "theta_min_deg, hierarchy, vertices_per_cluster, cluster_blend, "
+                      "self_shadow, deringing, "
                       "field_space, frames, fps, tables, method, self_visibility, "
                       "self_visibility_directions, traced_shadows, traced_shadow_directions, "
                       "local_visibility"),
