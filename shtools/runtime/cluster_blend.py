@@ -33,9 +33,6 @@ import numpy as np
 
 from shtools.runtime.clusters import ReceiverClusters
 
-#: Receivers per block of the distance computation.
-_BLOCK = 1 << 15
-
 
 @dataclass
 class BlendEntries:
@@ -90,27 +87,38 @@ def blend_entries(points, clusters: ReceiverClusters, centers, radii, labels,
     cand_idx = np.argsort(~cand, axis=1, kind="stable")[:, :k]  # (C, K)
     cand_ok = np.take_along_axis(cand, cand_idx, axis=1)
     own = clusters.labels
-    idx = cand_idx[own]  # (V, K)
-    d = np.empty(idx.shape)
-    for start in range(0, p.shape[0], _BLOCK):  # bounds the (block, K, 3) offsets
-        stop = min(start + _BLOCK, p.shape[0])
-        rel = p[start:stop, None, :] - c[idx[start:stop]]
-        d[start:stop] = np.sqrt(np.einsum("vkx,vkx->vk", rel, rel))
-    d[~cand_ok[own]] = np.inf
-    t = np.clip((d - d.min(axis=1, keepdims=True)) / h[idx], 0.0, 1.0)
-    raw = 1.0 - t * t * (3.0 - 2.0 * t)  # 0 where d is inf (t clipped to 1)
-    phi = raw / raw.sum(axis=1, keepdims=True)
-    vi, ki = np.nonzero(raw > 0)
-    entry_cluster = idx[vi, ki]
-    by_cluster = np.argsort(entry_cluster, kind="stable")  # receivers ascending within
+    # candidate-major (K, V): the reductions over candidates run along rows
+    idx = np.take(np.ascontiguousarray(cand_idx.T), own, axis=1)
+    # distances by coordinate, relative to the points' mean, in float32 (a blend
+    # weight needs no more; it stays continuous): 1-D gathers, no (V, K, 3) array
+    o = p.mean(axis=0)
+    d2 = np.zeros(idx.shape, dtype=np.float32)
+    for axis in range(3):
+        delta = np.take((c[:, axis] - o[axis]).astype(np.float32), idx)
+        delta -= (p[:, axis] - o[axis]).astype(np.float32)
+        delta *= delta
+        d2 += delta
+    d = np.sqrt(d2)
+    d[~np.take(np.ascontiguousarray(cand_ok.T), own, axis=1)] = np.inf
+    t = d - d.min(axis=0)
+    t /= np.take(h.astype(np.float32), idx)
+    ki, vi = np.nonzero(t < 1.0)  # (inf where not a candidate)
+    s = t[ki, vi]
+    raw = 1.0 - s * s * (3.0 - 2.0 * s)
+    entry_cluster = idx[ki, vi]
+    # by cluster, receivers ascending within (a tile's receivers are neighbours)
+    by_cluster = np.argsort(entry_cluster * p.shape[0] + vi)
     entry_cluster = entry_cluster[by_cluster]
     order = vi[by_cluster]
-    weights = phi[vi, ki][by_cluster]
+    # normalised in float64: a receiver's weights sum to 1 to rounding
+    weights = raw.astype(np.float64)
+    weights /= np.bincount(vi, weights=weights, minlength=p.shape[0])[vi]
+    weights = weights[by_cluster]
     counts = np.bincount(entry_cluster, minlength=c.shape[0])
     offsets = np.concatenate([[0], np.cumsum(counts)])
-    reach = np.zeros(c.shape[0])
-    np.maximum.at(reach, entry_cluster, d[vi, ki][by_cluster])
-    return BlendEntries(order, offsets, weights, np.maximum(reach, r))
+    reach = np.zeros(c.shape[0], dtype=np.float32)
+    np.maximum.at(reach, entry_cluster, d[ki, vi][by_cluster])
+    return BlendEntries(order, offsets, weights, np.maximum(reach.astype(np.float64), r))
 
 
 def blend_rows(values, order, weights, n_rows: int) -> np.ndarray:
