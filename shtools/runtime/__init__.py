@@ -20,7 +20,9 @@ Pipeline per frame (SHEXP sections 6–7):
 
 1. refit the blocker trees from their moved leaves; per receiver cluster take
    the eq. 36 cut (``theta_max``) and the eq. 37 ratio vectors at the cluster
-   centre (:mod:`~shtools.runtime.hierarchy`);
+   centre (:mod:`~shtools.runtime.hierarchy`); with ``cluster_blend``, receivers
+   near a cluster boundary also take the nearby clusters' cuts and are blended
+   with weights continuous over the surface (:mod:`~shtools.runtime.cluster_blend`);
 2. per vertex, accumulate eq. 38 log vectors of the cut spheres after the
    self-shadow rules of Sec. 6.2 (:mod:`~shtools.runtime.accumulate`,
    :mod:`~shtools.runtime.self_shadow`) at the accumulation order ``n_acc``;

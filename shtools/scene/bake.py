@@ -401,6 +401,8 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
 
     if (lights := light_parameters(scene.lights)) is not None:  # absent: all shexp, as before
         parameters["light_shadows"] = lights
+    if st.cluster_blend:  # absent: no blend over clusters, as before
+        parameters["cluster_blend"] = st.cluster_blend
     from shtools.runtime.settings import ShadowSettings
 
     if st.deringing != ShadowSettings.deringing:  # absent: the default; relighting reads it

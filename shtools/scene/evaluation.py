@@ -40,7 +40,8 @@ def scene_eval_inputs(path, frame: int = 0, order: int | None = None) -> EvalInp
     settings = {"order": order or st.order, "acc_order": st.acc_order, "window": st.window,
                 "window_h": st.window_h, "theta_max": st.theta_max, "theta_min": st.theta_min,
                 "hierarchy": st.hierarchy, "vertices_per_cluster": st.vertices_per_cluster,
-                "deringing": st.deringing, "field_space": st.field_space}
+                "cluster_blend": st.cluster_blend, "deringing": st.deringing,
+                "field_space": st.field_space}
     receivers = [o.spec.name for o in prepared.receivers]
     blocking = [o.spec.name for o in prepared.objects if o.spec.blocks]
     return EvalInputs(Path(path).name, state.vertices, state.normals, groups, state.blockers,
