@@ -1,5 +1,6 @@
 """Runtime benchmarks: battle-scale frame time, accuracy/time of the
-accumulation order, log space vs product space, peak memory.
+accumulation order, log space vs product space, peak memory, the cluster blend's
+seams against its cost.
 
 ``python -m benchmarks -k runtime`` or ``python benchmarks/bench_runtime.py [--quick]``.
 With ``--baseline DIR`` (or ``SHTOOLS_BASELINE=DIR``; DIR a checkout of an earlier
