@@ -121,3 +121,30 @@ def test_blend_bytes_do_not_depend_on_the_processes():
                                           processes=processes)) as rt:
             out.append(rt.visibility(v, n, _blockers(), rt.clusters(v)))
     assert out[0].tobytes() == out[1].tobytes()
+
+
+def test_blend_stays_within_an_object_group_and_its_exclusion_label():
+    """Two objects side by side, one of them split by the blockers it skips: no
+    receiver is evaluated with a cluster of the other object or of another label."""
+    from shtools.runtime.frame_work import frame_work
+    from shtools.runtime.self_visibility import Skipped
+
+    rng = np.random.default_rng(4)
+    pts = np.column_stack([rng.uniform(-2, 2, 4000), np.zeros(4000), rng.uniform(-1, 1, 4000)])
+    groups = (pts[:, 0] > 0).astype(np.int64)  # two objects meeting along x = 0
+    clusters = lloyd_clusters(pts, 200, groups=groups)
+    assert clusters.groups is not None and clusters.groups.shape == (clusters.n_clusters,)
+    # the second object's far half skips the blockers (label 1): its clusters split
+    labels = ((pts[:, 0] > 1.0) & (pts[:, 2] > 0)).astype(np.int64)
+    exclude = Skipped(labels, np.array([[False, False], [True, False]]))
+    split = clusters.split(labels)
+    first = split.order[split.offsets[:-1]]
+    np.testing.assert_array_equal(split.groups, groups[first])  # carried by the split
+    with ShadowRuntime(ShadowSettings(order=4, cluster_blend=1.0)) as rt:
+        work, _ = frame_work(rt.settings, rt.table, pts, _blockers(), clusters, exclude,
+                             rt._clusters_for)
+    entry_cluster = np.repeat(np.arange(split.n_clusters), np.diff(work.offsets))
+    owner = split.labels[work.order]  # the cluster each entry's receiver belongs to
+    np.testing.assert_array_equal(split.groups[entry_cluster], split.groups[owner])
+    np.testing.assert_array_equal(labels[first][entry_cluster], labels[work.order])
+    assert (entry_cluster != owner).mean() > 0.1  # the band at 1.0 does blend
