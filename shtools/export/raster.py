@@ -149,8 +149,8 @@ def rasterize(
     # drop triangles touching the near plane (a fitted camera has none)
     faces = faces[np.all(z[faces] > near, axis=1)]
     zbuf = np.full(W * H, np.inf)
-    none = np.iinfo(np.int64).max
-    win_tri = np.full(W * H, none, dtype=np.int64)
+    no_face = np.iinfo(np.int64).max  # above every face index: loses every tie
+    win_tri = np.full(W * H, no_face, dtype=np.int64)
     fine = np.zeros((W * H, C))  # the winner's interpolated colour per sub-pixel
     inv_z = 1.0 / z[faces]  # (F, 3) for perspective-correct interpolation
 
@@ -165,7 +165,7 @@ def rasterize(
         np.minimum.at(zbuf, pid, depth)
         hit = np.flatnonzero(depth == zbuf[pid])
         pid, frag_tri, bary = pid[hit], frag_tri[hit], bary[hit]
-        win_tri[pid[zbuf[pid] < before[hit]]] = none  # an earlier batch's winner is hidden
+        win_tri[pid[zbuf[pid] < before[hit]]] = no_face  # an earlier batch's winner is hidden
         np.minimum.at(win_tri, pid, frag_tri)
         won = np.flatnonzero(win_tri[pid] == frag_tri)
         pid, frag_tri = pid[won], frag_tri[won]
@@ -175,7 +175,7 @@ def rasterize(
         corners = faces[frag_tri]
         fine[pid] = sum(colors[corners[:, k]] * pc[:, k, None] for k in range(3))
 
-    covered = (win_tri != none).astype(np.float64)
+    covered = (win_tri != no_face).astype(np.float64)
     # box filter: the sum of the s x s sub-pixel grids (strided views, no reduction)
     fine, covered = fine.reshape(H, W, C), covered.reshape(H, W)
     image = sum(fine[i::s, j::s] for i in range(s) for j in range(s)) / (s * s)

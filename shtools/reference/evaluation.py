@@ -102,7 +102,8 @@ def eval_settings(inputs: EvalInputs, *, order: int | None = None,
     """
     base = inputs.settings
     kwargs = {"order": base.get("order", order or 4)}
-    for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster", "deringing"):
+    for key in ("window_h", "theta_max", "theta_min", "vertices_per_cluster", "cluster_blend",
+                "deringing"):
         if base.get(key) is not None:
             kwargs[key] = base[key]
     kwargs["window"] = base.get("window", "cosine") if window else None

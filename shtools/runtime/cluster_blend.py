@@ -20,9 +20,17 @@ band (``band`` times its radius), the raw weight of cluster :math:`c` is
 1 for the nearest centre, 0 for clusters more than :math:`h_c` farther, and
 :math:`\phi_c = \rho_c / \sum_k \rho_k`.  Every term is a continuous function of
 the position alone (not of the cluster a receiver belongs to), so the blend is
-continuous wherever each cluster's evaluation is; only clusters of the same label
-(the blockers their receivers skip) are blended.  A cluster's cut must hold for
-every receiver it evaluates, so its bounding radius grows to cover them.
+continuous wherever each cluster's evaluation is; only clusters of one object
+group and one label (the blockers their receivers skip) are blended.  A cluster's
+cut must hold for every receiver it evaluates, so its bounding radius grows to
+cover them.
+
+What is blended is what the evaluation returns: visibility vectors after the exp
+for :meth:`~shtools.runtime.ShadowRuntime.visibility` (a frame's parts
+exponentiate their own entries, and a receiver's entries may lie in different
+parts), log vectors for a log result (``log_visibility``, the kept log sums of
+static pairs).  Either way the blend is a convex combination of continuous
+functions of the position.
 """
 
 from __future__ import annotations
@@ -81,7 +89,8 @@ def blend_entries(points, clusters: ReceiverClusters, centers, radii, labels,
     # within 2 r_a + h_c of a's.  A receiver of a has d_a <= r_a, so the nearest
     # centre (d <= d_a) and every centre within d_min + h_c of it pass: the blend
     # below is the one over all clusters, whatever cluster the receiver is in.
-    gap = np.sqrt(((c[:, None, :] - c[None, :, :]) ** 2).sum(-1))  # (C, C)
+    sq = np.einsum("cx,cx->c", c, c)
+    gap = np.sqrt(np.maximum(sq[:, None] + sq[None, :] - 2.0 * (c @ c.T), 0.0))  # (C, C)
     cand = (gap <= 2.0 * r[:, None] + h[None, :]) & (lab[:, None] == lab[None, :])
     k = int(cand.sum(axis=1).max())
     cand_idx = np.argsort(~cand, axis=1, kind="stable")[:, :k]  # (C, K)

@@ -52,15 +52,20 @@ class ReceiverClusters:
         return int(self.labels.shape[0])
 
     @classmethod
-    def from_labels(cls, labels) -> ReceiverClusters:
-        """Build from per-vertex labels (relabelled to ``0..C-1``, empty clusters dropped)."""
+    def from_labels(cls, labels, groups=None) -> ReceiverClusters:
+        """Build from per-vertex labels (relabelled to ``0..C-1``, empty clusters dropped).
+
+        ``groups``: the object group of each label value (indexed by the labels as
+        given, e.g. the ``groups`` of the clusters the labels come from), or None.
+        """
         labels = np.asarray(labels)
-        _, dense = np.unique(labels, return_inverse=True)
+        kept, dense = np.unique(labels, return_inverse=True)
         dense = dense.astype(np.int64)
         order = np.argsort(dense, kind="stable")
         counts = np.bincount(dense)
         offsets = np.concatenate([[0], np.cumsum(counts)])
-        return cls(dense, order, offsets)
+        return cls(dense, order, offsets,
+                   None if groups is None else np.asarray(groups)[kept])
 
     def split(self, labels) -> ReceiverClusters:
         """These clusters split so that each holds vertices of one label only (self when
@@ -151,11 +156,9 @@ def lloyd_clusters(vertices, vertices_per_cluster: int = 400, *, groups=None,
         labels[idx] = local + next_label
         next_label += k
         cluster_groups.append(np.full(k, k_group, dtype=np.int64))
-    out = ReceiverClusters.from_labels(labels)
-    # (from_labels drops empty clusters: the group of each cluster left)
-    kept = np.unique(labels)
-    return ReceiverClusters(out.labels, out.order, out.offsets,
-                            np.concatenate(cluster_groups)[kept])
+    # (from_labels drops empty clusters and keeps the group of each one left)
+    return ReceiverClusters.from_labels(
+        labels, np.concatenate(cluster_groups) if cluster_groups else None)
 
 
 def _kmeans(points: np.ndarray, k: int, iterations: int, rng) -> np.ndarray:

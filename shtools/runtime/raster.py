@@ -44,7 +44,9 @@ def triangle_fragments(sx, sy, width: int, height: int, *, budget: int = FRAGMEN
     width, height : int
         Image size in pixels.
     budget : int
-        Candidate pixels per batch.
+        Candidate pixels tested at once (bounds the scratch arrays); a yielded batch
+        joins pieces until it holds at least this many fragments (at most about
+        twice as many).
 
     Yields
     ------
@@ -75,7 +77,12 @@ def _joined(pieces: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
 
 
 class _Boxes:
-    """The triangles' screen boxes and barycentric planes, expanded into fragments."""
+    """The triangles' screen boxes and barycentric planes, expanded into fragments.
+
+    ``xmin, ymin, bw, bh`` ``(F,)``: each box's first pixel and size (0 off screen);
+    ``tri`` ``(T,)``: the triangles drawn; ``coef`` ``(F, 6)``: ``l1, l2`` as affine
+    functions of the pixel centre.
+    """
 
     def __init__(self, sx, sy, width: int, height: int):
         x3, y3 = np.asarray(sx, dtype=np.float64), np.asarray(sy, dtype=np.float64)
@@ -130,7 +137,9 @@ class _Boxes:
         yield from self._expanded(rest, budget)
 
     def _tests(self, t, cx, cy):
-        """Barycentrics at pixel centres ``cx, cy`` (broadcast against ``t``) and the test."""
+        """Barycentrics ``l0, l1, l2`` and the inside test at pixel centres ``cx, cy`` of
+        triangles ``t`` (int arrays, all three broadcast to one shape: ``(P,)`` or
+        ``(n, h, w)``)."""
         c = self.coef[t]
         l1 = c[..., 0] * cx + c[..., 1] * cy + c[..., 2]
         l2 = c[..., 3] * cx + c[..., 4] * cy + c[..., 5]
@@ -139,7 +148,8 @@ class _Boxes:
         return l0, l1, l2, inside
 
     def _block(self, t):
-        """Triangles ``t`` of one box size ``(h, w)``, tested as an ``(n, h, w)`` block."""
+        """Triangles ``t`` ``(n,)`` of one box size ``(h, w)``, tested as an ``(n, h, w)``
+        block; yields their fragments as :func:`triangle_fragments` does."""
         h, w = int(self.bh[t[0]]), int(self.bw[t[0]])
         cx = (self.xmin[t][:, None, None] + np.arange(w)) + 0.5
         cy = (self.ymin[t][:, None, None] + np.arange(h)[:, None]) + 0.5
@@ -151,7 +161,8 @@ class _Boxes:
                    np.stack([l0[inside], l1[inside], l2[inside]], axis=1))
 
     def _expanded(self, tri, budget: int):
-        """Triangles ``tri`` of any box size, expanded pixel by pixel in batches."""
+        """Triangles ``tri`` ``(n,)`` of any box size, expanded pixel by pixel in batches
+        of about ``budget`` candidates."""
         counts = (self.bw * self.bh)[tri]
         csum = np.cumsum(counts)
         start = 0

@@ -401,7 +401,7 @@ def _writer(prepared: PreparedScene, output, frames, times, method, store_visibi
 
     if (lights := light_parameters(scene.lights)) is not None:  # absent: all shexp, as before
         parameters["light_shadows"] = lights
-    if st.cluster_blend:  # absent: no blend over clusters, as before
+    if st.cluster_blend:  # absent when 0: a bake without a blend keeps its bytes
         parameters["cluster_blend"] = st.cluster_blend
     from shtools.runtime.settings import ShadowSettings
 

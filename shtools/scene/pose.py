@@ -275,7 +275,8 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
         at = handed[part]
         # grouped as the bake's clusters: the cuts of the sphere tree the runtime makes
         # for the rows next door, which keep the blocker
-        groups = None if labels is None else ReceiverClusters.from_labels(labels[at])
+        groups = None if labels is None else ReceiverClusters.from_labels(labels[at],
+                                                                          clusters.groups)
         s = _handover_runtime(prepared).visibility(points[at], normals[at], own,
                                                    clusters=groups)
         w = weight[part, None]

@@ -120,6 +120,7 @@ def test_blend_bytes_do_not_depend_on_the_processes():
         with ShadowRuntime(ShadowSettings(order=4, vertices_per_cluster=60, cluster_blend=0.5,
                                           processes=processes)) as rt:
             out.append(rt.visibility(v, n, _blockers(), rt.clusters(v)))
+            assert rt.last_stats["processes"] == processes  # the parts did go to a worker
     assert out[0].tobytes() == out[1].tobytes()
 
 
@@ -148,3 +149,15 @@ def test_blend_stays_within_an_object_group_and_its_exclusion_label():
     np.testing.assert_array_equal(split.groups[entry_cluster], split.groups[owner])
     np.testing.assert_array_equal(labels[first][entry_cluster], labels[work.order])
     assert (entry_cluster != owner).mean() > 0.1  # the band at 1.0 does blend
+
+
+def test_eval_and_an_empty_frame_take_the_setting():
+    from types import SimpleNamespace
+
+    from shtools.reference.evaluation import eval_settings
+
+    assert eval_settings(SimpleNamespace(settings={"cluster_blend": 0.5})).cluster_blend == 0.5
+    with ShadowRuntime(ShadowSettings(order=4, cluster_blend=0.5)) as rt:
+        none = np.zeros((0, 3))
+        g = rt.visibility(none, none, _blockers(), rt.clusters(none))
+    assert g.shape == (0, 16)
