@@ -148,6 +148,9 @@ def bake_row(name: str, scene_path: Path, out: Path) -> dict:
 
 #: Alternated runs of each tree in the side-by-side demo wall time.
 DEMO_ROUNDS = 3
+#: A demo run taking longer than this (s) is killed and fails the table (a fresh
+#: clone's demo takes 12-22 s on this repository's 2-core machines).
+DEMO_TIMEOUT_S = 600
 
 
 def demo_wall(root: Path) -> float:
@@ -161,7 +164,8 @@ def demo_wall(root: Path) -> float:
                                                             os.environ.get("PYTHONPATH")])))
         start = time.perf_counter()
         subprocess.run([sys.executable, "-m", "shtools.demo", str(Path(tmp) / "out")],
-                       cwd=root, env=env, check=True, capture_output=True)
+                       cwd=root, env=env, check=True, capture_output=True,
+                       timeout=DEMO_TIMEOUT_S)
         return time.perf_counter() - start
 
 

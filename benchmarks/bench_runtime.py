@@ -381,15 +381,19 @@ BLEND_BANDS = (0.0, 0.25, 0.5, 1.0)
 def table_cluster_blend(quick: bool) -> list[dict]:
     """The battle ground's seams and cost with the receivers blended over clusters.
 
-    The ground's luminance under the sky, against the flat sum of every leaf at every
+    The ground's radiance under the sky, against the flat sum of every leaf at every
     receiver (``hierarchy = False``, which has no clusters and so no seam): the
-    smoothness ratio (mean |discrete Laplacian|, as bench_look's) and the relative
-    RMSE, and the visibility's CPU (fastest of 3 frames) and pairs.
+    smoothness ratio (:func:`shtools.reference.look.smoothness_ratio`, bench_look's
+    mesh-graph Laplacian of the luminance) and the relative RMSE, and the
+    visibility's CPU (fastest of 3 frames) and pairs.
     """
+    from shtools.reference.evaluation import grid_faces
+    from shtools.reference.look import smoothness_ratio
+
     grid = 90 if quick else 200
     scene = BattleScene(grid=grid, mesh_count=14)
     v, n, groups, blockers = scene.frame(0.3)
-    lum = np.array([0.2126, 0.7152, 0.0722])
+    faces = grid_faces(grid)
 
     def ground(**kw):
         with ShadowRuntime(ShadowSettings(order=4, **kw)) as rt:
@@ -399,12 +403,7 @@ def table_cluster_blend(quick: bool) -> list[dict]:
                 t0 = time.process_time()
                 g = rt.visibility(v, n, blockers, clusters)
                 cpu = min(cpu, time.process_time() - t0)
-            radiance = rt.shade(g, v, n, scene.env, [])[:grid * grid]
-            return (radiance @ lum).reshape(grid, grid), cpu, rt.last_stats["pairs"]
-
-    def roughness(x):
-        return np.abs(4 * x[1:-1, 1:-1] - x[:-2, 1:-1] - x[2:, 1:-1] - x[1:-1, :-2]
-                      - x[1:-1, 2:]).mean()
+            return rt.shade(g, v, n, scene.env, [])[:grid * grid], cpu, rt.last_stats["pairs"]
 
     flat, flat_cpu, flat_pairs = ground(hierarchy=False)
     rows = [{"cluster_blend": "flat sum (no hierarchy)", "smoothness vs flat": 1.0,
@@ -412,12 +411,11 @@ def table_cluster_blend(quick: bool) -> list[dict]:
              "pairs": flat_pairs, "CPU vs no blend": math.nan}]
     base_cpu = None
     for band in BLEND_BANDS:
-        lum_b, cpu, pairs = ground(cluster_blend=band)
+        radiance, cpu, pairs = ground(cluster_blend=band)
         base_cpu = cpu if base_cpu is None else base_cpu
-        rows.append({"cluster_blend": f"{band:g}", "smoothness vs flat":
-                     float(roughness(lum_b) / roughness(flat)),
-                     "error vs flat %": float(100 * np.sqrt(np.mean((lum_b - flat) ** 2)
-                                                            / np.mean(flat ** 2))),
+        rows.append({"cluster_blend": f"{band:g}",
+                     "smoothness vs flat": smoothness_ratio(radiance, flat, faces),
+                     "error vs flat %": 100 * relative_rmse(radiance, flat),
                      "visibility CPU ms": 1e3 * cpu, "pairs": pairs,
                      "CPU vs no blend": cpu / base_cpu})
     rows[0]["CPU vs no blend"] = flat_cpu / base_cpu

@@ -119,22 +119,19 @@ class _Boxes:
         tri = self.tri
         if not len(tri):
             return
-        bw, bh = self.bw[tri], self.bh[tri]
-        key = bh * (self.width + 1) + bw
+        key = self.bh[tri] * (self.width + 1) + self.bw[tri]
         order = np.argsort(key, kind="stable")
         tri, key = tri[order], key[order]
         starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
         stops = np.r_[starts[1:], len(tri)]
-        cells = bw[order][starts] * bh[order][starts]
+        cells = self.bw[tri[starts]] * self.bh[tri[starts]]
         grouped = cells * (stops - starts) >= GROUP_MIN_CANDIDATES
         for start, stop, cell in zip(starts[grouped], stops[grouped], cells[grouped],
                                      strict=True):
             step = max(budget // int(cell), 1)
             for first in range(int(start), int(stop), step):
                 yield from self._block(tri[first:min(first + step, stop)])
-        rest = np.concatenate([tri[a:b] for a, b in zip(starts[~grouped], stops[~grouped],
-                                                        strict=True)] or [tri[:0]])
-        yield from self._expanded(rest, budget)
+        yield from self._expanded(tri[np.repeat(~grouped, stops - starts)], budget)
 
     def _tests(self, t, cx, cy):
         """Barycentrics ``l0, l1, l2`` and the inside test at pixel centres ``cx, cy`` of

@@ -100,6 +100,7 @@ def test_depth_buffer_is_the_nearest_of_overlapping_triangles():
         flat[inside] = np.minimum(flat[inside], z[inside])
     finite = np.isfinite(expected)
     np.testing.assert_array_equal(np.isfinite(zb), finite)
+    # rtol: two float64 evaluations of 1 / (sum l_k / z_k), differently rounded
     np.testing.assert_allclose(zb[finite], expected[finite], rtol=1e-12)
 
 
@@ -136,6 +137,7 @@ def test_rasterize_shows_the_nearest_surface_in_any_number_of_batches(monkeypatc
     np.testing.assert_array_equal(one_cov[clear], hit[clear].astype(float))
     shown = clear & hit
     assert shown.sum() > 500  # the squares overlap on much of the picture
+    # atol: a constant colour through weights that sum to 1 to float64 rounding
     np.testing.assert_allclose(one[shown], square_colors[nearest[shown]], atol=1e-12)
 
 
