@@ -82,6 +82,7 @@ from shtools.scene.kept_traces import _GROUND  # noqa: F401  the kept traces (te
 from shtools.scene.kept_traces import keep as _keep_ground
 from shtools.scene.kept_traces import kept as _kept_ground
 from shtools.scene.receiver_filter import (
+    mesh_distance,
     nearest_distance,
     neighbours,
     receiver_spacing,
@@ -338,9 +339,10 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         Rays of a receiver whose cone fills its hemisphere.
     spheres : tuple of ndarray, shapes (S, 3) and (S,), optional
         Spheres bounding the mesh (its blocker's): the filter's distance to the mesh
-        is the distance to their union, never more than the true one (a contact
-        shadow is never filtered wider than its distance allows); without them, the
-        distance to the mesh's nearest vertex or face centroid.
+        is the exact one near them and the distance to their union beyond
+        (:func:`~shtools.scene.receiver_filter.mesh_distance`; object receivers, which
+        touch the mesh, take the spheres' throughout); without them, the distance to
+        the mesh's nearest vertex or face centroid.
     lights : sequence of (position (3,), radius)
         Spherical lights: a receiver that sees one behind the object is traced
         however far (:func:`light_weights`).
@@ -393,7 +395,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
 
 
 #: Version of :func:`traced_ground`'s results in the set-up cache.
-TRACED_GROUND_VERSION = 1
+TRACED_GROUND_VERSION = 2
 
 
 def _trace_ground(points, normals, vertices, faces, caster, order, n_dirs, spheres, lights,
@@ -428,8 +430,13 @@ def _trace_ground(points, normals, vertices, faces, caster, order, n_dirs, spher
     busy = np.flatnonzero(hit[local].any(axis=1))
     if busy.size:
         at = rows[busy]
-        if spheres is not None and len(spheres[1]):
+        if spheres is not None and len(spheres[1]) and strata:
+            # object receivers touching the mesh: all of them near its spheres, where
+            # the exact distance would cost more than their filter (their smoothness
+            # holds without it: bench_look's demo walker parts, 1.00-1.03)
             near = sphere_distance(p[at], *spheres)
+        elif spheres is not None and len(spheres[1]):
+            near = mesh_distance(p[at], v, faces, spheres)
         else:
             near = nearest_distance(p[at], v, faces, caster)
         step = math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near

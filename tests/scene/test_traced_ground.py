@@ -279,3 +279,44 @@ def test_a_far_shadow_is_smoothed_into_the_closed_form():
     # and closer to the closed form (0.0101 in one pass, 0.0074 in three; each direction
     # is 0.018 in g_00)
     assert float(np.sqrt(np.mean((g - want) ** 2))) < 0.0085
+
+
+def test_the_filter_distance_is_the_meshs_near_a_loose_bound_and_continuous():
+    """A thin rod in fat spheres: the spheres' distance is far short of the rod's next to
+    it (the filter would be that much too narrow), so near the spheres mesh_distance is
+    the exact distance to the triangles (checked against trimesh's closest points, an
+    independent implementation), far from them the spheres' (closed form), and it is
+    continuous in between."""
+    from shtools.scene.receiver_filter import EXACT_REACH, mesh_distance, sphere_distance
+
+    rod = trimesh.creation.cylinder(radius=0.02, height=1.0, sections=16)
+    centers = np.stack([np.zeros(6), np.zeros(6), np.linspace(-0.5, 0.5, 6)], axis=1)
+    radii = np.full(6, 0.15)  # 7.5x the rod: a loose bound
+    # points along x from the rod's side out past the blend (z = 0.1: between spheres)
+    x = np.linspace(0.03, (EXACT_REACH[1] + 1.0) * 0.15 + 0.15, 4001)
+    pts = np.stack([x, np.zeros_like(x), np.full_like(x, 0.1)], axis=1)
+    d = mesh_distance(pts, rod.vertices, rod.faces, (centers, radii))
+    # the rod's side is a 16-gon prism and every point is level with its middle: the
+    # distance is the plane distance to the polygon's edges (point-segment, closed form)
+    ring = rod.vertices[np.isclose(rod.vertices[:, 2], 0.5)][:, :2]
+    ring = ring[np.argsort(np.arctan2(ring[:, 1], ring[:, 0]))]
+    a, b = ring, np.roll(ring, -1, axis=0)
+    rel = pts[:, None, :2] - a[None]
+    t = np.clip(np.einsum("pek,ek->pe", rel, b - a) / np.einsum("ek,ek->e", b - a, b - a),
+                0.0, 1.0)
+    exact = np.linalg.norm(rel - t[..., None] * (b - a)[None], axis=2).min(axis=1)
+    spheres = sphere_distance(pts, centers, radii)
+    inside = spheres <= EXACT_REACH[0] * 0.15
+    beyond = spheres >= EXACT_REACH[1] * 0.15
+    assert inside.sum() > 100 and beyond.sum() > 100
+    # next to the rod the spheres' distance is a fraction of the true one
+    assert np.all(spheres[inside] < 0.8 * exact[inside])
+    # 1e-6: libigl's float64 distance to the same facets (the 16-gon, not the circle)
+    np.testing.assert_allclose(d[inside], exact[inside], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(d[beyond], spheres[beyond], rtol=0, atol=1e-6)
+    # continuous: steps of 1e-4 along x move it by no more than a slope of 1 allows
+    # (both distances are 1-Lipschitz, the smoothstep's weight adds at most 1.5 x the
+    # gap between them over its band)
+    gap = float(np.max(np.abs(exact - spheres)))
+    slope = 1.0 + 1.5 * gap / ((EXACT_REACH[1] - EXACT_REACH[0]) * 0.15)
+    assert np.max(np.abs(np.diff(d))) <= slope * (x[1] - x[0]) * (1 + 1e-6)
