@@ -17,21 +17,25 @@ tracer of the posed real meshes (:func:`shtools.reference.raytrace_visibility`,
   and the raw reference's shadowed error beside (``shadowed raw``),
 * CPU per frame (one process and one frame baker, as a bake's worker; the set-up
   frame left out) and its ratio to the baseline, and the CPU of that set-up frame
-  (receiver clusters, runtime, the first frame's per-bake state).
+  (receiver clusters, runtime, the first frame's per-bake state; the set-up cache off,
+  so every code computes it).
 
 Scenes from ``../shared/data`` (never committed; the assets are built with
 ``benchmarks/bench_fidelity.py``'s helpers and cached there): the bunny under the
 Uffizi probe and CesiumMan walking under Grace, each on a 4 x 4 ground of 96
-subdivisions; ``--demo DIR`` adds frames 10-13 of ``make demo``'s scene in DIR;
+subdivisions; the glTF Fox running under the Mondello probe on a 3 x 3 ground of 96
+(a low-poly quadruped whose thin legs stand in loose spheres); the cow and the human
+side by side under Uffizi on the 4 x 4 ground; ``--demo DIR`` adds frames 10-13 of
+``make demo``'s scene in DIR (default ``out/`` when ``make demo`` has written it);
 ``--scenes dragon`` (only when named: two large transfers and references) the dragon
 and the armadillo side by side under Grace on the same ground, each shadowing the
 other (objects that both receive and block).
 ``--quick``: spot on a 3 x 3 ground of 40 subdivisions, one frame.
 
-``--baseline DIR`` bakes the same scenes with the code in DIR (e.g. the worktree of
-the previous release) in the same run, each bake in its own process (the codes
-alternated, the fastest repeat kept), and prints them side by side; given again, it
-adds more codes (the CPU ratios are against the first).
+``--baseline DIR`` (or ``SHTOOLS_BASELINE=DIR``) bakes the same scenes with the code in
+DIR (e.g. the worktree of the previous release) in the same run, each bake in its own
+process (the codes alternated, the fastest repeat kept), and prints them side by side;
+given again, it adds more codes (the CPU ratios are against the first).
 
 ``python benchmarks/bench_look.py [--quick] [--baseline DIR] [--demo DIR]``
 """
@@ -105,6 +109,19 @@ def scenes(quick: bool, demo: Path | None, field: Path | None = None,
     body = fid._ground(4.0, 96) + fid._skinned("cesiumman", "CesiumMan.glb", 48, pre)
     out["cesiumman"] = {"path": write("cesiumman", body, DATA / "probes" / "grace.hdr", 3, 4),
                         "frames": range(0, 3)}
+    # a low-poly quadruped (576 faces) under a third probe: a skinned character unlike
+    # CesiumMan, whose thin legs stand in loose spheres
+    body = fid._ground(3.0, 96) + fid._skinned(
+        "fox", "Fox.glb", 32, pre, extra="scale = 0.012\ntranslate = [0.0, 0.0, 0.2]\n",
+        animation=2)
+    out["fox"] = {"path": write("fox", body, DATA / "probes" / "spiaggia_di_mondello_1k.hdr",
+                                3, 4),
+                  "frames": range(0, 3)}
+    body = (fid._ground(4.0, 96)
+            + fid._rigid("cow", "cow.obj", 48, 0.9, -0.8, 0.1, 25.0, pre)
+            + fid._rigid("human", "human_man.obj", 48, 1.7, 0.7, -0.2, -20.0, pre))
+    out["cowman"] = {"path": write("cowman", body, DATA / "probes" / "uffizi.hdr", 1),
+                     "frames": range(0, 1)}
     if only and "dragon" in only:  # opt-in: two large transfers and references
         body = (fid._ground(4.0, 96)
                 + fid._rigid("dragon", "dragon.obj", 64, 1.1, -0.9, 0.0, 20.0, pre)
@@ -181,8 +198,9 @@ def _bake(code: Path, scene: dict, tag: str) -> dict:
     out = CACHE / f"{scene['path'].stem}.{tag}.npz"
     # the bytecode kept out of the code's folder: a set-up frame's imports compile no
     # source after the first repeat (an installed package has its bytecode)
+    # the set-up cache off: every code's set-up frame is computed, not read back
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code),
-           "PYTHONPYCACHEPREFIX": str(CACHE / "pycache" / tag)}
+           "PYTHONPYCACHEPREFIX": str(CACHE / "pycache" / tag), "SHTOOLS_NO_CACHE": "1"}
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
                     str(scene["path"]), str(scene["frames"].start), str(scene["frames"].stop),
@@ -339,9 +357,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="spot, one small ground")
     parser.add_argument("--baseline", type=Path, action="append",
-                        help="code to compare with (a worktree); again for more codes, the "
-                             "ratios against the first")
-    parser.add_argument("--demo", type=Path, help="make demo's output folder (its scene.toml)")
+                        help="code to compare with (a worktree; default $SHTOOLS_BASELINE); "
+                             "again for more codes, the ratios against the first")
+    parser.add_argument("--demo", type=Path,
+                        help="make demo's output folder (its scene.toml; default out/ when "
+                             "make demo has written it)")
     parser.add_argument("--scenes", help="comma-separated scene names (default all)")
     parser.add_argument("--field", type=Path, help="a field asset of teapot.obj (order 4): "
                         "adds the teapot scenes 'teapot14' and 'teapot3'")
@@ -351,6 +371,10 @@ def main(argv=None) -> int:
                              "0: the errors' reference)")
     parser.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.baseline is None and os.environ.get("SHTOOLS_BASELINE"):
+        args.baseline = [Path(os.environ["SHTOOLS_BASELINE"])]
+    if args.demo is None and not args.quick and (REPO / "out" / "scene.toml").is_file():
+        args.demo = REPO / "out"
     if args.worker:
         bake_worker(args.worker[0], int(args.worker[1]), int(args.worker[2]), args.worker[3])
         return 0
