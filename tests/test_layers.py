@@ -23,9 +23,10 @@ ALLOWED = {
     "progress": set(),  # the progress protocol, a leaf like errors
     "tasks": {"errors", "registry"},  # a package: pool, workers, dask_cluster
     "cache": set(),  # the set-up cache: stdlib and numpy only
-    "sh": {"errors", "registry"},
+    "blend": set(),  # the one smoothstep of every continuous transition, a leaf
+    "sh": {"errors", "registry", "blend"},
     "data_formats": {"errors", "registry", "sh"},
-    "runtime": {"errors", "registry", "tasks", "sh", "data_formats"},
+    "runtime": {"errors", "registry", "blend", "tasks", "sh", "data_formats"},
     "geometry": {"errors", "registry", "progress", "cache", "tasks", "sh", "data_formats",
                  "runtime"},
     "fields": {"errors", "registry", "progress", "cache", "tasks", "sh", "data_formats",
@@ -35,7 +36,7 @@ ALLOWED = {
                   "runtime", "geometry", "fields", "lighting"},
     "export": {"errors", "registry", "progress", "cache", "tasks", "sh", "data_formats",
                "runtime", "geometry", "fields", "lighting", "reference"},
-    "scene": {"errors", "registry", "progress", "cache", "tasks", "sh", "data_formats",
+    "scene": {"errors", "registry", "blend", "progress", "cache", "tasks", "sh", "data_formats",
               "runtime", "geometry", "fields", "lighting", "reference", "export"},
     "cli": {"*"},
     "demo": {"*"},

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shtools.blend import smoothstep
 from shtools.runtime.clusters import ReceiverClusters
 
 
@@ -113,7 +114,7 @@ def blend_entries(points, clusters: ReceiverClusters, centers, radii, labels,
     t /= np.take(h.astype(np.float32), idx)
     ki, vi = np.nonzero(t < 1.0)  # (inf where not a candidate)
     s = t[ki, vi]
-    raw = 1.0 - s * s * (3.0 - 2.0 * s)
+    raw = 1.0 - smoothstep(s)
     entry_cluster = idx[ki, vi]
     # by cluster, receivers ascending within (a tile's receivers are neighbours)
     by_cluster = np.argsort(entry_cluster * p.shape[0] + vi)

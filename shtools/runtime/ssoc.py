@@ -88,6 +88,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shtools.blend import smoothstep
 from shtools.errors import InputError
 from shtools.runtime.light_camera import LightCamera, fit_light_camera
 from shtools.runtime.raster import depth_buffer
@@ -419,7 +420,7 @@ def _falloff(t: np.ndarray, kind: str) -> np.ndarray:
     if kind == "disk":
         tau = 2.0 * t - 1.0
         return 0.5 + (np.arcsin(tau) + tau * np.sqrt(np.maximum(1.0 - tau * tau, 0.0))) / np.pi
-    return t * t * (3.0 - 2.0 * t)
+    return smoothstep(t)
 
 
 def _receivers(cam: LightCamera, face: int, maps: FaceMaps, pts, nrm, radius: float,

@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from shtools.blend import smoothstep
+
 #: The neighbour (by rank, self excluded) whose distance is a receiver's spacing.
 SPACING_NEIGHBOUR = 4
 #: Receivers whose normals differ by more than this cosine are not filtered together.
@@ -54,36 +56,42 @@ def nearest_distance(points, mesh_vertices, faces, caster=None) -> np.ndarray:
 
 #: Sphere distances (in the largest sphere's radius) within which
 #: :func:`mesh_distance` is the exact distance to the mesh, and beyond which it is the
-#: spheres'.  A loose bound's spheres are nearer than its mesh, by a third of the
-#: distance next to a thin leg; the filter that much too narrow leaves the steps
+#: spheres'.  A loose bound's spheres are nearer than its mesh, next to a thin leg
+#: by 28 % of the distance; the filter that much too narrow leaves the steps
 #: there (the ground under the glTF sample Fox, 576 faces and 32 spheres: smoothness
 #: ratio 1.19 on ``benchmarks/bench_look.py``'s measure; 1.11 with the exact distance
-#: within these radii, and no better within 3 to 6).
+#: within these radii, the same within noise out to 3 to 6).
 EXACT_REACH = (1.0, 2.5)
 
 
 def mesh_distance(points, vertices, faces, spheres) -> np.ndarray:
     """Distance ``(V,)`` from each point to a mesh bound by spheres, for the filter's width.
 
-    The distance to the spheres' union (:func:`sphere_distance`) far from them, the exact
-    distance to the triangles (libigl's AABB tree) near them, blended by a smoothstep
-    of the sphere distance over :data:`EXACT_REACH` (continuous over the receivers);
-    only the receivers near the spheres pay for the exact query.
+    The exact distance to the triangles (libigl's AABB tree) within ``EXACT_REACH[0]``
+    of the largest sphere's radius of the spheres, the distance to the spheres' union
+    (:func:`sphere_distance`) beyond ``EXACT_REACH[1]``, and between them a smoothstep
+    of the sphere distance blending the two (continuous over the receivers); only the
+    receivers near the spheres pay for the exact query.
 
     Parameters
     ----------
     points : array_like, shape (V, 3)
+        The receivers (world space).
     vertices, faces : array_like, shapes (P, 3) and (F, 3)
-        The mesh.
+        The mesh (at least one triangle).
     spheres : tuple of ndarray, shapes (S, 3) and (S,)
-        Its bounding spheres' centres and radii.
+        Its bounding spheres' centres and radii (at least one sphere).
+
+    Returns
+    -------
+    ndarray, shape (V,) float64
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     d = sphere_distance(p, *spheres)
     r_max = float(np.max(spheres[1]))
     lo, hi = (k * r_max for k in EXACT_REACH)
     t = np.clip((d - lo) / max(hi - lo, 1e-300), 0.0, 1.0)
-    w = 1.0 - t * t * (3.0 - 2.0 * t)
+    w = 1.0 - smoothstep(t)
     near = np.flatnonzero(w > 0)
     if near.size:
         import igl

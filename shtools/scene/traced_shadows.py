@@ -77,6 +77,7 @@ import math
 
 import numpy as np
 
+from shtools.blend import smoothstep
 from shtools.geometry.visibility import RAY_OFFSET
 from shtools.scene.kept_traces import _GROUND  # noqa: F401  the kept traces (tests clear it)
 from shtools.scene.kept_traces import keep as _keep_ground
@@ -151,7 +152,7 @@ def handover_weights(rays) -> np.ndarray:
     """
     lo, hi = HANDOVER_RAYS
     t = np.clip((np.asarray(rays, dtype=np.float64) - lo) / (hi - lo), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+    return smoothstep(t)
 
 
 def light_weights(points, axis, cos_half, center, radius, position, light_radius
@@ -174,7 +175,7 @@ def light_weights(points, axis, cos_half, center, radius, position, light_radius
     gap = np.arccos(np.clip(np.einsum("vk,vk->v", axis, u), -1.0, 1.0)) - cone - disc
     margin = LIGHT_MARGIN * (cone + disc)
     t = np.clip(1.0 - gap / np.maximum(margin, 1e-300), 0.0, 1.0)
-    w = t * t * (3.0 - 2.0 * t)
+    w = smoothstep(t)
     beyond = far > np.linalg.norm(np.asarray(center, dtype=np.float64)[None] - p,
                                   axis=1) - radius
     return np.where(beyond & (cos_half < 1.0), w, 0.0)
@@ -347,8 +348,10 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         Spherical lights: a receiver that sees one behind the object is traced
         however far (:func:`light_weights`).
     strata : bool
-        Cast the set in strata (``around`` of :func:`set_visibility`: the receivers'
-        neighbours share what their first rays found).
+        The receivers are objects' (contact shadows): the set is cast in strata
+        (``around`` of :func:`set_visibility`: the receivers' neighbours share what
+        their first rays found), with no denser set, and the filter's distance is
+        the spheres'.
     rest : tuple, optional
         The receivers' rest geometry when they are one rigid object (``rest`` of
         :func:`~shtools.scene.receiver_filter.neighbours`).
@@ -430,15 +433,15 @@ def _trace_ground(points, normals, vertices, faces, caster, order, n_dirs, spher
     busy = np.flatnonzero(hit[local].any(axis=1))
     if busy.size:
         at = rows[busy]
-        if spheres is not None and len(spheres[1]) and strata:
+        if spheres is None or not len(spheres[1]):
+            near = nearest_distance(p[at], v, faces, caster)
+        elif strata:
             # object receivers touching the mesh: all of them near its spheres, where
             # the exact distance would cost more than their filter (their smoothness
             # holds without it: bench_look's demo walker parts, 1.00-1.03)
             near = sphere_distance(p[at], *spheres)
-        elif spheres is not None and len(spheres[1]):
-            near = mesh_distance(p[at], v, faces, spheres)
         else:
-            near = nearest_distance(p[at], v, faces, caster)
+            near = mesh_distance(p[at], v, faces, spheres)
         step = math.sqrt(4.0 * math.pi / (2 * int(n_dirs))) * near
         # object receivers (strata) take no denser set: near a touching mesh nearly all
         # of them would, at more than the rest of a frame's cost, for an error already
@@ -471,4 +474,4 @@ def refine_weights(step, spacing) -> np.ndarray:
     w = np.asarray(step, dtype=np.float64)
     ratio = np.where(w > 0, s / np.where(w > 0, w, 1.0), np.inf)
     t = np.clip(ratio - 1.0, 0.0, 1.0)
-    return np.where(np.isfinite(s), t * t * (3.0 - 2.0 * t), 0.0)
+    return np.where(np.isfinite(s), smoothstep(t), 0.0)

@@ -50,6 +50,7 @@ from typing import Protocol
 
 import numpy as np
 
+from shtools.blend import smoothstep
 from shtools.sh._kernels import run_product
 from shtools.sh.basis import SQRT_4PI, basis, check_order, order_from_size
 from shtools.sh.quadrature import sphere_quadrature
@@ -97,7 +98,7 @@ def squaring_weights(norm, margin: int = SQUARING_MARGIN) -> tuple[np.ndarray, n
     u = _log_count(norm, margin)
     floor = np.floor(u)
     t = np.clip((u - floor - (1.0 - SQUARING_BLEND)) / SQUARING_BLEND, 0.0, 1.0)
-    w = np.where(u >= 0, t * t * (3.0 - 2.0 * t), 0.0)
+    w = np.where(u >= 0, smoothstep(t), 0.0)
     return np.maximum(floor, 0).astype(np.int64), w
 
 
