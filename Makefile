@@ -82,7 +82,7 @@ bench: $(STAMP) ## Run every benchmarks/bench_*.py, print their tables, write be
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks $(if $(QUICK),--quick) $(if $(ONLY),--update $(foreach n,$(ONLY),-k $(n)))
 
 golden: $(STAMP) ## Regenerate tests/golden/golden.h5 on purpose (review with shtools diff)
-	$(PY) tests/golden/regenerate.py
+	OPENBLAS_NUM_THREADS=1 $(PY) tests/golden/regenerate.py
 
 examples: $(STAMP) ## Build the example asset pipeline in examples/ (make -j2 works)
 	$(MAKE) -C examples

@@ -25,7 +25,10 @@ options beyond the paper at 0.05 rad, and the paper's Table 1 columns (CPU) on t
 bunny and the dragon.  First, :func:`penumbra`: the error over the ground vertices
 in the penumbra and umbra of a 0.05 rad light, next to the whole ground's.
 
-``python benchmarks/bench_ssoc.py [--quick] [--penumbra-only]``
+The penumbra table is repeated with spot and the cow in the bunny's place (held out:
+the defaults were tuned on the bunny; ``--penumbra-mesh NAME`` for others).
+
+``python benchmarks/bench_ssoc.py [--quick] [--penumbra-only] [--penumbra-mesh NAME]``
 """
 
 from __future__ import annotations
@@ -179,6 +182,8 @@ def accuracy(mesh, quick: bool):
 
 #: Rays per penumbra receiver of the hybrid rows (the scene's ``ssoc.rays``).
 HYBRID_RAYS = (64, 256)
+#: Meshes of the penumbra table held out from the tuning (the bunny's), scaled likewise.
+HELD_OUT = ("spot.obj", "cow.obj")
 #: Light centres of the small-light penumbra scenes (bunny of unit height at the origin).
 PENUMBRA_LIGHTS = ((0.35, 2.5, 0.25), (1.5, 1.6, 0.8), (-0.8, 1.2, -1.0))
 
@@ -294,7 +299,11 @@ def main():
     parser.add_argument("--skip-stages", action="store_true")
     parser.add_argument("--stages-only", action="store_true")
     parser.add_argument("--penumbra-only", action="store_true",
-                        help="only the small-light penumbra table (bunny on a 3 x 3 ground)")
+                        help="only the small-light penumbra tables (bunny on a 3 x 3 ground)")
+    parser.add_argument("--penumbra-mesh", action="append", metavar="NAME",
+                        help="a mesh of the shared data for another penumbra table, in the "
+                             "bunny's place (again for more; default without --quick: "
+                             + ", ".join(HELD_OUT) + ")")
     args = parser.parse_args()
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     load = os.getloadavg()
@@ -307,6 +316,11 @@ def main():
     print("\n## Small light (0.05 rad), bunny on a 3 x 3 ground: the vertices seeing "
           "< 98 % of it\n")
     print(_markdown(penumbra(mesh, args.quick)))
+    for name in args.penumbra_mesh or (() if args.quick else HELD_OUT):
+        if not (DATA / name).exists():
+            continue
+        print(f"\n## Small light (0.05 rad), {name} in the bunny's place (held out)\n")
+        print(_markdown(penumbra(_load(name, args.quick), args.quick)))
     if args.penumbra_only:
         return
     t0 = time.perf_counter()
