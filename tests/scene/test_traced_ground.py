@@ -324,3 +324,28 @@ def test_the_filter_distance_is_the_meshs_near_a_loose_bound_and_continuous():
     slope = 1.0 + 1.5 * float(np.max(np.abs(exact - spheres)[band])) / width
     steps = np.abs(np.diff(d)) / (x[1] - x[0])
     assert np.max(steps) <= slope * (1 + 1e-6)
+
+
+def test_the_ground_filters_with_the_mesh_distance_and_objects_with_the_spheres(monkeypatch):
+    """Which distance sets the filter's width: a ground's receivers (no strata) take
+    mesh_distance (exact near a loose bound), object receivers in contact (strata) the
+    spheres' alone, as traced_ground documents."""
+    import shtools.scene.traced_shadows as ts
+
+    v, f, caster = _unit_sphere()
+    x = np.linspace(-1.5, 1.5, 13)
+    X, Z = np.meshgrid(x, x)
+    pts = np.column_stack([X.ravel(), np.full(X.size, -1.05), Z.ravel()])
+    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    spheres = (np.zeros((1, 3)), np.array([1.3]))  # loose: 1.3 about a unit sphere
+    calls = []
+    real_mesh, real_spheres = ts.mesh_distance, ts.sphere_distance
+    monkeypatch.setattr(ts, "mesh_distance",
+                        lambda *a: calls.append("mesh") or real_mesh(*a))
+    monkeypatch.setattr(ts, "sphere_distance",
+                        lambda *a: calls.append("spheres") or real_spheres(*a))
+    for strata in (False, True):
+        ts._GROUND.clear()
+        traced_ground(pts, nrm, v, f, caster, 3, 96, spheres=spheres, strata=strata)
+    ts._GROUND.clear()
+    assert calls == ["mesh", "spheres"]
