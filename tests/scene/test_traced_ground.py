@@ -281,11 +281,13 @@ def test_a_far_shadow_is_smoothed_into_the_closed_form():
     assert float(np.sqrt(np.mean((g - want) ** 2))) < 0.0085
 
 
-def test_the_filter_distance_is_the_meshs_near_a_loose_bound_and_continuous():
+def test_the_filter_distance_is_the_meshs_near_a_loose_bound_and_continuous(monkeypatch):
     """A thin rod in fat spheres: the spheres' distance is far short of the rod's next to
     it (the filter would be that much too narrow), so near the spheres mesh_distance is
     the exact distance to the triangles, far from them the spheres', and it is
     continuous in between; both checked against closed forms."""
+    import igl
+
     from shtools.scene.receiver_filter import EXACT_REACH, mesh_distance
 
     rod = trimesh.creation.cylinder(radius=0.02, height=1.0, sections=16)
@@ -295,7 +297,21 @@ def test_the_filter_distance_is_the_meshs_near_a_loose_bound_and_continuous():
     # (z = 0.1): that sphere is the nearest, so the spheres' distance is x - 0.15
     x = np.linspace(0.03, (EXACT_REACH[1] + 1.0) * 0.15 + 0.15, 4001)
     pts = np.stack([x, np.zeros_like(x), np.full_like(x, 0.1)], axis=1)
-    d = mesh_distance(pts, rod.vertices, rod.faces, (centers, radii))
+    # a second rod far away: its triangles cannot hold a nearest point, and libigl is
+    # not given them (its tree costs about 1 us a triangle)
+    far = rod.copy()
+    far.apply_translation([50.0, 0.0, 0.0])
+    mesh = trimesh.util.concatenate([rod, far])
+    given = []
+    real = igl.point_mesh_squared_distance
+
+    def spy(q, v, f):
+        given.append(len(f))
+        return real(q, v, f)
+
+    monkeypatch.setattr(igl, "point_mesh_squared_distance", spy)
+    d = mesh_distance(pts, mesh.vertices, mesh.faces, (centers, radii))
+    assert given and given[0] <= len(rod.faces) < len(mesh.faces)
     spheres = np.maximum(x - 0.15, 0.0)
     # the rod's side is a 16-gon prism and every point is level with its middle: the
     # distance is the plane distance to the polygon's edges (point-segment)
