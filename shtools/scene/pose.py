@@ -264,8 +264,11 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                       spheres=_bounding_spheres(own),
                                       lights=[(x.position, x.radius) for x in lights
                                               if isinstance(x, SphereLight)],
-                                      strata=strata,
-                                      rest=rest, cache=cache, still=still)
+                                      strata=strata, rest=rest, cache=cache, still=still,
+                                      # object receivers at the reach they were
+                                      # paired at (contact_casters): no gain, no pop
+                                      # as an object crosses it
+                                      sky=None if strata else _sky(prepared))
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)
@@ -284,6 +287,13 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     return SelfVisibility(None, rows[handed], blocker=_skip_handed(blockers, indices,
                                                                    rows[handed]),
                           visibility=g.astype(np.float32))
+
+
+def _sky(prepared):
+    """The environment's luminance in SH ``(n*n,)``, or None without one."""
+    from shtools.runtime.shading import LUMINANCE
+
+    return None if prepared.env_sh is None else np.asarray(prepared.env_sh) @ LUMINANCE
 
 
 def _skip_handed(blockers: list, indices: tuple, handed: np.ndarray):
@@ -354,26 +364,10 @@ def _rigid_caster(rigid: list):
 def _overlapping(rigid: list) -> list[list]:
     """``rigid`` (object, transform, posed vertices, blocker index) grouped by bounding
     spheres that overlap, directly or through others (in the objects' order)."""
-    spheres = []
-    for _, _, v, _ in rigid:
-        center = 0.5 * (v.min(axis=0) + v.max(axis=0))
-        spheres.append((center, float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))))
-    group = list(range(len(rigid)))
+    from shtools.scene.contact_shadows import overlapping_groups, posed_sphere
 
-    def root(i):
-        while group[i] != i:
-            i = group[i]
-        return i
-
-    for i in range(len(rigid)):
-        for j in range(i):
-            (ci, ri), (cj, rj) = spheres[i], spheres[j]
-            if np.linalg.norm(ci - cj) < ri + rj:
-                group[max(root(i), root(j))] = min(root(i), root(j))
-    out: dict = {}
-    for i, r in enumerate(rigid):
-        out.setdefault(root(i), []).append(r)
-    return list(out.values())
+    return [[rigid[i] for i in group]
+            for group in overlapping_groups([posed_sphere(v) for _, _, v, _ in rigid])]
 
 
 def _joint_faces(rigid: list) -> np.ndarray:

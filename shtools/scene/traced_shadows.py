@@ -64,10 +64,14 @@ mesh, and in between the blend ``w T + (1 - w) S`` of the traced visibility
 visibility, not log: ``T`` is a visibility whose per-frame log (eigen) would
 cost more than the frame, and where the blend happens the object is far and
 faint (both visibilities near 1), where a visibility blend and a log blend
-agree to first order in the log.  A spherical light the object may hide keeps
-its long shadow traced however far (:func:`light_weights`), where spheres shade
-it poorly.  Receivers of weight 0 keep the blocker in the runtime (which splits a
-receiver cluster whose rows skip different blockers).
+agree to first order in the log.  The ray count is weighed by the light behind
+the object (:func:`sky_gain`): a receiver that sees the object against a sun
+darkens by more than the count says, and its shadow stays traced farther (the
+long shadow of a low sun, where the spheres' outline is not the mesh's).  A
+spherical light the object may hide keeps its long shadow traced however far
+(:func:`light_weights`), where spheres shade it poorly.  Receivers of weight 0
+keep the blocker in the runtime (which splits a receiver cluster whose rows skip
+different blockers).
 """
 
 from __future__ import annotations
@@ -97,6 +101,11 @@ from shtools.sh.basis import SQRT_4PI
 #: bounding radii) and 4 (about 3.5 radii, the reach of the former per-cluster rule,
 #: within which the whole shadow is the real mesh's).
 HANDOVER_RAYS = (2.0, 4.0)
+#: Most that :func:`sky_gain` lengthens a cone's ray count by (a sun against a grazing
+#: receiver's dim sky would otherwise trace the whole ground).
+SKY_GAIN_MAX = 8.0
+#: Directions on a cone's rim where :func:`sky_gain` looks for bright light.
+SKY_RIM = 6
 #: Gap (in the cone's half-angle plus the light disc's) over which a spherical light
 #: hidden by the object hands its long shadow over to the spheres (:func:`light_weights`).
 LIGHT_MARGIN = 0.5
@@ -144,6 +153,15 @@ def cone_rays(cos_half, n_dirs: int) -> np.ndarray:
     return int(n_dirs) * (1.0 - np.asarray(cos_half, dtype=np.float64))
 
 
+def handover_reach(n_dirs: int) -> float:
+    """Distance from a bounding sphere's centre, in its radii, beyond which a receiver's
+    cone holds at most ``HANDOVER_RAYS[0]`` rays of ``n_dirs`` (its hand-over weight is
+    0 there at a sky gain of 1): ``1 / sin θ`` for ``1 - cos θ = HANDOVER_RAYS[0] / n_dirs``.
+    """
+    c = 1.0 - min(1.0, HANDOVER_RAYS[0] / int(n_dirs))
+    return 1.0 / math.sqrt(max(1e-300, 1.0 - c * c))
+
+
 def handover_weights(rays) -> np.ndarray:
     """Weight ``(V,)`` of the traced mesh against the spheres: a smoothstep of the rays.
 
@@ -153,6 +171,62 @@ def handover_weights(rays) -> np.ndarray:
     lo, hi = HANDOVER_RAYS
     t = np.clip((np.asarray(rays, dtype=np.float64) - lo) / (hi - lo), 0.0, 1.0)
     return smoothstep(t)
+
+
+def sky_gain(axis, normals, cos_half, sky) -> np.ndarray:
+    r"""Factor ``(V,)`` of each receiver's cone ray count by the light behind the object.
+
+    A cone of ``k`` rays darkens a receiver by about ``k / n_dirs`` of its light under
+    a uniform sky; against a brighter part of the sky by more.  The factor is the
+    brightest cosine-weighted radiance in the cone over the receiver's
+    cosine-weighted mean radiance,
+
+    .. math::
+
+        \rho = \max_{s \in \mathrm{cone}} \frac{L^+(s)\,\max(s\cdot N, 0)}
+                {\mathbf H(N)\cdot\mathbf L},
+
+    ``L^+`` the sky's order-``n`` luminance reconstruction clamped at 0 and
+    ``H(N) . L = E(N) / π`` (:func:`~shtools.sh.zonal.clamped_cosine_zh`), the maximum
+    taken over the axis and :data:`SKY_RIM` directions on the cone's rim (the
+    reconstruction varies over tens of degrees: a low sun inside a wide cone, off its
+    axis, is what lengthens the shadow).  Clamped to ``[1, SKY_GAIN_MAX]``: never
+    below 1 (a uniform sky gives ``s . N <= 1``: the count as it was), so the traced
+    reach only grows toward bright light.
+
+    Parameters
+    ----------
+    axis, normals : ndarray, shape (V, 3)
+        The cones' unit axes and the receivers' unit normals.
+    cos_half : ndarray, shape (V,)
+        The cones' half-angle cosines.
+    sky : array_like, shape (n*n,), or None
+        The environment's luminance in SH (None: no environment, factor 1).
+    """
+    from shtools.runtime.shading import cosine_transfer
+    from shtools.sh import basis
+
+    if sky is None or not len(axis):
+        return np.ones(len(axis))
+    lum = np.asarray(sky, dtype=np.float64)
+    order = math.isqrt(len(lum))
+    a = np.asarray(axis, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    # an orthonormal frame about each axis (the helper farthest from it)
+    helper = np.where((np.abs(a[:, 1]) < 0.9)[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    u = np.cross(a, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(a, u)
+    c = np.clip(cos_half, -1.0, 1.0)[:, None, None]
+    phi = 2.0 * math.pi * np.arange(SKY_RIM) / SKY_RIM
+    rim = c * a[:, None] + np.sqrt(1.0 - c * c) * (np.cos(phi)[None, :, None] * u[:, None]
+                                                   + np.sin(phi)[None, :, None] * v[:, None])
+    s = np.concatenate([a[:, None], rim], axis=1)  # (V, 1 + SKY_RIM, 3)
+    bright = np.maximum(basis(s.reshape(-1, 3), order) @ lum, 0.0).reshape(s.shape[:2])
+    facing = np.maximum(np.einsum("vsk,vk->vs", s, nrm), 0.0)
+    mean = cosine_transfer(nrm, order).astype(np.float64) @ lum
+    rho = (bright * facing).max(axis=1) / np.maximum(mean, 1e-12 * max(abs(lum[0]), 1e-300))
+    return np.clip(rho, 1.0, SKY_GAIN_MAX)
 
 
 def light_weights(points, axis, cos_half, center, radius, position, light_radius
@@ -323,7 +397,7 @@ def _set_projection(n: int, order: int) -> tuple[np.ndarray, np.ndarray]:
 
 def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: int,
                   spheres=None, lights=(), strata: bool = False, rest=None, *, cache=None,
-                  still: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  still: bool = False, sky=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The traced part of an object's shadow on receivers, and each one's hand-over weight.
 
     Parameters
@@ -364,6 +438,9 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
         The object, the receivers and the lights never move in this bake (the result
         is the same every frame: worth a cache entry, and the caster is not used on a
         hit).
+    sky : array_like, shape (n*n,), optional
+        The environment's luminance in SH: the hand-over's ray count weighed by the
+        light behind the object (:func:`sky_gain`).
 
     Returns
     -------
@@ -374,13 +451,14 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
     visibility : ndarray, shape (T, order^2) float64
         The filtered traced visibility.
     """
+    sky = None if sky is None else np.asarray(sky, dtype=np.float64)
     key = (caster, points, normals, vertices, faces, order, n_dirs, spheres, tuple(lights),
-           strata)
+           strata, sky)
     kept = _kept_ground(key)
     if kept is not None:  # a static object over static receivers: the last frame's result
         return kept
     args = (points, normals, vertices, faces, caster, order, n_dirs, spheres, lights, strata,
-            rest, cache)
+            rest, cache, sky)
     if still and cache is not None:
         parts = {"points": np.asarray(points, dtype=np.float64),
                  "normals": np.asarray(normals, dtype=np.float64),
@@ -389,6 +467,7 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
                  "n_dirs": int(n_dirs), "strata": bool(strata),
                  "spheres": None if spheres is None else [np.asarray(x) for x in spheres],
                  "lights": [[np.asarray(c, dtype=np.float64), float(r)] for c, r in lights],
+                 "sky": sky,
                  "rest": None if rest is None else [np.asarray(rest[0]), np.asarray(rest[1]),
                                                     float(rest[2])]}
         got = cache.fetch("traced_ground", TRACED_GROUND_VERSION, parts, lambda: dict(
@@ -398,11 +477,11 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
 
 
 #: Version of :func:`traced_ground`'s results in the set-up cache.
-TRACED_GROUND_VERSION = 2
+TRACED_GROUND_VERSION = 3
 
 
 def _trace_ground(points, normals, vertices, faces, caster, order, n_dirs, spheres, lights,
-                  strata, rest, cache) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  strata, rest, cache, sky) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`traced_ground` computed (its parameters, in order)."""
     from shtools.geometry.visibility import bounding_cones
 
@@ -412,7 +491,11 @@ def _trace_ground(points, normals, vertices, faces, caster, order, n_dirs, spher
     center = 0.5 * (v.min(axis=0) + v.max(axis=0))
     radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
     axis, cos_half = bounding_cones(p, nrm, center, radius)
-    weight = handover_weights(cone_rays(cos_half, n_dirs))
+    rays = cone_rays(cos_half, n_dirs)
+    # the gain matters only between the hand-over's ends (at most SKY_GAIN_MAX short)
+    band = np.flatnonzero((rays < HANDOVER_RAYS[1]) & (rays * SKY_GAIN_MAX > HANDOVER_RAYS[0]))
+    rays[band] *= sky_gain(axis[band], nrm[band], cos_half[band], sky)
+    weight = handover_weights(rays)
     for position, light_radius in lights:
         weight = np.maximum(weight, light_weights(p, axis, cos_half, center, radius,
                                                   position, light_radius))

@@ -65,7 +65,7 @@ def test_a_still_trace_outlives_moving_ones():
     still = RayCaster(v, faces, robust=False)
     args = (points, normals, v, faces, still, 3, 48)
     traced_ground(*args)
-    key = (still, points, normals, v, faces, 3, 48, None, (), False)
+    key = (still, points, normals, v, faces, 3, 48, None, (), False, None)
     assert kept(key) is not None
     for step in range(GROUND_KEPT + 4):  # moving objects: a new scene each frame
         moved = v + np.array([0.05 * step, 0.0, 0.0])

@@ -365,3 +365,72 @@ def test_the_ground_filters_with_the_mesh_distance_and_objects_with_the_spheres(
         traced_ground(pts, nrm, v, f, caster, 3, 96, spheres=spheres, strata=strata)
     ts._GROUND.clear()
     assert calls == ["mesh", "spheres"]
+
+
+def _sky(sun, order: int, floor: float = 0.2) -> np.ndarray:
+    """Luminance in SH ``(n*n,)`` of a uniform ``floor`` plus a sun lobe ``exp(8 (s.sun - 1))``
+    about the unit direction ``sun``, projected by quadrature over 20,000 equal-area
+    directions (``world_directions``)."""
+    from shtools.sh import basis
+
+    d = world_directions(20000)
+    radiance = floor + np.exp(8.0 * (d @ np.asarray(sun) - 1.0))
+    return (4.0 * math.pi / len(d)) * basis(d, order).T @ radiance
+
+
+def test_sky_gain_is_one_under_a_uniform_sky_and_the_sun_over_the_mean_radiance():
+    """Under a uniform sky nothing changes (gain 1).  A narrow cone pointing at a sun
+    gains the sun's cosine-weighted radiance over the receiver's cosine-weighted mean
+    radiance E / pi, here integrated by quadrature over the directions above the
+    receiver (not with the clamped-cosine SH the code uses)."""
+    from shtools.scene.traced_shadows import SKY_GAIN_MAX, sky_gain
+    from shtools.sh import basis
+
+    up = np.array([[0.0, 1.0, 0.0]])
+    sun = np.array([math.cos(math.radians(30.0)), math.sin(math.radians(30.0)), 0.0])
+    flat = np.zeros(16)
+    flat[0] = 1.0
+    axes = np.array([sun, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    assert np.all(sky_gain(axes, np.repeat(up, 3, axis=0), np.full(3, 0.9), flat) == 1.0)
+    lum = _sky(sun, 4, floor=0.05)
+    d = world_directions(20000)
+    mean = (4.0 / len(d)) * float(np.maximum(basis(d, 4) @ lum, 0.0) @ np.maximum(d[:, 1], 0))
+    want = float((basis(sun[None], 4) @ lum)[0]) * sun[1] / mean
+    got = sky_gain(sun[None], up, np.array([math.cos(1e-3)]), lum)
+    # the order-4 reconstruction is clamped at 0 in the quadrature (it barely dips below):
+    # a few 1e-3 relative between the two means
+    assert 1.5 < want < SKY_GAIN_MAX
+    np.testing.assert_allclose(got, want, rtol=1e-2)
+    # a cone away from the sun (toward the dim floor) keeps the count
+    assert sky_gain(np.array([[-sun[0], sun[1], 0.0]]), up, np.array([0.99]), lum) == 1.0
+
+
+def test_a_sun_behind_the_object_keeps_its_long_shadow_traced():
+    """Receivers on a ground beyond the hand-over (cones of at most HANDOVER_RAYS[0]
+    rays: spheres only) see a unit sphere 45 degrees up, against a sun: their shadow is
+    traced there, and it is the sphere's cap as a 4,096-ray trace finds it; a sun on
+    the other side leaves them to the spheres, as does a uniform sky."""
+    v, f, caster = _unit_sphere()
+    d = np.array([5.2, 5.5, 6.0]) / math.sqrt(2.0)
+    pts = np.column_stack([-d, -d, np.zeros(3)])
+    nrm = np.tile([0.0, 1.0, 0.0], (3, 1))
+    rays = 96 * (1.0 - np.sqrt(1.0 - 1.0 / np.linalg.norm(pts, axis=1) ** 2))
+    assert np.all(rays < HANDOVER_RAYS[0])
+    toward = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0)  # the sphere, from each receiver
+    flat = np.zeros(16)
+    flat[0] = 1.0
+    for sky in (None, flat, _sky(toward * np.array([-1.0, 1.0, 1.0]), 4, floor=0.05)):
+        rows, _, _ = traced_ground(pts, nrm, v, f, caster, 4, 96, sky=sky)
+        assert rows.size == 0
+    rows, w, g = traced_ground(pts, nrm, v, f, caster, 4, 96, sky=_sky(toward, 4, floor=0.05))
+    assert rows.tolist() == [0, 1, 2] and np.all(w > 0)
+    # the traced part is the sphere's cap: against a 4,096-ray trace, within two of the
+    # shared set's directions (4 pi / 192 sr each, 0.018 in g_00; the cap is about one)
+    want = set_visibility(pts, nrm, caster, *_cones(pts, nrm), 4, 4096)
+    np.testing.assert_allclose(g[:, 0], want[:, 0], atol=0.04)
+
+
+def _cones(pts, nrm):
+    from shtools.geometry.visibility import bounding_cones
+
+    return bounding_cones(pts, nrm, np.zeros(3), 1.0)
