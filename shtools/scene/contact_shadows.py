@@ -31,7 +31,9 @@ who is traced on whom (:func:`contact_casters`):
   handed over per vertex to their blockers: a mid-range object's spheres misplace
   its shadow as much on an object as on the ground (spot beside the teapot,
   ``bench_look``'s held-out ``spottea``);
-  objects beyond that reach keep their blockers, which shade them well;
+  objects beyond that reach keep their blockers, which shade them well, unless they
+  may hide a spherical light from it (their long shadow stays traced, as on the
+  ground);
 * a convex receiver (its own mesh never blocks above its tangent planes) is traced
   with itself among them (one scene serves the receivers that touch the same objects); a receiver
   that can shadow itself is traced against the others alone (its self-visibility
@@ -142,7 +144,8 @@ def _buried(points, center, radius) -> bool:
     return bool((np.einsum("vk,vk->v", d, d) < radius * radius).any())
 
 
-def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, tuple]]:
+def contact_casters(parts: list[ContactPart], n_dirs: int, lights=()
+                    ) -> list[tuple[tuple, tuple]]:
     """Who is traced on whom: ``[(receivers, caster_of), ...]`` for the frame's object
     receivers.
 
@@ -152,6 +155,10 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
         Every object of the frame that receives or has a traceable blocker.
     n_dirs : int
         Rays of a receiver whose cone fills its hemisphere (the hand-over's scale).
+    lights : sequence of (position (3,), radius)
+        The frame's spherical lights: a farther object that may hide one from a
+        receiver is traced on it however far (its long shadow, as on the ground:
+        :func:`~shtools.scene.traced_shadows.light_weights`).
 
     Returns
     -------
@@ -188,7 +195,8 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
         for group in overlapping_groups([sphere for _, sphere in farther]):
             members = [farther[i][0] for i in group]
             c, r = posed_sphere(np.concatenate([m.vertices for m in members]))
-            if np.linalg.norm(c - center) - radius >= reach * r:
+            if (np.linalg.norm(c - center) - radius >= reach * r
+                    and not _hides_a_light(receiver, c, r, lights)):
                 continue  # no vertex inside its hand-over: its blockers shade it
             key = tuple(id(m) for m in members)
             if key not in built:
@@ -217,6 +225,20 @@ def contact_casters(parts: list[ContactPart], n_dirs: int) -> list[tuple[tuple, 
             *((r.rows, r.vertices, r.normals) for r in receivers), strict=True))
         calls.append(((*joint, _rest(receivers)), (caster, vertices, faces, skipped)))
     return calls
+
+
+def _hides_a_light(receiver: ContactPart, center, radius: float, lights) -> bool:
+    """Whether a bounding sphere may hide one of ``lights`` from a vertex of
+    ``receiver``: the same test as the traced rows' light weights (> 0 somewhere), so
+    the pairing never cuts a long shadow that the hand-over would trace."""
+    if not lights:
+        return False
+    from shtools.geometry.visibility import bounding_cones
+    from shtools.scene.traced_shadows import light_weights
+
+    axis, cos_half = bounding_cones(receiver.vertices, receiver.normals, center, radius)
+    return any(light_weights(receiver.vertices, axis, cos_half, center, radius, position,
+                             light_radius).max() > 0 for position, light_radius in lights)
 
 
 def similarity_scale(matrix) -> float | None:

@@ -185,7 +185,8 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         n_contact = contact_directions(st.traced_shadow_directions)
         selfs.extend(v for v in (_traced_shadow(c, receivers, st, clusters, blockers, prepared,
                                                 lights, n_dirs=n_contact, strata=True)
-                                 for receivers, c in contact_casters(parts, n_contact))
+                                 for receivers, c in contact_casters(
+                                     parts, n_contact, _sphere_lights(lights)))
                      if v is not None)
     return FrameState(np.concatenate(verts), np.concatenate(norms), blockers, lights, meshes,
                       [spec.shadows for spec in prepared.scene.lights], selfs,
@@ -246,7 +247,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     when the object and the lights do not either (``still`` of
     :func:`~shtools.scene.traced_shadows.traced_ground`); returns None when none is
     within the object's reach."""
-    from shtools.runtime import FieldBlocker, SelfVisibility, SphereLight
+    from shtools.runtime import FieldBlocker, SelfVisibility
     from shtools.scene.traced_shadows import traced_ground
 
     caster, mesh_v, faces, index = caster_of
@@ -262,8 +263,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     handed, weight, g = traced_ground(points, normals, mesh_v, faces, caster, st.order,
                                       n_dirs or st.traced_shadow_directions,
                                       spheres=_bounding_spheres(own),
-                                      lights=[(x.position, x.radius) for x in lights
-                                              if isinstance(x, SphereLight)],
+                                      lights=_sphere_lights(lights),
                                       strata=strata, rest=rest, cache=cache, still=still,
                                       # object receivers at the reach they were
                                       # paired at (contact_casters): no gain, no pop
@@ -287,6 +287,14 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     return SelfVisibility(None, rows[handed], blocker=_skip_handed(blockers, indices,
                                                                    rows[handed]),
                           visibility=g.astype(np.float32))
+
+
+def _sphere_lights(lights: list) -> list:
+    """``[(position (3,), radius), ...]`` of the frame's spherical lights (a lamp with a
+    source radiance field is not one)."""
+    from shtools.runtime import SphereLight
+
+    return [(x.position, x.radius) for x in lights if isinstance(x, SphereLight)]
 
 
 def _sky(prepared):

@@ -175,6 +175,26 @@ def test_a_farther_object_within_its_hand_over_is_traced_alone():
     assert 3 not in on and not any((3,) in x for x in on.values())
 
 
+def test_a_far_object_between_a_receiver_and_a_lamp_stays_traced_on_it():
+    """Beyond every hand-over reach an object is still traced on a receiver where it
+    may hide a spherical light from it (its long shadow stays the real mesh's, as on
+    the ground); with the lamp elsewhere its blocker alone shades the receiver."""
+    from shtools.scene.contact_shadows import contact_casters
+    from shtools.scene.traced_shadows import handover_reach
+
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    radius = math.sqrt(0.5)
+    receiver = _part(tri, rows=np.arange(0, 3))  # normals +y
+    above = _part(tri + np.array([0.0, 12.0, 0.0]), blocker=0)
+    assert 12.0 - 2 * radius > handover_reach(96) * radius  # beyond the reach
+    behind = [(np.array([0.5, 40.0, 0.0]), 1.0)]  # the lamp past it, seen from the receiver
+    aside = [(np.array([-40.0, 8.0, 0.0]), 1.0)]
+    paired = contact_casters([receiver, above], 96, behind)
+    assert [(tuple(r[0]), c[3]) for r, c in paired] == [((0, 1, 2), (0,))]
+    assert contact_casters([receiver, above], 96, aside) == []
+    assert contact_casters([receiver, above], 96) == []
+
+
 def test_links_apart_shadow_each_other_by_their_real_meshes_at_mid_range(tmp_path,
                                                                           monkeypatch):
     """Two links past touching (bounding spheres 2.6 apart, 1.5 radii of gap) but within
