@@ -35,11 +35,13 @@ rotate = [{rx2}, 0.0, 0.0]
 """
 
 
-def _scene(folder, settings="", second_x=0.3):
-    """Two links of a chain over the ground, the second moving and turning."""
+def _scene(folder, settings="", second_x=0.3, second_dx=0.02):
+    """Two links of a chain over the ground, the second moving (by ``second_dx``) and
+    turning (unless it does not move)."""
     text = (ground_scene_head(settings, size=4, subdivisions=24)
             + LINK.format(name="a", x=-0.3, x2=-0.3, rx=90, rx2=90)
-            + LINK.format(name="b", x=second_x, x2=second_x + 0.02, rx=0, rx2=10))
+            + LINK.format(name="b", x=second_x, x2=second_x + second_dx, rx=0,
+                          rx2=10 if second_dx else 0))
     (folder / "scene.toml").write_text(text)
     return load_scene(folder / "scene.toml")
 
@@ -193,6 +195,64 @@ def test_a_far_object_between_a_receiver_and_a_lamp_stays_traced_on_it():
     assert [(tuple(r[0]), c[3]) for r, c in paired] == [((0, 1, 2), (0,))]
     assert contact_casters([receiver, above], 96, aside) == []
     assert contact_casters([receiver, above], 96) == []
+
+
+def _crossing(tmp_path, distance) -> float:
+    """The second link's x where its bounding sphere's centre comes ``distance(r_a, r_b)``
+    from the first's (both posed by the scene, the second moved along x)."""
+    from shtools.scene.contact_shadows import posed_sphere
+    from shtools.scene.pose import pose_frame
+
+    scene = _scene(tmp_path, second_x=0.3, second_dx=0.0)
+    v = pose_frame(prepare_scene(scene), 0.0).vertices  # the ground's rows, a's, b's
+    (c_a, r_a), (c_b, r_b) = (posed_sphere(v[GROUND + k * TORUS:GROUND + (k + 1) * TORUS])
+                              for k in (0, 1))
+    # |c_b + s e_x - c_a| = D: the root beyond the links' present spacing
+    d = c_b - c_a
+    target = distance(r_a, r_b)
+    return 0.3 - d[0] + math.sqrt(target ** 2 - d[1] ** 2 - d[2] ** 2)
+
+
+def test_a_link_moving_past_touching_and_past_the_reach_shades_the_other_smoothly(
+        tmp_path, monkeypatch):
+    """Where the second link stops touching the first (the joint trace hands over to
+    its own), a step of a thousandth across moves the first link's radiance no more
+    than the same step beside the crossing, and far less than a switch from the traced
+    mesh to the spheres; where it leaves the hand-over's reach (no trace at all), by
+    far less than a cut short of the reach would."""
+    import shtools.scene.traced_shadows as ts
+    from shtools.scene.contact_shadows import NEAR_MARGIN, contact_directions
+
+    bounded_torus(tmp_path)
+    first = slice(GROUND, GROUND + TORUS)
+    reach = ts.handover_reach(contact_directions(96))
+    step = 1e-3
+
+    def radiance(x):
+        return baked_radiance(_scene(tmp_path, second_x=x, second_dx=0.0),
+                              scheduler="inline")[0, first]
+
+    for name, distance in (("touching", lambda r_a, r_b: NEAR_MARGIN * (r_a + r_b)),
+                           ("reach", lambda r_a, r_b: r_a + reach * r_b)):
+        x = _crossing(tmp_path, distance)
+        before, inside, outside = (radiance(x + k * step) for k in (-3, -1, 1))
+        across, beside = relative_rmse(outside, inside), relative_rmse(inside, before)
+        if name == "reach":
+            # the traced rows' weights are 0 there, but a traced object's visibility
+            # multiplies the others' where untraced its log joins their sum, and SH
+            # products truncate: measured 8.6e-5 across (beside 8e-6), where a cut 5 %
+            # short of the reach jumps 5.7e-4 and 10 % short 1.3e-3
+            assert across < 2.5e-4, (across, beside)
+        else:
+            # both sides traced: the shadow moves as much in either step (measured
+            # 1.2e-4 across, 1.9e-4 beside)
+            assert across < 1.5 * beside, (across, beside)
+            with monkeypatch.context() as m:  # the same link by its spheres alone
+                m.setattr(ts, "handover_reach", lambda n_dirs: 0.0)
+                m.setattr("shtools.scene.contact_shadows.NEAR_MARGIN", 0.0)
+                switch = relative_rmse(radiance(x - step), inside)
+            # a hard switch there would jump by the whole traced-vs-spheres gap (2.1e-2)
+            assert across < 0.05 * switch, (across, switch)
 
 
 def test_links_apart_shadow_each_other_by_their_real_meshes_at_mid_range(tmp_path,
