@@ -29,7 +29,9 @@ from shtools.scene.kinds import bake_method_names
                    "exp method by name), product-space accumulation, or ray tracing of the "
                    "posed meshes (ground truth).  Default: settings.method of the scene.")
 @click.option("--store-visibility", is_flag=True,
-              help="Also store the per-vertex visibility SH vectors (T, V, n*n).")
+              help="Also store the per-vertex visibility SH vectors (T, V, n*n), for "
+                   "`shtools relight`: the traced shadows' hand-over then leaves the sky "
+                   "out, so the visibility holds under any light.")
 @click.option("--processes", type=setting_type("processes"), default=None,
               help="Processes sharing ONE frame's shadow evaluation, when frames are "
                    "evaluated in this process (a single frame, or --workers 1); default one "

@@ -12,6 +12,8 @@ checked against an exhaustive support-set search in the tests).
 
 :func:`sphere_pair_bound` (exact for two spheres) is re-exported from the
 numpy-only runtime module, which uses it to refit trees every frame.
+:func:`box_sphere` is the cheap bound of a posed mesh the traced shadows' cones and
+hand-over reach use, :func:`overlapping_groups` the objects those bounds join.
 """
 
 from __future__ import annotations
@@ -21,11 +23,41 @@ from scipy.optimize import minimize
 
 from shtools.runtime.spheres import sphere_pair_bound
 
-__all__ = ["enclosing_radius", "minimal_enclosing_sphere", "sphere_pair_bound"]
+__all__ = ["box_sphere", "enclosing_radius", "minimal_enclosing_sphere", "overlapping_groups",
+           "sphere_pair_bound"]
 
 #: SLSQP stopping tolerance on the radius, in units of the starting radius.
 SOLVER_FTOL = 1e-13
 SOLVER_MAXITER = 200
+
+
+def box_sphere(points) -> tuple[np.ndarray, float]:
+    """Bounding sphere of points ``(V, 3)``: their box centre ``(3,)`` and the farthest
+    point's distance from it (not minimal: one pass, and the same for every caller)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    center = 0.5 * (p.min(axis=0) + p.max(axis=0))
+    return center, float(np.sqrt(((p - center) ** 2).sum(axis=1).max()))
+
+
+def overlapping_groups(spheres: list) -> list[list[int]]:
+    """Indices of bounding spheres ``[(center (3,), radius), ...]`` grouped by overlap,
+    directly or through others (each group and the groups in the spheres' order)."""
+    group = list(range(len(spheres)))
+
+    def root(i):
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    for i, (ci, ri) in enumerate(spheres):
+        for j in range(i):
+            cj, rj = spheres[j]
+            if np.linalg.norm(np.asarray(ci) - np.asarray(cj)) < ri + rj:
+                group[max(root(i), root(j))] = min(root(i), root(j))
+    out: dict = {}
+    for i in range(len(spheres)):
+        out.setdefault(root(i), []).append(i)
+    return list(out.values())
 
 
 def enclosing_radius(center, centers, radii) -> float:

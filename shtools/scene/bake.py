@@ -138,8 +138,10 @@ class FrameBaker:
         """Pose, shadow and shade scene frame ``frame`` at time ``t``."""
         start = time.perf_counter()
         # the traced shadows and self-visibilities of a frame only feed its visibility
+        # a stored visibility is relit under other skies: it may not depend on this one
         state = pose_frame(self.run.prepared, float(t), with_meshes=self.with_meshes,
-                           trace=self.needs_visibility, clusters=self.run.cache.get("clusters"))
+                           trace=self.needs_visibility, clusters=self.run.cache.get("clusters"),
+                           sky_gain=not self.store_visibility)
         vis = self.method.visibility(self.run, state) if self.needs_visibility else None
         setup = self.run.cache.pop("setup_seconds", 0.0)  # one-time setup, not frame time
         radiance = shade_frame(self.run, state, vis)

@@ -50,6 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shtools.geometry.bounding import box_sphere, overlapping_groups
+
 
 @dataclass
 class ContactPart:
@@ -111,33 +113,6 @@ def contact_directions(ground_directions: int) -> int:
 NEAR_MARGIN = 1.25
 
 
-def posed_sphere(v: np.ndarray) -> tuple[np.ndarray, float]:
-    """Bounding sphere of posed vertices: the box centre and the farthest vertex."""
-    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    return center, float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
-
-
-def overlapping_groups(spheres: list) -> list[list[int]]:
-    """Indices of bounding spheres ``[(center (3,), radius), ...]`` grouped by overlap,
-    directly or through others (each group and the groups in the spheres' order)."""
-    group = list(range(len(spheres)))
-
-    def root(i):
-        while group[i] != i:
-            i = group[i]
-        return i
-
-    for i, (ci, ri) in enumerate(spheres):
-        for j in range(i):
-            cj, rj = spheres[j]
-            if np.linalg.norm(ci - cj) < ri + rj:
-                group[max(root(i), root(j))] = min(root(i), root(j))
-    out: dict = {}
-    for i in range(len(spheres)):
-        out.setdefault(root(i), []).append(i)
-    return list(out.values())
-
-
 def _buried(points, center, radius) -> bool:
     """Whether any point lies inside the sphere."""
     d = np.asarray(points, dtype=np.float64) - center
@@ -174,14 +149,14 @@ def contact_casters(parts: list[ContactPart], n_dirs: int, lights=()
     traceable = [p for p in parts if p.blocker is not None and len(p.obj.faces)]
     if not traceable:
         return []
-    spheres = [posed_sphere(p.vertices) for p in traceable]
+    spheres = [box_sphere(p.vertices) for p in traceable]
     reach = handover_reach(n_dirs)
     built: dict = {}  # the frame's Embree scenes, one per set of members
     out: dict = {}  # (scene, blockers skipped, receiver or None) -> its receivers
     for receiver in parts:
         if receiver.rows is None or not len(receiver.rows):
             continue
-        center, radius = posed_sphere(receiver.vertices)
+        center, radius = box_sphere(receiver.vertices)
         near, farther = [], []
         for p, (c, r) in zip(traceable, spheres, strict=True):
             if p is receiver or (p.exact and not _buried(receiver.vertices, c, r)):
@@ -194,7 +169,7 @@ def contact_casters(parts: list[ContactPart], n_dirs: int, lights=()
         # a column: one scene, as on the ground), each group within its hand-over reach
         for group in overlapping_groups([sphere for _, sphere in farther]):
             members = [farther[i][0] for i in group]
-            c, r = posed_sphere(np.concatenate([m.vertices for m in members]))
+            c, r = box_sphere(np.concatenate([m.vertices for m in members]))
             if (np.linalg.norm(c - center) - radius >= reach * r
                     and not _hides_a_light(receiver, c, r, lights)):
                 continue  # no vertex inside its hand-over: its blockers shade it
@@ -202,8 +177,8 @@ def contact_casters(parts: list[ContactPart], n_dirs: int, lights=()
             if key not in built:
                 built[key] = _joint_caster(members)
             # one call per receiver: a lone rigid receiver's neighbour lists are its rest
-            # geometry's, computed once (a moving walker's parts joined would search
-            # theirs every frame: 12 of make demo's 172 ms a frame)
+            # geometry's, computed once (moving receivers joined would search theirs
+            # every frame)
             out[key, tuple(m.blocker for m in members), id(receiver)] = [receiver]
         if not near:
             continue

@@ -47,7 +47,7 @@ MAX_COORDINATE = 1e18
 
 
 def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
-               trace: bool = True, clusters=None) -> FrameState:
+               trace: bool = True, clusters=None, sky_gain: bool = True) -> FrameState:
     """World-space receivers, blockers, lights (and blocker meshes) at time ``t``.
 
     Each blocker object is posed by its kind (:meth:`BlockerKind.pose`).
@@ -57,7 +57,9 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
     :class:`~shtools.runtime.clusters.ReceiverClusters` of this bake) groups the
     receivers where a traced shadow hands over to the object's blocker, so the
     blocker is evaluated there by the same cuts of its tree as on the receivers
-    next door.
+    next door.  ``sky_gain=False`` leaves the environment out of the traced shadows'
+    hand-over (:func:`~shtools.scene.traced_shadows.sky_gain`): the visibility is then
+    the same under any environment, as a visibility stored for relighting must be.
     """
     from shtools.runtime import FieldBlocker, SelfVisibility, SphereBlocker
     from shtools.scene.transfer import (
@@ -176,9 +178,10 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
         # a still group over a still ground under still lights: the same trace every
         # frame and every bake of these inputs (kept in the set-up cache)
         calm = ground_still and not any(len(spec.keys) > 1 for spec in prepared.scene.lights)
+        sky = _sky(prepared) if sky_gain else None
         selfs.extend(v for v in (
             _traced_shadow(c, receivers, st, clusters, blockers, prepared, lights,
-                           receivers_still=ground_still, still=calm and c_still)
+                           receivers_still=ground_still, still=calm and c_still, sky=sky)
             for c, c_still in zip(casters, still_casters, strict=True)) if v is not None)
     if trace and st.traced_shadows and field_traced:
         # the other objects' real meshes on each object receiver near them (contact)
@@ -228,7 +231,7 @@ def pose_lights(scene, t: float) -> list:
 
 def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, prepared,
                    lights=(), n_dirs: int | None = None, strata: bool = False,
-                   receivers_still: bool = False, still: bool = False):
+                   receivers_still: bool = False, still: bool = False, sky=None):
     """A traced object's shadow on the receiver-only objects (the ground): its real mesh
     near it, its blocker far from it, a per-vertex blend between
     (:mod:`shtools.scene.traced_shadows`); its blocker is skipped on the rows handed
@@ -245,8 +248,11 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
     (their neighbour lists, or a lone rigid receiver's rest ones, are then entries of
     the set-up cache: a moving receiver's would be a new entry every frame), ``still``
     when the object and the lights do not either (``still`` of
-    :func:`~shtools.scene.traced_shadows.traced_ground`); returns None when none is
-    within the object's reach."""
+    :func:`~shtools.scene.traced_shadows.traced_ground`); ``sky`` the environment's
+    luminance in SH ``(n*n,)``, whose light behind the object lengthens its hand-over
+    (:func:`~shtools.scene.traced_shadows.sky_gain`; None on object receivers, which
+    :func:`~shtools.scene.contact_shadows.contact_casters` pairs at the reach without
+    it); returns None when none is within the object's reach."""
     from shtools.runtime import FieldBlocker, SelfVisibility
     from shtools.scene.traced_shadows import traced_ground
 
@@ -265,10 +271,7 @@ def _traced_shadow(caster_of, receivers: tuple, st, clusters, blockers: list, pr
                                       spheres=_bounding_spheres(own),
                                       lights=_sphere_lights(lights),
                                       strata=strata, rest=rest, cache=cache, still=still,
-                                      # object receivers at the reach they were
-                                      # paired at (contact_casters): no gain, no pop
-                                      # as an object crosses it
-                                      sky=None if strata else _sky(prepared))
+                                      sky=sky)
     if not len(handed):  # every receiver beyond the object's reach keeps its blocker
         return None
     part = np.flatnonzero(weight < 1.0)
@@ -372,10 +375,10 @@ def _rigid_caster(rigid: list):
 def _overlapping(rigid: list) -> list[list]:
     """``rigid`` (object, transform, posed vertices, blocker index) grouped by bounding
     spheres that overlap, directly or through others (in the objects' order)."""
-    from shtools.scene.contact_shadows import overlapping_groups, posed_sphere
+    from shtools.geometry.bounding import box_sphere, overlapping_groups
 
     return [[rigid[i] for i in group]
-            for group in overlapping_groups([posed_sphere(v) for _, _, v, _ in rigid])]
+            for group in overlapping_groups([box_sphere(v) for _, _, v, _ in rigid])]
 
 
 def _joint_faces(rigid: list) -> np.ndarray:

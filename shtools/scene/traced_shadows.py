@@ -104,8 +104,9 @@ HANDOVER_RAYS = (2.0, 4.0)
 #: Most that :func:`sky_gain` lengthens a cone's ray count by (a sun against a grazing
 #: receiver's dim sky would otherwise trace the whole ground).
 SKY_GAIN_MAX = 8.0
-#: Directions on a cone's rim where :func:`sky_gain` looks for bright light.
-SKY_RIM = 6
+#: Directions searched for the sky's brightest (:func:`brightest_direction`): about
+#: 3 degrees apart.
+SKY_SEARCH = 4096
 #: Gap (in the cone's half-angle plus the light disc's) over which a spherical light
 #: hidden by the object hands its long shadow over to the spheres (:func:`light_weights`).
 LIGHT_MARGIN = 0.5
@@ -178,21 +179,22 @@ def sky_gain(axis, normals, cos_half, sky) -> np.ndarray:
 
     A cone of ``k`` rays darkens a receiver by about ``k / n_dirs`` of its light under
     a uniform sky; against a brighter part of the sky by more.  The factor is the
-    brightest cosine-weighted radiance in the cone over the receiver's
-    cosine-weighted mean radiance,
+    cosine-weighted radiance toward the sky's brightest point in the cone, over the
+    receiver's cosine-weighted mean radiance,
 
     .. math::
 
-        \rho = \max_{s \in \mathrm{cone}} \frac{L^+(s)\,\max(s\cdot N, 0)}
+        \rho = \max_{s \in \{a,\ s^*\}} \frac{L^+(s)\,\max(s\cdot N, 0)}
                 {\mathbf H(N)\cdot\mathbf L},
 
-    ``L^+`` the sky's order-``n`` luminance reconstruction clamped at 0 and
-    ``H(N) . L = E(N) / π`` (:func:`~shtools.sh.zonal.clamped_cosine_zh`), the maximum
-    taken over the axis and :data:`SKY_RIM` directions on the cone's rim (the
-    reconstruction varies over tens of degrees: a low sun inside a wide cone, off its
-    axis, is what lengthens the shadow).  Clamped to ``[1, SKY_GAIN_MAX]``: never
-    below 1 (a uniform sky gives ``s . N <= 1``: the count as it was), so the traced
-    reach only grows toward bright light.
+    ``L^+`` the sky's order-``n`` luminance reconstruction clamped at 0, ``H(N) . L =
+    E(N) / π`` (:func:`~shtools.sh.zonal.clamped_cosine_zh`), ``a`` the cone's axis and
+    ``s*`` its direction nearest the sky's brightest one (:func:`brightest_direction`;
+    a low sun inside a wide cone, off its axis, is what lengthens the shadow).  ``s*``
+    moves continuously with the cone (it is the sun's direction inside the cone, the
+    rim's point toward it outside), so the factor does too.  Clamped to
+    ``[1, SKY_GAIN_MAX]``: never below 1 (a uniform sky gives ``s . N <= 1``: the count
+    as it was), so the traced reach only grows toward bright light.
 
     Parameters
     ----------
@@ -202,6 +204,11 @@ def sky_gain(axis, normals, cos_half, sky) -> np.ndarray:
         The cones' half-angle cosines.
     sky : array_like, shape (n*n,), or None
         The environment's luminance in SH (None: no environment, factor 1).
+
+    Returns
+    -------
+    ndarray, shape (V,) float64
+        The factors, in ``[1, SKY_GAIN_MAX]``.
     """
     from shtools.runtime.shading import cosine_transfer
     from shtools.sh import basis
@@ -212,21 +219,37 @@ def sky_gain(axis, normals, cos_half, sky) -> np.ndarray:
     order = math.isqrt(len(lum))
     a = np.asarray(axis, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
-    # an orthonormal frame about each axis (the helper farthest from it)
-    helper = np.where((np.abs(a[:, 1]) < 0.9)[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
-    u = np.cross(a, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(a, u)
-    c = np.clip(cos_half, -1.0, 1.0)[:, None, None]
-    phi = 2.0 * math.pi * np.arange(SKY_RIM) / SKY_RIM
-    rim = c * a[:, None] + np.sqrt(1.0 - c * c) * (np.cos(phi)[None, :, None] * u[:, None]
-                                                   + np.sin(phi)[None, :, None] * v[:, None])
-    s = np.concatenate([a[:, None], rim], axis=1)  # (V, 1 + SKY_RIM, 3)
+    c = np.clip(np.asarray(cos_half, dtype=np.float64), -1.0, 1.0)
+    sun = brightest_direction(tuple(lum))
+    along = a @ sun
+    side = sun[None] - along[:, None] * a  # the sun's direction off each axis
+    length = np.linalg.norm(side, axis=1)
+    u = side / np.maximum(length, 1e-300)[:, None]
+    rim = c[:, None] * a + np.sqrt(1.0 - c * c)[:, None] * u
+    # inside the cone the sun itself; a sun straight behind the axis (no rim point
+    # toward it, and the rim is as far from it all round) leaves the axis alone
+    near = np.where((along >= c)[:, None], sun[None], np.where((length > 1e-9)[:, None], rim, a))
+    s = np.stack([a, near], axis=1)  # (V, 2, 3)
     bright = np.maximum(basis(s.reshape(-1, 3), order) @ lum, 0.0).reshape(s.shape[:2])
     facing = np.maximum(np.einsum("vsk,vk->vs", s, nrm), 0.0)
     mean = cosine_transfer(nrm, order).astype(np.float64) @ lum
     rho = (bright * facing).max(axis=1) / np.maximum(mean, 1e-12 * max(abs(lum[0]), 1e-300))
     return np.clip(rho, 1.0, SKY_GAIN_MAX)
+
+
+@functools.lru_cache(maxsize=8)
+def brightest_direction(sky: tuple) -> np.ndarray:
+    """The unit direction ``(3,)`` where a luminance in SH ``(n*n,)`` (as a tuple: a
+    cache key) is brightest, to the spacing of :data:`SKY_SEARCH` directions (a
+    constant of the sky: :func:`sky_gain` stays continuous in the cones however
+    coarse it is)."""
+    from shtools.sh import basis
+
+    lum = np.asarray(sky, dtype=np.float64)
+    d = world_directions(SKY_SEARCH)
+    out = np.array(d[int(np.argmax(basis(d, math.isqrt(len(lum))) @ lum))])
+    out.setflags(write=False)
+    return out
 
 
 def light_weights(points, axis, cos_half, center, radius, position, light_radius
@@ -477,19 +500,20 @@ def traced_ground(points, normals, vertices, faces, caster, order: int, n_dirs: 
 
 
 #: Version of :func:`traced_ground`'s results in the set-up cache.
-TRACED_GROUND_VERSION = 3
+TRACED_GROUND_VERSION = 4
 
 
 def _trace_ground(points, normals, vertices, faces, caster, order, n_dirs, spheres, lights,
                   strata, rest, cache, sky) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`traced_ground` computed (its parameters, in order)."""
+    from shtools.geometry.bounding import box_sphere
     from shtools.geometry.visibility import bounding_cones
 
     v = np.asarray(vertices, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    radius = float(np.sqrt(((v - center) ** 2).sum(axis=1).max()))
+    # the bound the pairing's reach and light tests use (contact_casters)
+    center, radius = box_sphere(v)
     axis, cos_half = bounding_cones(p, nrm, center, radius)
     rays = cone_rays(cos_half, n_dirs)
     # the gain matters only between the hand-over's ends (at most SKY_GAIN_MAX short)

@@ -164,3 +164,26 @@ def test_pair_bound_batched_is_minimal():
         assert r[i] == pytest.approx(r_exact, rel=1e-12)
     for cc, rr in ((c1, r1), (c2, r2)):
         assert np.all(np.linalg.norm(cc - c, axis=1) + rr <= r * (1 + 1e-14) + 1e-14)
+
+
+def test_box_sphere_bounds_the_points_about_their_box_centre():
+    """The box centre of the points and the farthest point's distance, by hand for a
+    right triangle (box centre (0.5, 0.5, 0), every vertex sqrt(0.5) from it)."""
+    from shtools.geometry.bounding import box_sphere
+
+    center, radius = box_sphere([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    np.testing.assert_allclose(center, [0.5, 0.5, 0.0])
+    assert radius == pytest.approx(np.sqrt(0.5), rel=1e-15)
+
+
+def test_overlapping_groups_join_chains_and_keep_the_order():
+    """Spheres join through others (a chain 0-2-1 is one group although 0 and 1 are
+    apart), touching without overlap does not join, and groups come in first-index
+    order."""
+    from shtools.geometry.bounding import overlapping_groups
+
+    spheres = [(np.array([0.0, 0, 0]), 1.0), (np.array([3.0, 0, 0]), 1.0),
+               (np.array([1.5, 0, 0]), 1.0), (np.array([10.0, 0, 0]), 1.0),
+               (np.array([12.0, 0, 0]), 1.0)]  # the last two touch at x = 11
+    assert overlapping_groups(spheres) == [[0, 1, 2], [3], [4]]
+    assert overlapping_groups([]) == []

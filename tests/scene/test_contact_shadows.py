@@ -200,12 +200,12 @@ def test_a_far_object_between_a_receiver_and_a_lamp_stays_traced_on_it():
 def _crossing(tmp_path, distance) -> float:
     """The second link's x where its bounding sphere's centre comes ``distance(r_a, r_b)``
     from the first's (both posed by the scene, the second moved along x)."""
-    from shtools.scene.contact_shadows import posed_sphere
+    from shtools.geometry.bounding import box_sphere
     from shtools.scene.pose import pose_frame
 
     scene = _scene(tmp_path, second_x=0.3, second_dx=0.0)
     v = pose_frame(prepare_scene(scene), 0.0).vertices  # the ground's rows, a's, b's
-    (c_a, r_a), (c_b, r_b) = (posed_sphere(v[GROUND + k * TORUS:GROUND + (k + 1) * TORUS])
+    (c_a, r_a), (c_b, r_b) = (box_sphere(v[GROUND + k * TORUS:GROUND + (k + 1) * TORUS])
                               for k in (0, 1))
     # |c_b + s e_x - c_a| = D: the root beyond the links' present spacing
     d = c_b - c_a

@@ -405,6 +405,27 @@ def test_sky_gain_is_one_under_a_uniform_sky_and_the_sun_over_the_mean_radiance(
     assert sky_gain(np.array([[-sun[0], sun[1], 0.0]]), up, np.array([0.99]), lum) == 1.0
 
 
+def test_sky_gain_moves_smoothly_as_the_cone_sweeps_past_the_sun():
+    """A 15-degree cone swept from the horizon over a sun 60 degrees up (and around it
+    in azimuth) changes its gain by small steps: no sample that jumps where the cone's
+    frame would turn (a fixed helper axis jumped 14 % at |a_y| = 0.9)."""
+    from shtools.scene.traced_shadows import sky_gain
+
+    sun = np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
+    lum = _sky(sun, 4, floor=0.05)
+    for azimuth in (0.0, 7.0, 30.0):
+        elev = np.radians(np.linspace(0.0, 90.0, 3601))
+        az = math.radians(azimuth)
+        axes = np.column_stack([np.cos(elev) * math.cos(az), np.sin(elev),
+                                np.cos(elev) * math.sin(az)])
+        up = np.tile([0.0, 1.0, 0.0], (len(axes), 1))
+        g = sky_gain(axes, up, np.full(len(axes), math.cos(math.radians(15.0))), lum)
+        assert g.max() - g.min() > 0.5  # the sun does lengthen the count
+        # 0.025 degree steps: the smooth gain moves by a few 1e-3 at most (its slope
+        # peaks near 0.1 a degree); a jump of the sample point is a step of 0.1 or more
+        assert np.abs(np.diff(g)).max() < 0.01, (azimuth, np.abs(np.diff(g)).max())
+
+
 def test_a_sun_behind_the_object_keeps_its_long_shadow_traced():
     """Receivers on a ground beyond the hand-over (cones of at most HANDOVER_RAYS[0]
     rays: spheres only) see a unit sphere 45 degrees up, against a sun: their shadow is
