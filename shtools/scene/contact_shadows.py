@@ -152,6 +152,7 @@ def contact_casters(parts: list[ContactPart], n_dirs: int, lights=()
     spheres = [box_sphere(p.vertices) for p in traceable]
     reach = handover_reach(n_dirs)
     built: dict = {}  # the frame's Embree scenes, one per set of members
+    bounds: dict = {}  # the bounding sphere of each set of farther members, once a frame
     out: dict = {}  # (scene, blockers skipped, receiver or None) -> its receivers
     for receiver in parts:
         if receiver.rows is None or not len(receiver.rows):
@@ -169,11 +170,13 @@ def contact_casters(parts: list[ContactPart], n_dirs: int, lights=()
         # a column: one scene, as on the ground), each group within its hand-over reach
         for group in overlapping_groups([sphere for _, sphere in farther]):
             members = [farther[i][0] for i in group]
-            c, r = box_sphere(np.concatenate([m.vertices for m in members]))
+            key = tuple(id(m) for m in members)
+            if key not in bounds:
+                bounds[key] = box_sphere(np.concatenate([m.vertices for m in members]))
+            c, r = bounds[key]
             if (np.linalg.norm(c - center) - radius >= reach * r
                     and not _hides_a_light(receiver, c, r, lights)):
                 continue  # no vertex inside its hand-over: its blockers shade it
-            key = tuple(id(m) for m in members)
             if key not in built:
                 built[key] = _joint_caster(members)
             # one call per receiver: a lone rigid receiver's neighbour lists are its rest

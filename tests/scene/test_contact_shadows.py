@@ -161,8 +161,10 @@ def test_a_farther_object_within_its_hand_over_is_traced_alone():
 
     tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     radius = math.sqrt(0.5)  # the triangle's bounding sphere: its box centre, a vertex
+    # a gap between touching and the reach exists at these settings (else no object
+    # is at mid-range); the mid one is placed half-way
+    assert 2 * NEAR_MARGIN < 1 + handover_reach(96)
     gap = 0.5 * (2 * NEAR_MARGIN * radius + (1 + handover_reach(96)) * radius)
-    assert 2 * NEAR_MARGIN * radius < gap < (1 + handover_reach(96)) * radius
     a = _part(tri, rows=np.arange(0, 3), blocker=0, convex=True)
     b = _part(tri + np.array([0.2, 0.0, 0.0]), rows=np.arange(3, 6), blocker=1, convex=True)
     mid = _part(tri + np.array([gap, 0.0, 0.0]), rows=np.arange(6, 9), blocker=2)

@@ -525,15 +525,11 @@ translate = [0.3, 1.0, 0.0]
 
 
 def _low_sun(path, order=3):
-    """A grey sky: a dim floor and a sun lobe 15 degrees up toward +x, projected by
-    quadrature over 20,000 equal-area directions."""
-    from shtools.scene.traced_shadows import world_directions
-    from shtools.sh import basis
+    """A grey sky: a dim floor and a sun lobe 15 degrees up toward +x (``sun_sky``)."""
+    from helpers.skies import sun_sky
 
-    d = world_directions(20000)
     sun = np.array([math.cos(math.radians(15.0)), math.sin(math.radians(15.0)), 0.0])
-    radiance = 0.05 + np.exp(8.0 * (d @ sun - 1.0))
-    lum = (4.0 * math.pi / len(d)) * basis(d, order).T @ radiance
+    lum = sun_sky(sun, order, floor=0.05)
     write_light(path, np.repeat(lum[:, None], 3, axis=1), source="inline",
                 parameters={"order": order, "window": "none"})
     return path

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from helpers.skies import sun_sky
 
 from shtools.geometry.raycast import RayCaster
 from shtools.scene.receiver_filter import FILTER_NEIGHBOURS, neighbours, surface_filter
@@ -367,17 +368,6 @@ def test_the_ground_filters_with_the_mesh_distance_and_objects_with_the_spheres(
     assert calls == ["mesh", "spheres"]
 
 
-def _sky(sun, order: int, floor: float = 0.2) -> np.ndarray:
-    """Luminance in SH ``(n*n,)`` of a uniform ``floor`` plus a sun lobe ``exp(8 (s.sun - 1))``
-    about the unit direction ``sun``, projected by quadrature over 20,000 equal-area
-    directions (``world_directions``)."""
-    from shtools.sh import basis
-
-    d = world_directions(20000)
-    radiance = floor + np.exp(8.0 * (d @ np.asarray(sun) - 1.0))
-    return (4.0 * math.pi / len(d)) * basis(d, order).T @ radiance
-
-
 def test_sky_gain_is_one_under_a_uniform_sky_and_the_sun_over_the_mean_radiance():
     """Under a uniform sky nothing changes (gain 1).  A narrow cone pointing at a sun
     gains the sun's cosine-weighted radiance over the receiver's cosine-weighted mean
@@ -392,7 +382,7 @@ def test_sky_gain_is_one_under_a_uniform_sky_and_the_sun_over_the_mean_radiance(
     flat[0] = 1.0
     axes = np.array([sun, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     assert np.all(sky_gain(axes, np.repeat(up, 3, axis=0), np.full(3, 0.9), flat) == 1.0)
-    lum = _sky(sun, 4, floor=0.05)
+    lum = sun_sky(sun, 4, floor=0.05)
     d = world_directions(20000)
     mean = (4.0 / len(d)) * float(np.maximum(basis(d, 4) @ lum, 0.0) @ np.maximum(d[:, 1], 0))
     want = float((basis(sun[None], 4) @ lum)[0]) * sun[1] / mean
@@ -412,7 +402,7 @@ def test_sky_gain_moves_smoothly_as_the_cone_sweeps_past_the_sun():
     from shtools.scene.traced_shadows import sky_gain
 
     sun = np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
-    lum = _sky(sun, 4, floor=0.05)
+    lum = sun_sky(sun, 4, floor=0.05)
     for azimuth in (0.0, 7.0, 30.0):
         elev = np.radians(np.linspace(0.0, 90.0, 3601))
         az = math.radians(azimuth)
@@ -440,10 +430,10 @@ def test_a_sun_behind_the_object_keeps_its_long_shadow_traced():
     toward = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0)  # the sphere, from each receiver
     flat = np.zeros(16)
     flat[0] = 1.0
-    for sky in (None, flat, _sky(toward * np.array([-1.0, 1.0, 1.0]), 4, floor=0.05)):
+    for sky in (None, flat, sun_sky(toward * np.array([-1.0, 1.0, 1.0]), 4, floor=0.05)):
         rows, _, _ = traced_ground(pts, nrm, v, f, caster, 4, 96, sky=sky)
         assert rows.size == 0
-    rows, w, g = traced_ground(pts, nrm, v, f, caster, 4, 96, sky=_sky(toward, 4, floor=0.05))
+    rows, w, g = traced_ground(pts, nrm, v, f, caster, 4, 96, sky=sun_sky(toward, 4, floor=0.05))
     assert rows.tolist() == [0, 1, 2] and np.all(w > 0)
     # the traced part is the sphere's cap: against a 4,096-ray trace, within two of the
     # shared set's directions (4 pi / 192 sr each, 0.018 in g_00; the cap is about one)
