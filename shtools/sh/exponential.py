@@ -413,14 +413,8 @@ def _factored_series(parts, degree: int, ops, ws=None):
     Even powers are built as :math:`f^{2*} = f * f`, :math:`f^{2k*} = f^{(2k-2)*} * f^{2*}`.
     """
     coef = [1.0 / math.factorial(k) for k in range(degree + 1)]
-    if degree == 2:  # 1 + f + f^2/2 in place in the square (the sums of the loop below)
-        f2 = ops.square_split(parts, ws=ws)
-        for e in f2:
-            e *= coef[2]
-        f2[0][:, 0] += SQRT_4PI * coef[0]
-        for e, p in zip(f2, parts, strict=True):
-            e += p
-        return f2
+    if degree == 2:
+        return _quadratic_series(parts, ops.square_split(parts, ws=ws), 1.0)
     even = [np.zeros_like(p) for p in parts]
     even[0][:, 0] = SQRT_4PI * coef[0]
     odd = [np.zeros_like(p) for p in parts]
@@ -439,6 +433,17 @@ def _factored_series(parts, degree: int, ops, ws=None):
             e += coef[1] * p
         return even
     return [e + x for e, x in zip(even, ops.product_split(parts, odd), strict=True)]
+
+
+def _quadratic_series(parts, square, s: float):
+    """PS*-2 of ``s f`` from the class parts of ``f`` and of ``f * f``:
+    ``1 + s f + (s^2 / 2) f^2``, written into ``square`` (returned)."""
+    c2 = 0.5 * s * s
+    for e, p in zip(square, parts, strict=True):
+        e *= e.dtype.type(c2)
+        e += p if s == 1.0 else p * p.dtype.type(s)
+    square[0][:, 0] += SQRT_4PI
+    return square
 
 
 def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
@@ -466,23 +471,38 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
     norm_sorted = norm[by_norm[:live]]
     scale = np.ldexp(1.0, -q_sorted)
     column = scale[:, None].astype(f.dtype)  # exact: powers of 2
-    scaled = f[by_norm[:live]]
+    scaled = np.take(f, by_norm[:live], axis=0)
     scaled[:, 0] = 0.0  # f_hat: DC isolated
     scaled *= column
     scaled = ops.split(scaled, copy=False)
-    g = _scaled_exp(scaled, method, norm_sorted * scale, tables, degree, ops, ws)
+    w_sorted = w[by_norm[:live]]
+    band = np.flatnonzero(w_sorted > 0)
+    # PS*-2 (the default series) is 1 + x + x^2/2: the band's e(x/2) below reuses the
+    # square of x (x/2 squared is x^2 / 4 up to rounding) instead of squaring again
+    square = ops.square_split(scaled, ws=ws) if method == "ps*" and degree == 2 else None
+    keep = None if square is None or not band.size else [np.take(e, band, axis=0)
+                                                         for e in square]
+    if square is not None:
+        g = _quadratic_series(scaled, square, 1.0)
+    else:
+        g = _scaled_exp(scaled, method, norm_sorted * scale, tables, degree, ops, ws)
     # in a blend band of the squaring count, the scaled exp e(x) blends toward
     # e(x/2)^2: after the row's q squarings that is the result of q + 1 squarings,
     # where the next octave starts (the exp is continuous in f)
-    w_sorted = w[by_norm[:live]]
-    band = np.flatnonzero(w_sorted > 0)
     if band.size:
-        half = [np.take(p, band, axis=0) * p.dtype.type(0.5) for p in scaled]
-        twice = ops.square_split(_scaled_exp(half, method, 0.5 * norm_sorted[band] * scale[band],
-                                             tables, degree, ops, ws), ws=ws)
+        x_band = [np.take(p, band, axis=0) for p in scaled]
+        if keep is not None:
+            e_half = _quadratic_series(x_band, keep, 0.5)
+        else:
+            e_half = _scaled_exp([p * p.dtype.type(0.5) for p in x_band], method,
+                                 0.5 * norm_sorted[band] * scale[band], tables, degree, ops,
+                                 ws)
+        twice = ops.square_split(e_half, ws=ws)
         wb = w_sorted[band, None].astype(out.dtype)
         for p, t in zip(g, twice, strict=True):
-            p[band] += wb * (t[:, : p.shape[1]] - p[band])
+            at = np.take(p, band, axis=0)  # (a gather: faster than p[band], read once)
+            at += wb * (t[:, : p.shape[1]] - at)
+            p[band] = at
     # each row's result, in class parts (sorted rows), merged once at the end
     res = [np.zeros((f.shape[0], k), dtype=out.dtype) for k in ops.class_sizes(n_out)]
     res[0][live:, 0] = SQRT_4PI
