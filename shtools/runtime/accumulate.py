@@ -195,7 +195,8 @@ class BlockKernel:
             self._scratch = np.empty((_N_SCRATCH + self.order, size), np.float32)
             self._idx = np.empty(size, np.intp)
             self._idx32 = np.empty(size, np.int32)
-        views = [self._scratch[i, :size].reshape(shape) for i in range(self._scratch.shape[0])]
+        # one view of them all, split along its first axis (cheaper than a reshape each)
+        views = list(self._scratch[:, :size].reshape(-1, *shape))
         return views, self._idx[:size].reshape(shape)
 
     def _bools(self, shape):
