@@ -154,8 +154,17 @@ def tree_cuts(forest: Forest, cluster_centers, cluster_radii, theta_max: float) 
     """
     pc = np.asarray(cluster_centers, dtype=np.float64)
     rc = np.asarray(cluster_radii, dtype=np.float64)
-    # node-major (M, C): each level's parent lookups gather contiguous rows
-    dist = np.sqrt(((forest.centers[:, None, :] - pc[None, :, :]) ** 2).sum(-1))  # (M, C)
+    # node-major (M, C): each level's parent lookups gather contiguous rows; summed
+    # component by component (x^2 + y^2 + z^2, the order of a sum over the last axis of
+    # 3, without its strided (M, C, 3) temporaries)
+    fc = forest.centers
+    dist = np.subtract.outer(fc[:, 0], pc[:, 0])
+    dist *= dist
+    for k in (1, 2):
+        dk = np.subtract.outer(fc[:, k], pc[:, k])
+        dk *= dk
+        dist += dk
+    np.sqrt(dist, out=dist)  # (M, C)
     passes = forest.radii[:, None] < math.sin(theta_max) * (dist - rc[None, :])
     blocked = np.zeros_like(passes)
     owner_node = np.full(passes.shape, -1, dtype=np.int64)
