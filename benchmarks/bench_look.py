@@ -428,6 +428,8 @@ def main(argv=None) -> int:
         wanted = (wanted - {"heldout"}) | set(HELDOUT)
     if args.demo is None and not args.quick and (REPO / "out" / "scene.toml").is_file():
         args.demo = REPO / "out"
+    if args.demo is not None:  # each code's bake runs in that code's folder
+        args.demo = args.demo.resolve()
     if args.field is None and not args.quick and (wanted is None or wanted & set(FIELD_SCENES)):
         # the teapot's field at `field sample` defaults (order 4), built once (~10 s CPU)
         args.field = CACHE / "teapot.field.h5"
