@@ -196,7 +196,7 @@ class BlockKernel:
             self._idx = np.empty(size, np.intp)
             self._idx32 = np.empty(size, np.int32)
         # one view of them all, split along its first axis (cheaper than a reshape each)
-        views = list(self._scratch[:, :size].reshape(-1, *shape))
+        views = list(self._scratch[:, :size].reshape(self._scratch.shape[0], *shape))
         return views, self._idx[:size].reshape(shape)
 
     def _bools(self, shape):

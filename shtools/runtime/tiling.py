@@ -136,7 +136,8 @@ def accumulate_clusters(points, normals, cluster_order, cluster_offsets, sphere_
             pair = tile_cluster[tiles][:, None] * n_s + tile_spheres[tiles, :s_max]
             # past a tile's own list: radius 0 (dropped spheres contribute 0 anyway)
             radius = np.take(rad_rows, pair)
-            radius[np.arange(s_max)[None, :] >= sizes[tiles][:, None]] = 0.0
+            np.copyto(radius, np.float32(0.0),
+                      where=np.arange(radius.shape[1])[None, :] >= sizes[tiles][:, None])
             r = rows[tiles]
             res = accumulate_blocks(
                 np.take(pts, r, axis=0), np.take(nrm, r, axis=0),

@@ -81,7 +81,8 @@ SQUARING_MARGIN = 3
 #: where ``|f_hat|`` crosses a power of 2, and the scaled series' error with it: a
 #: jump of up to 0.2 % of the visibility at the paper's margin, 3 % at margin 1, a
 #: ring on a receiver surface.  Blended, the exp is continuous in ``f``; the rows of
-#: the band (this share of them, about) take one series and one square more.
+#: the band (this share of them, about) take one square more (PS*-2) or one series
+#: and one square more (the other series, HYB).
 SQUARING_BLEND = 0.25
 
 
@@ -413,8 +414,6 @@ def _factored_series(parts, degree: int, ops, ws=None):
     Even powers are built as :math:`f^{2*} = f * f`, :math:`f^{2k*} = f^{(2k-2)*} * f^{2*}`.
     """
     coef = [1.0 / math.factorial(k) for k in range(degree + 1)]
-    if degree == 2:
-        return _quadratic_series(parts, ops.square_split(parts, ws=ws), 1.0)
     even = [np.zeros_like(p) for p in parts]
     even[0][:, 0] = SQRT_4PI * coef[0]
     odd = [np.zeros_like(p) for p in parts]
@@ -478,10 +477,11 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
     w_sorted = w[by_norm[:live]]
     band = np.flatnonzero(w_sorted > 0)
     # PS*-2 (the default series) is 1 + x + x^2/2: the band's e(x/2) below reuses the
-    # square of x (x/2 squared is x^2 / 4 up to rounding) instead of squaring again
+    # square of x (x/2 squared is exactly x^2 / 4: halving is exact in binary floating
+    # point) instead of squaring again
     square = ops.square_split(scaled, ws=ws) if method == "ps*" and degree == 2 else None
-    keep = None if square is None or not band.size else [np.take(e, band, axis=0)
-                                                         for e in square]
+    square_band = None if square is None or not band.size else [
+        np.take(e, band, axis=0) for e in square]  # copies, before the in-place series
     if square is not None:
         g = _quadratic_series(scaled, square, 1.0)
     else:
@@ -491,8 +491,8 @@ def _exp_block(f, method, tables, degree, ops, n_out: int, out, ws=None,
     # where the next octave starts (the exp is continuous in f)
     if band.size:
         x_band = [np.take(p, band, axis=0) for p in scaled]
-        if keep is not None:
-            e_half = _quadratic_series(x_band, keep, 0.5)
+        if square_band is not None:
+            e_half = _quadratic_series(x_band, square_band, 0.5)
         else:
             e_half = _scaled_exp([p * p.dtype.type(0.5) for p in x_band], method,
                                  0.5 * norm_sorted[band] * scale[band], tables, degree, ops,

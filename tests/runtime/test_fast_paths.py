@@ -126,3 +126,64 @@ def test_half_rule_integrates_even_functions_and_rejects_asymmetric_rules():
     np.testing.assert_allclose(w @ y[:, even], want, atol=1e-13)
     with pytest.raises(ValueError, match="centrally symmetric"):
         half_rule(dirs, w)
+
+
+def blended_ps2_reference(f, margin):
+    """PS*-2 with the squaring count's band blend, written out in float64 with the
+    library's tensor products: ``e(x) = 1 + x + x^2 / 2`` at ``x = f_hat / 2^q``,
+    blended as ``(1 - w) e(x) + w e(x/2)^2``, squared ``q`` times, times ``exp(dc)``."""
+    from shtools.sh.exponential import squaring_weights
+
+    sqrt_4pi = np.sqrt(4 * np.pi)
+    f_hat = np.array(f, dtype=np.float64)
+    dc = np.exp(f_hat[:, 0] / sqrt_4pi)
+    f_hat[:, 0] = 0.0
+    q, w = squaring_weights(np.linalg.norm(f_hat, axis=1), margin)
+    x = f_hat * np.ldexp(1.0, -q)[:, None]
+    one = np.zeros_like(x)
+    one[:, 0] = sqrt_4pi
+    e = one + x + 0.5 * square(x)
+    half = one + 0.5 * x + 0.5 * square(0.5 * x)
+    e = (1.0 - w)[:, None] * e + w[:, None] * square(half)
+    for k in range(int(q.max())):
+        more = q > k
+        e[more] = square(e[more])
+    return e * dc[:, None], w
+
+
+@pytest.mark.parametrize("order", [4, 6, 8])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_ps_star_blend_band_is_the_written_out_blend(order, dtype):
+    """The runtime's PS*-2 (symmetry-class quadrature products, the band's e(x/2) from
+    the square of x it already made) against the blend written out with tensor
+    products, on |f_hat| spread over 0.3-20 (squaring counts 0-5 at margin 1, a fifth to
+    a quarter of the rows in a band)."""
+    rng = np.random.default_rng(order)
+    f = rng.normal(size=(300, order * order))
+    f[:, 1:] *= (np.exp(rng.uniform(np.log(0.3), np.log(20.0), 300))
+                 / np.linalg.norm(f[:, 1:], axis=1))[:, None]
+    f[:, 0] = -0.5
+    want, w = blended_ps2_reference(f, 1)
+    assert 50 < np.count_nonzero((w > 0) & (w < 1)) < 150  # the band is exercised
+    got = fast_exp(f.astype(dtype), "ps*", margin=1)
+    # float64: both exact truncated products, agreement to rounding over <= 5 squarings;
+    # float32: its rounding (1e-7) grown by the squarings (measured <= 4.3e-6 of the peak)
+    tol = 1e-10 if dtype == np.float64 else 2e-5
+    np.testing.assert_allclose(got, want, atol=tol * np.abs(want).max())
+
+
+def test_empty_sphere_lists_give_zero_logs():
+    """Blocks and clusters with no sphere at all (every cut empty) sum to zero."""
+    from shtools.runtime.accumulate import accumulate_blocks
+
+    table = CapLogTable(default_tables(4), 4)
+    rng = np.random.default_rng(1)
+    pts = rng.normal(size=(2, 8, 3)).astype(np.float32)
+    nrm = np.broadcast_to(np.float32([0, 1, 0]), (2, 8, 3)).copy()
+    got = accumulate_blocks(pts, nrm, np.zeros((2, 0, 3), np.float32),
+                            np.zeros((2, 0), np.float32), table)
+    np.testing.assert_array_equal(got, np.zeros((2, 8, 16), np.float32))
+    got = accumulate_clusters(pts.reshape(-1, 3), nrm.reshape(-1, 3), np.arange(16),
+                              np.array([0, 8, 16]), np.zeros((2, 0, 3)), np.zeros((2, 0)),
+                              None, np.array([0, 0]), table)
+    np.testing.assert_array_equal(got, np.zeros((16, 16), np.float32))
