@@ -75,6 +75,10 @@ def relight(baked, light, rotate, scene, compress, keep_visibility, output, forc
                            compression="gzip" if compress else None,
                            keep_visibility=keep_visibility,
                            progress=deferred(progress, PROGRESS_AFTER))
+    if summary["lamps_as_baked"] is False:
+        click.echo(f"warning: {baked}: the lamps of --lights sit or measure otherwise than "
+                   "the baked ones; a lamp's long shadow beyond an object's traced reach "
+                   "is its blocker's (bake the scene with these lamps for it)", err=True)
     lights = f" + {summary['lights']} spherical light(s)" if summary["lights"] else ""
     report(summary, as_json,
            f"relit {summary['frames']} frame(s) x {summary['vertices']} vertices{lights} "

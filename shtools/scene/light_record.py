@@ -212,6 +212,27 @@ def posed(bake, scene) -> PosedLights:
     return PosedLights(Path(scene.path), [pose_lights(scene, float(t)) for t in bake.times], [])
 
 
+def lamps_as_baked(bake, lights: PosedLights) -> bool | None:
+    """Whether ``lights`` sit where the bake's recorded lamps sat, at their sizes, at
+    every frame; None when the bake recorded none to compare with.
+
+    A stored visibility keeps one thing of the bake's lamps: where they were.  A
+    spherical light that a traced object may hide keeps the object's real mesh traced
+    on the receivers behind it however far
+    (:func:`~shtools.scene.traced_shadows.light_weights`), for the lamps the bake had;
+    their colours do not enter it.  True also when ``lights`` holds no lamp.
+    """
+    poses = getattr(bake, "light_poses", None)
+    if poses is None:
+        return None
+    table = pose_table(lights.frames)
+    if table is None:
+        return True
+    recorded = np.asarray(poses[...], dtype=np.float64)[..., :4]
+    return table.shape[:2] == recorded.shape[:2] and bool(
+        np.allclose(table[..., :4], recorded, rtol=1e-9, atol=0.0))
+
+
 def frame_lights(bake, scene=None) -> list:
     """The posed spherical lights of each frame of ``bake`` (:func:`posed`); empty lists
     without ``scene``."""

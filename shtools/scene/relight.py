@@ -513,7 +513,11 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     Returns
     -------
     dict
-        ``frames``, ``vertices``, ``seconds``, ``output``, ``lights``.
+        ``frames``, ``vertices``, ``seconds``, ``output``, ``lights``, and
+        ``lamps_as_baked``: whether ``scene``'s lamps sit and measure as the bake's
+        recorded ones (:func:`~shtools.scene.light_record.lamps_as_baked`; False: a
+        lamp's long shadow beyond an object's traced reach is its blocker's, where a
+        fresh bake would trace the real mesh; None: no lamps given, or none recorded).
 
     Raises
     ------
@@ -527,7 +531,7 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
     from shtools.data_formats.bake import BakeWriter
     from shtools.data_formats.bake_stream import open_bake
     from shtools.progress import silent
-    from shtools.scene.light_record import PosedLights, pose_table, posed
+    from shtools.scene.light_record import PosedLights, lamps_as_baked, pose_table, posed
 
     start = time.perf_counter()
     named = scene.path if isinstance(scene, PosedLights) else scene
@@ -541,9 +545,11 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         env = relight_environment(light, b.sh_order,
                                   b.parameters.get("window", settings.window), rotate, inputs)
         sphere = relight_midrange(b, env)
+        as_baked = None
         if scene is not None:
             scene = posed(b, scene)
             inputs["scene"] = scene.path
+            as_baked = lamps_as_baked(b, scene)
         parameters = dict(b.parameters)
         parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
                                  "lights": None if scene is None else Path(scene.path).name}
@@ -576,4 +582,4 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                 bar.update(z - a)
     return {"frames": b.n_frames, "vertices": b.n_vertices,
             "seconds": round(time.perf_counter() - start, 4), "output": os.fspath(output),
-            "lights": 0 if scene is None else len(scene.lights)}
+            "lights": 0 if scene is None else len(scene.lights), "lamps_as_baked": as_baked}

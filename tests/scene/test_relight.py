@@ -560,3 +560,30 @@ def test_a_relit_traced_shadow_under_a_turned_sun_equals_a_fresh_bake(tmp_path):
     assert np.max(np.abs(plain - stored)) > 1e-3 * top
     # float32 shading of the same visibility, as the tests above
     np.testing.assert_allclose(relit, stored, rtol=1e-4, atol=1e-6 * top)
+
+
+@pytest.mark.parametrize("moving", ["all"])
+def test_relight_says_when_its_lamps_are_not_the_baked_ones(baked_a, tmp_path, run_cli):
+    """A stored visibility keeps where the bake's lamps were (a hidden lamp's long shadow
+    stays traced for them): relit with a lamp moved elsewhere, the command says so in
+    one warning line; with the bake's own lamps, a recoloured one, or a bake that
+    recorded none, it says nothing."""
+    scene_a, bake_a = baked_a
+    moved = tmp_path / "moved.toml"
+    moved.write_text(scene_a.read_text().replace("position = [1.0, 2.5, 0.5]",
+                                                 "position = [-2.0, 1.5, 0.5]"))
+    warm = tmp_path / "warm.toml"
+    warm.write_text(scene_a.read_text().replace("color = [6.0, 5.0, 4.0]",
+                                                "color = [9.0, 5.0, 2.0]"))
+    old = _older(bake_a, tmp_path / "old.h5")
+    said = {}
+    for name, bake, scene in (("moved", bake_a, moved), ("own", bake_a, scene_a),
+                              ("warm", bake_a, warm), ("older", old, moved)):
+        code, _, stderr = run_cli("relight", bake, "--light", tmp_path / "b.h5",
+                                  "--lights", scene, "-o", tmp_path / f"{name}.h5")
+        assert code == 0, stderr
+        said[name] = [line for line in stderr.splitlines() if line.startswith("warning:")]
+    assert len(said["moved"]) == 1 and str(bake_a) in said["moved"][0]
+    assert said["own"] == said["warm"] == said["older"] == []
+    assert relight(bake_a, tmp_path / "b.h5", tmp_path / "py.h5",
+                   scene=moved)["lamps_as_baked"] is False
