@@ -10,14 +10,14 @@ world matrix.  The runtime combines it as ``settings.field_space`` says (log
 space by default, or product space).  The baker gives the posed blocker the
 object's own receiver rows (``skip_rows``: a surface point lies inside the
 field's innermost shells); on those rows the object is shadowed by its own
-real mesh through the log of the O_v stored in the asset (by default at the
-accumulation order, rotated with the object), or of the ``transfer`` asset the
-scene names with ``self_visibility`` (:func:`shtools.scene.transfer.object_self_log`,
-:func:`shtools.scene.pose.pose_frame`).  So one asset gives a rigid object
-real-mesh shadows both on the other receivers and on itself.  On the receiver-only
-objects near it (``traced_shadows``) its real mesh is traced instead, handed over
-per vertex to the field (:mod:`shtools.scene.traced_shadows`); the field skips the
-rows traced too.
+real mesh: the O_v stored in the asset (by default at the accumulation order),
+rotated with the object and multiplied in after the exp at the shading order, or
+the ``transfer`` asset the scene names with ``self_visibility``
+(:func:`shtools.scene.transfer.object_self_log`, :func:`shtools.scene.pose.pose_frame`).
+So one asset gives a rigid object real-mesh shadows both on the other receivers and
+on itself.  On the receiver-only objects near it (``traced_shadows``) its real mesh
+is traced instead, handed over per vertex to the field
+(:mod:`shtools.scene.traced_shadows`); the field skips the rows traced too.
 """
 
 from __future__ import annotations
@@ -70,13 +70,9 @@ class FieldKind(BlockerKind):
                              "resample it from this mesh", spec.path)
         table = FieldTable(fld)
         if fld.self_visibility is not None and prep.spec.receives:
-            # the stored O_v as a self-visibility log at the accumulation order (truncated
-            # before the log, or zero above an O_v of lower order): the object's exact
-            # self-shadowing unless the scene names a transfer asset or turns it off
-            from shtools.geometry.visibility import self_visibility_log_at
-
-            table.self_log = self_visibility_log_at(fld.self_visibility,
-                                                    ctx.settings.resolved_acc_order())
+            # the stored O_v, (V, self_order^2): the object's exact self-shadowing unless
+            # the scene names a transfer asset (shtools.scene.transfer.object_self_log)
+            table.self_visibility = np.asarray(fld.self_visibility, dtype=np.float32)
             table.self_order = fld.self_order
         prep.blocker_data = table
         ctx.inputs[f"{prep.spec.name}.field"] = spec.path

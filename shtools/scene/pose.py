@@ -160,7 +160,7 @@ def pose_frame(prepared: PreparedScene, t: float, *, with_meshes: bool = False,
                     exact=touches and not (stands_in or caster is not None)))
             if o.spec.receives and hasattr(blockers[-1], "skip_rows"):
                 _field_own_rows(o, blockers[-1], m, np.arange(n_rows - len(world_v), n_rows),
-                                selfs, len(blockers) - 1)
+                                selfs, len(blockers) - 1, st.order)
             if with_meshes:
                 meshes.append((world_v, o.faces))
     # rigid objects whose bounding spheres overlap (a character's parts) traced jointly,
@@ -387,20 +387,23 @@ def _joint_faces(rigid: list) -> np.ndarray:
     return np.concatenate([o.faces + offsets[i] for i, (o, _, _, _) in enumerate(rigid)])
 
 
-def _field_own_rows(o, blocker, world, rows, selfs: list, index: int) -> None:
+def _field_own_rows(o, blocker, world, rows, selfs: list, index: int, order: int) -> None:
     """A shadow field never shades its own object (its surface lies inside the innermost
     shells): the posed field skips the object's receiver rows, and the object's
     self-shadowing comes from ``self_visibility`` when that is on for it, else from the
-    O_v stored in the field asset (its log, rotated with the object)."""
+    O_v stored in the field asset (rotated with the object, multiplied in at the shading
+    ``order``)."""
     from shtools.runtime import SelfVisibility
-    from shtools.scene.transfer import rotation_of
+    from shtools.scene.transfer import rotation_of, world_transfer
 
     blocker.skip_rows = rows
     # the field already skips these rows: its self-visibility names no sphere blocker
     for k, sv in enumerate(selfs):
         if sv.blocker == index:
             selfs[k] = dataclasses.replace(sv, blocker=None)
-    own_log = getattr(o.blocker_data, "self_log", None)
-    if o.self_log is None and o.self_transfer is None and own_log is not None:
-        selfs.append(SelfVisibility(own_log, slice(int(rows[0]), int(rows[-1]) + 1),
-                                    rotation=rotation_of(world)))
+    own = getattr(o.blocker_data, "self_visibility", None)
+    rotation = rotation_of(world)
+    if o.self_log is None and o.self_transfer is None and own is not None and \
+            rotation is not None:
+        selfs.append(SelfVisibility(None, slice(int(rows[0]), int(rows[-1]) + 1),
+                                    visibility=world_transfer(own, rotation, order)))

@@ -71,7 +71,8 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
     shadow-field asset (``blocker = { field = ... }``, :mod:`shtools.scene.field_blocker`)
     when it is at least the accumulation order (a log); a zero log for a convex mesh;
     the visibility ray traced now, at the shading ``order`` (the runtime multiplies it
-    in at that order, and needs no log of it).
+    in at that order, and needs no log of it).  A field's O_v and a traced visibility
+    are visibilities only.
 
     Parameters
     ----------
@@ -90,25 +91,27 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
     Returns
     -------
     log : ndarray, shape (V, acc_order^2) float32, or None
-        None for a traced visibility.
+        A transfer asset's log, a convex mesh's zero; None otherwise.
     visibility : ndarray, shape (V, m*m) float32, or None
-        The projected visibility of a transfer asset (``m`` its order) or of the
-        tracing (``m = order``; the runtime multiplies it in exactly: the
-        eigen-log's exp does not give it back where the mesh shadows itself
-        deeply); None for a field's O_v and a convex mesh.
+        The projected visibility of a transfer asset (``m`` its order), of a field's
+        O_v or of the tracing (``m = order``; the runtime multiplies it in exactly:
+        the eigen-log's exp does not give it back where the mesh shadows itself
+        deeply); None for a convex mesh.
     path : Path or None
         The ``transfer`` asset read (for the bake's inputs), None otherwise.
     """
     source = getattr(obj.spec, "self_visibility", None)
     if isinstance(source, str | Path):
         return *_from_asset(obj, Path(source), acc_order), Path(source)
-    stored = getattr(obj.blocker_data, "self_log", None)
-    if stored is not None and getattr(obj.blocker_data, "self_order", 0) >= acc_order:
-        # the O_v of the object's field asset (already an input); an O_v below the
-        # accumulation order (fields sampled before it was stored there) would cost
-        # accuracy (dragon: 3.5 % instead of 2.4 %), so such an object is traced
-        return stored, None, None
     order = acc_order if order is None else int(order)
+    stored = getattr(obj.blocker_data, "self_visibility", None)
+    if stored is not None and getattr(obj.blocker_data, "self_order", 0) >= acc_order:
+        # the O_v of the object's field asset (already an input), multiplied in after
+        # the exp at the shading order as a transfer asset's visibility is: the round
+        # trip through its eigen-log and the exp does not give it back.  An O_v below
+        # the accumulation order (fields sampled before it was stored there) is traced,
+        # as it was when the log was used
+        return None, np.ascontiguousarray(stored[:, :order * order], dtype=np.float32), None
     zero = np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
     if cache is None:
         g = _traced_self_visibility(obj, order, log)
