@@ -144,7 +144,7 @@ def scenes(quick: bool, demo: Path | None, field: Path | None = None,
 #: Held-out scenes (only when named, or all with ``--scenes heldout``): the kind the
 #: look issue is judged on, with grounds, probes and placements none of the default
 #: scenes use.
-HELDOUT = ("spottea", "bunnywide", "cmcoarse", "foxwalk")
+HELDOUT = ("spottea", "bunnywide", "cmcoarse", "foxwalk", "spotfield")
 
 
 def heldout_scenes(write, only: set, pre: dict) -> dict[str, dict]:
@@ -152,7 +152,9 @@ def heldout_scenes(write, only: set, pre: dict) -> dict[str, dict]:
     radius or two apart on a 4 x 4 ground of 128 under Mondello (each shadows the
     other at mid-range); the bunny on a wide 8 x 8 ground of 160 under Mondello (the
     sun's long shadow); CesiumMan on a coarse 3 x 3 ground of 48 under Uffizi; the Fox
-    walking (animation 1) on a fine 2 x 2 ground of 128 under Grace."""
+    walking (animation 1) on a fine 2 x 2 ground of 128 under Grace; spot with a shadow
+    field of its own (sampled at ``field sample`` defaults, order 4, built once into the
+    cache) on a 4 x 4 ground of 48 under Mondello (a field object's own surface)."""
     fid = _fidelity()
     mondello = DATA / "probes" / "spiaggia_di_mondello_1k.hdr"
     out = {}
@@ -176,6 +178,19 @@ def heldout_scenes(write, only: set, pre: dict) -> dict[str, dict]:
             animation=1)
         out["foxwalk"] = {"path": write("foxwalk", body, DATA / "probes" / "grace.hdr", 3, 4),
                           "frames": range(0, 3)}
+    if "spotfield" in only:
+        field = CACHE / "spot.field.h5"
+        fid._ensure(field, "field", "sample", DATA / "meshes" / "spot.obj", "--order", 4)
+        body = fid._ground(4.0, 48) + f"""
+[[objects]]
+name = "spot"
+mesh = "{DATA / 'meshes' / 'spot.obj'}"
+role = "both"
+translate = [0.0, 0.72, 0.0]
+rotate = [0.0, 30.0, 0.0]
+blocker = {{ field = "{field}" }}
+"""
+        out["spotfield"] = {"path": write("spotfield", body, mondello, 1), "frames": range(0, 1)}
     return out
 
 
