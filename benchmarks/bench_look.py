@@ -179,16 +179,14 @@ def heldout_scenes(write, only: set, pre: dict) -> dict[str, dict]:
         out["foxwalk"] = {"path": write("foxwalk", body, DATA / "probes" / "grace.hdr", 3, 4),
                           "frames": range(0, 3)}
     if "spotfield" in only:
-        field = CACHE / "spot.field.h5"
-        fid._ensure(field, "field", "sample", DATA / "meshes" / "spot.obj", "--order", 4)
+        field, mesh = CACHE / "spot.field.h5", DATA / "meshes" / "spot.obj"
+        pre["spot field"] = fid._ensure(field, "field", "sample", mesh, "--order", 4)
         body = fid._ground(4.0, 48) + f"""
 [[objects]]
 name = "spot"
-mesh = "{DATA / 'meshes' / 'spot.obj'}"
+mesh = "{mesh}"
 role = "both"
-translate = [0.0, 0.72, 0.0]
-rotate = [0.0, 30.0, 0.0]
-blocker = {{ field = "{field}" }}
+{fid.placement(mesh, 1.0, 0.0, 0.0, 30.0)}blocker = {{ field = "{field}" }}
 """
         out["spotfield"] = {"path": write("spotfield", body, mondello, 1), "frames": range(0, 1)}
     return out

@@ -213,24 +213,32 @@ def posed(bake, scene) -> PosedLights:
 
 
 def lamps_as_baked(bake, lights: PosedLights) -> bool | None:
-    """Whether ``lights`` sit where the bake's recorded lamps sat, at their sizes, at
-    every frame; None when the bake recorded none to compare with.
+    """Whether each of ``lights`` sits where one of the bake's recorded lamps sat, at its
+    size, at every frame (in any order; a lamp left out is not a difference); None when
+    the bake's record cannot say.
 
     A stored visibility keeps one thing of the bake's lamps: where they were.  A
     spherical light that a traced object may hide keeps the object's real mesh traced
     on the receivers behind it however far
     (:func:`~shtools.scene.traced_shadows.light_weights`), for the lamps the bake had;
-    their colours do not enter it.  True also when ``lights`` holds no lamp.
+    their colours do not enter it.  The record cannot say for a bake that recorded no
+    lamps (it had none, or a field light, or it predates the record) and for a relit
+    bake (its record holds the lamps it was relit with, its visibility the reach of
+    the first bake's).  True when ``lights`` holds no lamp.
     """
     poses = getattr(bake, "light_poses", None)
-    if poses is None:
+    if poses is None or "relight" in bake.parameters:
         return None
     table = pose_table(lights.frames)
     if table is None:
         return True
     recorded = np.asarray(poses[...], dtype=np.float64)[..., :4]
-    return table.shape[:2] == recorded.shape[:2] and bool(
-        np.allclose(table[..., :4], recorded, rtol=1e-9, atol=0.0))
+    if table.shape[0] != recorded.shape[0]:
+        return False
+    # (T, relit, recorded): a relit lamp matches a recorded one of the same frame
+    same = np.isclose(table[:, :, None, :4], recorded[:, None, :, :], rtol=1e-9,
+                      atol=0.0).all(axis=-1)
+    return bool(same.any(axis=2).all())
 
 
 def frame_lights(bake, scene=None) -> list:

@@ -46,12 +46,11 @@ class PreparedObject:
         What a blocker kind that is not a sphere set prepared (its own type).
     self_log : ndarray, shape (V, n_acc^2) or None
         Self-visibility log in the object's frame (exact self-shadowing,
-        :mod:`shtools.scene.transfer`: a ``transfer`` asset's, a field's O_v, a
-        convex mesh's zero); None when the object uses its spheres or only a
-        traced ``self_transfer``.
+        :mod:`shtools.scene.transfer`: a ``transfer`` asset's, a convex mesh's
+        zero); None when the object uses its spheres or only ``self_transfer``.
     self_transfer : ndarray, shape (V, m*m) or None
-        The projected self-visibility (a ``transfer`` asset's, or traced at the
-        shading order), in the object's frame: multiplied into its rows after
+        The projected self-visibility (a ``transfer`` asset's, a field's O_v, or
+        traced at the shading order), in the object's frame: multiplied into its rows after
         the exp (:func:`shtools.scene.pose.pose_frame`) instead of adding a log
         before it, whose eigen-log and exp do not give it back.
     local_log : ndarray, shape (V, n_acc^2) or None

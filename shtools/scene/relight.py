@@ -517,7 +517,8 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         ``lamps_as_baked``: whether ``scene``'s lamps sit and measure as the bake's
         recorded ones (:func:`~shtools.scene.light_record.lamps_as_baked`; False: a
         lamp's long shadow beyond an object's traced reach is its blocker's, where a
-        fresh bake would trace the real mesh; None: no lamps given, or none recorded).
+        fresh bake would trace the real mesh; None: no lamps given, or the bake's
+        record cannot say).
 
     Raises
     ------

@@ -69,7 +69,7 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
     From the first source that applies: the ``transfer`` asset the scene names
     (``self_visibility = "x.transfer.h5"``: both); the O_v stored in the object's
     shadow-field asset (``blocker = { field = ... }``, :mod:`shtools.scene.field_blocker`)
-    when it is at least the accumulation order (a log); a zero log for a convex mesh;
+    when it is at least the accumulation order (a visibility); a zero log for a convex mesh;
     the visibility ray traced now, at the shading ``order`` (the runtime multiplies it
     in at that order, and needs no log of it).  A field's O_v and a traced visibility
     are visibilities only.
@@ -110,7 +110,8 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
         # the exp at the shading order as a transfer asset's visibility is: the round
         # trip through its eigen-log and the exp does not give it back.  An O_v below
         # the accumulation order (fields sampled before it was stored there) is traced,
-        # as it was when the log was used
+        # as it was when its log was used (where it cost accuracy; on this path it is
+        # not measured)
         return None, np.ascontiguousarray(stored[:, :order * order], dtype=np.float32), None
     zero = np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
     if cache is None:

@@ -227,8 +227,9 @@ def test_one_field_asset_shadows_the_object_and_the_ground_like_ray_tracing(
 
 def test_an_o_v_below_the_accumulation_order_is_traced_at_bake_time(torus_dir, monkeypatch):
     """A field whose O_v is at the shading order (sampled before O_v was stored at the
-    accumulation order) would cost the object's own vertices accuracy: the bake traces
-    them as it did, and uses the stored O_v only when told self_visibility = false."""
+    accumulation order): the bake traces the object's own vertices, as it did when the
+    O_v's log cost them accuracy, and uses the stored O_v only when told
+    self_visibility = false."""
     from shtools.cli.main import main
     from shtools.scene.bake import prepare_scene
     from shtools.scene.scene import load_scene
