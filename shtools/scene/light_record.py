@@ -212,10 +212,11 @@ def posed(bake, scene) -> PosedLights:
     return PosedLights(Path(scene.path), [pose_lights(scene, float(t)) for t in bake.times], [])
 
 
-def lamps_as_baked(bake, lights: PosedLights) -> bool | None:
-    """Whether each of ``lights`` sits where one of the bake's recorded lamps sat, at its
-    size, at every frame (in any order; a lamp left out is not a difference); None when
-    the bake's record cannot say.
+def lamps_as_baked(bake, table: np.ndarray | None) -> bool | None:
+    """Whether each lamp of ``table`` (the relit lamps' :func:`pose_table`, ``(T, S, 7)``
+    or None for none) sits where one of the bake's recorded lamps sat, at its size, at
+    every frame (in any order; a lamp left out is not a difference); None when the
+    bake's record cannot say.
 
     A stored visibility keeps one thing of the bake's lamps: where they were.  A
     spherical light that a traced object may hide keeps the object's real mesh traced
@@ -224,12 +225,11 @@ def lamps_as_baked(bake, lights: PosedLights) -> bool | None:
     their colours do not enter it.  The record cannot say for a bake that recorded no
     lamps (it had none, or a field light, or it predates the record) and for a relit
     bake (its record holds the lamps it was relit with, its visibility the reach of
-    the first bake's).  True when ``lights`` holds no lamp.
+    the first bake's).  True when there is no relit lamp.
     """
     poses = getattr(bake, "light_poses", None)
     if poses is None or "relight" in bake.parameters:
         return None
-    table = pose_table(lights.frames)
     if table is None:
         return True
     recorded = np.asarray(poses[...], dtype=np.float64)[..., :4]

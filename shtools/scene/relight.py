@@ -546,11 +546,12 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
         env = relight_environment(light, b.sh_order,
                                   b.parameters.get("window", settings.window), rotate, inputs)
         sphere = relight_midrange(b, env)
-        as_baked = None
+        as_baked = poses = None
         if scene is not None:
             scene = posed(b, scene)
             inputs["scene"] = scene.path
-            as_baked = lamps_as_baked(b, scene)
+            poses = pose_table(scene.frames)
+            as_baked = lamps_as_baked(b, poses)
         parameters = dict(b.parameters)
         parameters["relight"] = {"light": Path(light).name, "rotate_deg": float(rotate),
                                  "lights": None if scene is None else Path(scene.path).name}
@@ -569,7 +570,7 @@ def relight(bake: str | os.PathLike, light: str | os.PathLike, output: str | os.
                 frame_index=b.frame_index, albedo=b.albedo, object_offsets=b.object_offsets,
                 object_names=b.object_names, parameters=parameters, inputs=inputs,
                 fps=b.attrs.get("fps"), compression=compression, copy=copy,
-                light_poses=None if scene is None else pose_table(scene.frames))
+                light_poses=poses)
             frames = relight_frames(b, env, scene, settings, threads, midrange=sphere)
             first = next(frames)
             writer = made.result()

@@ -589,14 +589,14 @@ def test_relight_says_when_its_lamps_are_not_the_baked_ones(baked_a, tmp_path, r
                    scene=moved)["lamps_as_baked"] is False
 
 
-def test_lamps_as_baked_matches_each_lamp_to_a_recorded_one(tmp_path):
+def test_lamps_as_baked_matches_each_lamp_to_a_recorded_one():
     """Lamps in another order, or some left out, are the baked ones; a moved or resized
     one is not; a relit bake's record (its relit lamps) and a bake without one cannot
     say."""
     from types import SimpleNamespace
 
     from shtools.runtime import SphereLight
-    from shtools.scene.light_record import PosedLights, lamps_as_baked, pose_table
+    from shtools.scene.light_record import lamps_as_baked, pose_table
 
     def lamp(x, r=0.3, c=1.0):
         return SphereLight(position=np.array([x, 2.0, 0.0]), radius=r,
@@ -606,7 +606,7 @@ def test_lamps_as_baked_matches_each_lamp_to_a_recorded_one(tmp_path):
     bake = SimpleNamespace(light_poses=pose_table(baked), parameters={})
 
     def check(frames, of=bake):
-        return lamps_as_baked(of, PosedLights(tmp_path / "s.toml", frames, []))
+        return lamps_as_baked(of, pose_table(frames))
 
     assert check([[lamp(1.0), lamp(0.0, c=5.0)], [lamp(1.5), lamp(0.5)]]) is True
     assert check([[lamp(1.0)], [lamp(1.5)]]) is True
