@@ -49,8 +49,8 @@ def field():
               help="Do not store the per-vertex self-visibility O_v (the object's own "
                    "vertices then need a transfer asset or are not self-shadowed).")
 @click.option("--self-order", default=None, type=int,
-              help="SH order of the stored O_v [default: the bake's accumulation order at "
-                   "--order, 6 at order 4].")
+              help="SH order of the stored O_v, at least --order [default: --order; a bake "
+                   "uses its first --order only].")
 @click.option("--seed", default=0, show_default=True, type=option_type("seed"),
               help="Recorded for reproducibility (sampling is deterministic).")
 @click.option("--radiance", "emission", default=None, type=click.Path(dir_okay=False),
@@ -128,17 +128,15 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     mesh = load_mesh(mesh_path)
     sv = None
     if not no_self_visibility:
-        try:
-            from shtools.geometry.visibility import DEFAULT_DIRECTIONS
-            from shtools.geometry.visibility import self_visibility as sv
-        except ImportError:  # not in this build: the field is stored without O_v
-            sv = None
-        else:  # O_v: every vertex's rays besides the shells'
-            n = len(mesh.vertices)
-            check_rays("field sample (self-visibility)", n * DEFAULT_DIRECTIONS,
-                       f"{n} vertices x {DEFAULT_DIRECTIONS} directions",
-                       "pass --no-self-visibility (or use a `transfer` asset)", force=force,
-                       path=mesh_path)
+        from shtools.geometry.transfer import TRANSFER_DIRECTIONS
+        from shtools.geometry.transfer import field_self_visibility as sv
+
+        # O_v: every vertex's rays besides the shells' (at most the dense set each)
+        n = len(mesh.vertices)
+        check_rays("field sample (self-visibility)", n * TRANSFER_DIRECTIONS,
+                   f"{n} vertices x {TRANSFER_DIRECTIONS} directions",
+                   "pass --no-self-visibility (or use a `transfer` asset)", force=force,
+                   path=mesh_path)
     with progress(total=shells * resolution * resolution, desc="field samples") as bar:
         try:
             fld, rep = sample_field(mesh, params, self_visibility=sv, progress=bar.update,
@@ -150,6 +148,7 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         "cumulative", "log_floor", "log_eps", "seed")}
     if not no_self_visibility:
         parameters["self_order"] = params.resolved_self_order()
+        parameters["self_estimator"] = "hemisphere"  # the bake's (field_self_visibility)
     write_field(output, fld, inputs={"mesh": mesh_path}, parameters=parameters)
     fixed = shells * resolution * resolution * order * order
     summary = {

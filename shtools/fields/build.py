@@ -36,7 +36,7 @@ from shtools.fields.sampling import (
     sample_ocvs,
     shell_radii,
 )
-from shtools.runtime.settings import MAX_ACC_ORDER, MAX_ORDER, ShadowSettings
+from shtools.runtime.settings import MAX_ACC_ORDER, MAX_ORDER
 from shtools.sh import LOG_EPS
 from shtools.sh import log as sh_log
 from shtools.sh.basis import SQRT_4PI
@@ -60,16 +60,13 @@ class FieldParameters:
     log_floor: float = LOG_FLOOR
     log_eps: float = LOG_EPS
     seed: int = 0
-    #: SH order of the stored self-visibility O_v (None: the runtime's default
-    #: accumulation order at ``order``, 6 at order 4, so the object's own vertices get
-    #: the same accuracy as a ``transfer`` asset; ``order`` stores the paper's O_v)
+    #: SH order of the stored self-visibility O_v (None: ``order``, the paper's O_v; a
+    #: bake truncates a higher one to its shading order, which must be ``order``)
     self_order: int | None = None
 
     def resolved_self_order(self) -> int:
         """The O_v order actually stored."""
-        if self.self_order is not None:
-            return int(self.self_order)
-        return ShadowSettings(order=self.order).resolved_acc_order()
+        return self.order if self.self_order is None else int(self.self_order)
 
     def validate(self) -> None:
         """Raise :class:`InputError` naming the bad option."""
@@ -303,7 +300,8 @@ def sample_field(mesh, params: FieldParameters | None = None, *,
         ``f(vertices, normals, meshes, order) -> (V, m*m)``: per-vertex
         self-visibility O_v stored with the field at ``m =
         params.resolved_self_order()`` (rigid objects;
-        :func:`shtools.geometry.visibility.self_visibility`).
+        :func:`shtools.geometry.transfer.field_self_visibility`, what ``field sample``
+        stores).
     progress : callable, optional
         Called with the number of samples done after each shell.
     scheduler, workers : optional

@@ -401,3 +401,35 @@ def hemisphere_transfer(mesh, order: int, *, n_dirs: int = TRANSFER_DIRECTIONS,
 __all__ = ["FIRST_DIRECTIONS", "TRANSFER_DIRECTIONS", "hemisphere_transfer",
            "hemisphere_transfer_visibility", "mesh_transfer", "refined_transfer_visibility",
            "refinement_cells", "spatial_order"]
+
+
+def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
+    """The O_v a shadow-field asset stores: :func:`hemisphere_transfer`'s estimate.
+
+    The estimate of the bake's traced self-transfer of a rigid object, so a field's
+    O_v shades its object's own vertices as the bake would trace them (the product
+    rule of :func:`~shtools.geometry.visibility.self_visibility` spends half its
+    directions below the tangent planes); the signature of that function, as
+    :func:`shtools.fields.build.sample_field` calls it.
+
+    Parameters
+    ----------
+    vertices, normals : array_like, shape (V, 3)
+        The mesh's own vertices and unit normals.
+    meshes : list of trimesh.Trimesh
+        The blocking geometry (the object's mesh; its vertices are ``vertices``).
+    order : int
+        SH order ``m`` of the result.
+
+    Returns
+    -------
+    ndarray, shape (V, m*m) float64
+    """
+    import trimesh
+
+    mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(list(meshes))
+    if len(mesh.vertices) != len(vertices) or not np.array_equal(
+            np.asarray(mesh.vertices, dtype=np.float64), np.asarray(vertices, dtype=np.float64)):
+        raise ValueError("field_self_visibility traces a mesh on its own vertices")
+    g, _, _ = hemisphere_transfer(mesh, order, normals=normals, with_log=False)
+    return g

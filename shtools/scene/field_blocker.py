@@ -10,7 +10,7 @@ world matrix.  The runtime combines it as ``settings.field_space`` says (log
 space by default, or product space).  The baker gives the posed blocker the
 object's own receiver rows (``skip_rows``: a surface point lies inside the
 field's innermost shells); on those rows the object is shadowed by its own
-real mesh: the O_v stored in the asset (by default at the accumulation order),
+real mesh: the O_v stored in the asset (the estimate the bake would trace),
 rotated with the object and multiplied in after the exp at the shading order, or
 the ``transfer`` asset the scene names with ``self_visibility``
 (:func:`shtools.scene.transfer.object_self_log`, :func:`shtools.scene.pose.pose_frame`).

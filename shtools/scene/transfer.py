@@ -69,7 +69,7 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
     From the first source that applies: the ``transfer`` asset the scene names
     (``self_visibility = "x.transfer.h5"``: both); the O_v stored in the object's
     shadow-field asset (``blocker = { field = ... }``, :mod:`shtools.scene.field_blocker`)
-    when it is at least the accumulation order (a visibility); a zero log for a convex mesh;
+    when it is at least the shading order (a visibility); a zero log for a convex mesh;
     the visibility ray traced now, at the shading ``order`` (the runtime multiplies it
     in at that order, and needs no log of it).  A field's O_v and a traced visibility
     are visibilities only.
@@ -105,13 +105,12 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
         return *_from_asset(obj, Path(source), acc_order), Path(source)
     order = acc_order if order is None else int(order)
     stored = getattr(obj.blocker_data, "self_visibility", None)
-    if stored is not None and getattr(obj.blocker_data, "self_order", 0) >= acc_order:
+    if stored is not None and getattr(obj.blocker_data, "self_order", 0) >= order:
         # the O_v of the object's field asset (already an input), multiplied in after
         # the exp at the shading order as a transfer asset's visibility is: the round
-        # trip through its eigen-log and the exp does not give it back.  An O_v below
-        # the accumulation order (fields sampled before it was stored there) is traced,
-        # as it was when its log was used (where it cost accuracy; on this path it is
-        # not measured)
+        # trip through its eigen-log and the exp does not give it back.  Truncated to the
+        # shading order (rotations keep bands apart), it is what tracing here would give
+        # (field sample stores the same estimate: geometry.transfer.field_self_visibility)
         return None, np.ascontiguousarray(stored[:, :order * order], dtype=np.float32), None
     zero = np.zeros((len(obj.vertices), acc_order * acc_order), dtype=np.float32)
     if cache is None:
