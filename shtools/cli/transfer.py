@@ -1,7 +1,9 @@
 """``shtools transfer``: precompute a rigid object's self-visibility (a ``transfer`` asset).
 
-Thin: load the mesh, call :func:`shtools.geometry.transfer.mesh_transfer`,
-write the asset, report.
+Thin: load the mesh, call :func:`shtools.geometry.transfer.hemisphere_transfer` (the
+estimator a bake traces a rigid object's self-transfer with) or
+:func:`~shtools.geometry.transfer.mesh_transfer` (``--estimator product``), write the
+asset, report.
 """
 
 from __future__ import annotations
@@ -32,14 +34,20 @@ DIRECTION_BYTES, RAY_BYTES = 32, 64
 @click.option("--order", default=6, show_default=True, type=click.IntRange(1, 10),
               help="SH order; the scene's accumulation order (6 for the default shading "
                    "order 4).  A higher order is re-logged at bake time.")
-@click.option("--n-dirs", default=3200, show_default=True, type=option_type("transfer_n_dirs"),
-              help="Minimum ray directions per vertex (Gauss-Legendre x uniform rule).")
+@click.option("--estimator", default="hemisphere", show_default=True,
+              type=click.Choice(["hemisphere", "product"]),
+              help="hemisphere: rays over each vertex's own hemisphere, 256 first, refined to "
+                   "--n-dirs where its shadow boundaries are (what a bake traces without an "
+                   "asset); product: a Gauss-Legendre x uniform rule over the whole sphere.")
+@click.option("--n-dirs", default=None, type=option_type("transfer_n_dirs"),
+              help="Ray directions per vertex: the dense hemisphere set [default 1600], or "
+                   "the least nodes of the product rule [default 3200].")
 @click.option("--floor", default=0.01, show_default=True, type=option_type("floor"),
               help="Visibility floor of the log (fully blocked directions keep this much).")
 @force_option("4 GiB of memory, 2e10 rays")
 @json_option
 @errors_name("mesh_path")
-def transfer(mesh_path, output, order, n_dirs, floor, force, as_json):
+def transfer(mesh_path, output, order, estimator, n_dirs, floor, force, as_json):
     """Ray-trace MESH's self-visibility on its own vertices, projected to SH.
 
     The baker uses it in place of the object's own spheres on the object's
@@ -49,8 +57,16 @@ def transfer(mesh_path, output, order, n_dirs, floor, force, as_json):
     from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.transfer import write_transfer
     from shtools.geometry.mesh import load_mesh
-    from shtools.geometry.transfer import mesh_transfer
+    from shtools.geometry.transfer import (
+        FIRST_DIRECTIONS,
+        TRANSFER_DIRECTIONS,
+        hemisphere_transfer,
+        mesh_transfer,
+    )
+    from shtools.geometry.visibility import DEFAULT_DIRECTIONS
 
+    if n_dirs is None:
+        n_dirs = TRANSFER_DIRECTIONS if estimator == "hemisphere" else DEFAULT_DIRECTIONS
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
     _check_cost(len(mesh.vertices), order, n_dirs, force, mesh_path)
@@ -61,18 +77,24 @@ def transfer(mesh_path, output, order, n_dirs, floor, force, as_json):
         bar.update(done - bar.n)
 
     try:
-        g, f, params = mesh_transfer(mesh, order, n_dirs=n_dirs, floor=floor, progress=tick)
+        if estimator == "hemisphere":  # (no first pass when the set is no denser)
+            g, f, params = hemisphere_transfer(
+                mesh, order, n_dirs=n_dirs, floor=floor, progress=tick,
+                n_first=FIRST_DIRECTIONS if n_dirs > FIRST_DIRECTIONS else None)
+        else:
+            g, f, params = mesh_transfer(mesh, order, n_dirs=n_dirs, floor=floor, progress=tick)
     finally:
         bar.close()
     write_transfer(output, mesh.vertices, mesh.vertex_normals, g, f, inputs={"mesh": mesh_path},
                    parameters=params)
     seconds = time.perf_counter() - start
     shadowed = float((g[:, 0] < 0.99 * g[:, 0].max()).mean()) if len(g) else 0.0
-    summary = {"output": output, "vertices": len(g), "order": order,
+    summary = {"output": output, "vertices": len(g), "order": order, "estimator": estimator,
                "n_dirs": params["n_dirs"], "seconds": round(seconds, 3),
                "self_shadowed_fraction": round(shadowed, 4)}
     report(summary, as_json,
-           f"wrote {output}: {len(g)} vertices, order {order}, {params['n_dirs']} directions, "
+           f"wrote {output}: {len(g)} vertices, order {order}, {params['n_dirs']} directions "
+           f"({estimator}), "
            f"{100 * shadowed:.1f} % of vertices self-shadowed, {seconds:.1f} s")
 
 
