@@ -443,13 +443,14 @@ def test_read_only_folder_is_refused_as_nobody(argv, open_folder):
 
 
 def test_field_self_visibility_rays_are_costed(kit, tmp_path, monkeypatch):
-    """The stored O_v casts every vertex's rays too (at most the dense hemisphere set
-    each): counted against the ray limit (lowered so the 8-vertex box's 8 x 1600 rays
-    exceed it), with --no-self-visibility as a way out."""
+    """The stored O_v casts every vertex's rays too (at most the first pass and the whole
+    dense hemisphere set each): counted against the ray limit (lowered so the 8-vertex
+    box's 8 x 1856 rays exceed it), with --no-self-visibility as a way out."""
     import shtools.cli._limits as limits
-    from shtools.geometry.transfer import TRANSFER_DIRECTIONS
+    from shtools.geometry.transfer import FIRST_DIRECTIONS, TRANSFER_DIRECTIONS
 
-    assert 8 * TRANSFER_DIRECTIONS > 10_000  # the lowered limit below
+    per_vertex = FIRST_DIRECTIONS + TRANSFER_DIRECTIONS
+    assert 8 * per_vertex > 10_000  # the lowered limit below
 
     monkeypatch.setattr(limits, "RAY_LIMIT", 10_000)
     out = tmp_path / "f.h5"
@@ -457,7 +458,7 @@ def test_field_self_visibility_rays_are_costed(kit, tmp_path, monkeypatch):
             4, "--min-resolution", 2, "--map", 4, "--order", 2, "--workers", 1]
     code, stdout, err = _run(*argv)
     check_refused(code, stdout, err, want_code=1,
-                  named=["mesh.obj", "self-visibility", f"8 vertices x {TRANSFER_DIRECTIONS}",
+                  named=["mesh.obj", "self-visibility", f"8 vertices x {per_vertex}",
                          "--force"],
                   outputs=[out], kit=kit, folders=[tmp_path])
     code, _, err = _run(*argv, "--no-self-visibility")

@@ -128,13 +128,19 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     mesh = load_mesh(mesh_path)
     sv = None
     if not no_self_visibility:
-        from shtools.geometry.transfer import TRANSFER_DIRECTIONS
+        from shtools.geometry.transfer import (
+            FIELD_ESTIMATOR,
+            FIRST_DIRECTIONS,
+            TRANSFER_DIRECTIONS,
+        )
         from shtools.geometry.transfer import field_self_visibility as sv
 
-        # O_v: every vertex's rays besides the shells' (at most the dense set each)
+        # O_v: every vertex's rays besides the shells' (at most the first pass and the
+        # whole dense set each)
         n = len(mesh.vertices)
-        check_rays("field sample (self-visibility)", n * TRANSFER_DIRECTIONS,
-                   f"{n} vertices x {TRANSFER_DIRECTIONS} directions",
+        per_vertex = FIRST_DIRECTIONS + TRANSFER_DIRECTIONS
+        check_rays("field sample (self-visibility)", n * per_vertex,
+                   f"{n} vertices x {per_vertex} directions",
                    "pass --no-self-visibility (or use a `transfer` asset)", force=force,
                    path=mesh_path)
     with progress(total=shells * resolution * resolution, desc="field samples") as bar:
@@ -148,7 +154,7 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         "cumulative", "log_floor", "log_eps", "seed")}
     if not no_self_visibility:
         parameters["self_order"] = params.resolved_self_order()
-        parameters["self_estimator"] = "hemisphere"  # the bake's (field_self_visibility)
+        parameters["self_estimator"] = FIELD_ESTIMATOR  # the bake's (field_self_visibility)
     write_field(output, fld, inputs={"mesh": mesh_path}, parameters=parameters)
     fixed = shells * resolution * resolution * order * order
     summary = {

@@ -69,7 +69,11 @@ def transfer(mesh_path, output, order, estimator, n_dirs, floor, force, as_json)
         n_dirs = TRANSFER_DIRECTIONS if estimator == "hemisphere" else DEFAULT_DIRECTIONS
     guard_outputs({"-o": output}, [mesh_path])
     mesh = load_mesh(mesh_path)
-    _check_cost(len(mesh.vertices), order, n_dirs, force, mesh_path)
+    # two passes only where the dense set is well beyond the first one's 256 rays (a
+    # first pass plus the refined cells could cast more than one pass of a set near 256)
+    n_first = FIRST_DIRECTIONS if estimator == "hemisphere" and n_dirs >= 2 * FIRST_DIRECTIONS \
+        else None
+    _check_cost(len(mesh.vertices), order, n_dirs, n_first, force, mesh_path)
     start = time.perf_counter()
     bar = progress(total=len(mesh.vertices), desc="transfer", unit="vertices")
 
@@ -77,10 +81,9 @@ def transfer(mesh_path, output, order, estimator, n_dirs, floor, force, as_json)
         bar.update(done - bar.n)
 
     try:
-        if estimator == "hemisphere":  # (no first pass when the set is no denser)
-            g, f, params = hemisphere_transfer(
-                mesh, order, n_dirs=n_dirs, floor=floor, progress=tick,
-                n_first=FIRST_DIRECTIONS if n_dirs > FIRST_DIRECTIONS else None)
+        if estimator == "hemisphere":
+            g, f, params = hemisphere_transfer(mesh, order, n_dirs=n_dirs, n_first=n_first,
+                                               floor=floor, progress=tick)
         else:
             g, f, params = mesh_transfer(mesh, order, n_dirs=n_dirs, floor=floor, progress=tick)
     finally:
@@ -98,21 +101,27 @@ def transfer(mesh_path, output, order, estimator, n_dirs, floor, force, as_json)
            f"{100 * shadowed:.1f} % of vertices self-shadowed, {seconds:.1f} s")
 
 
-def _check_cost(n_vertices: int, order: int, n_dirs: int, force: bool, mesh_path) -> None:
+def _check_cost(n_vertices: int, order: int, n_dirs: int, n_first: int | None, force: bool,
+                mesh_path) -> None:
     """Refuse a transfer past the memory or ray limit (:mod:`shtools.cli._limits`).
 
     Memory: the projection matrix (Q, n*n) and the quadrature, one batch of rays
-    (at least one vertex's Q rays, at most all V x Q), and the visibility and its log
-    (V, n*n);
-    rays: V x Q.  Q is at least ``--n-dirs``.
+    (at least one vertex's Q rays, at most all V x Q), the visibility and its log
+    (V, n*n), and with a first pass of ``n_first`` rays its cells' table
+    (Q, n_first) float64;
+    rays: V x Q, plus V x ``n_first``.  Q is at least ``--n-dirs``.
     """
     from shtools.geometry.visibility import RAYS_PER_STEP
 
     n2 = order * order
+    first = n_first or 0
     batch = min(n_vertices * n_dirs, max(RAYS_PER_STEP, n_dirs))
-    nbytes = n_dirs * (n2 * 8 + DIRECTION_BYTES) + batch * RAY_BYTES + 2 * n_vertices * n2 * 8
+    nbytes = (n_dirs * (n2 * 8 + DIRECTION_BYTES + first * 8) + batch * RAY_BYTES
+              + 2 * n_vertices * n2 * 8)
     fix = "lower --n-dirs or --order"
     check_memory("transfer", nbytes, f"{n_dirs} directions x {n2} SH coefficients, "
                  f"{n_vertices} vertices", fix, force=force, path=mesh_path)
-    check_rays("transfer", n_vertices * n_dirs, f"{n_vertices} vertices x {n_dirs} directions",
-               fix, force=force, path=mesh_path)
+    per_vertex = n_dirs + first
+    check_rays("transfer", n_vertices * per_vertex,
+               f"{n_vertices} vertices x {per_vertex} directions", fix, force=force,
+               path=mesh_path)

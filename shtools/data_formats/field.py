@@ -6,8 +6,8 @@ with ``shells/<c>/offset`` and ``shells/<c>/step (n*n,) f4`` (value =
 ``offset + q * step``), and the same for the SH log of the visibility
 (``shells/<c>/log``, ``log_offset``, ``log_step``).  Optional
 ``self_visibility (V, m*m) f4`` (per-vertex self-visibility O_v of the object
-on its own mesh vertices, object frame, at an order ``m >= n``: by default the
-runtime's accumulation order, 6 at order 4).  Per-shell reduction statistics:
+on its own mesh vertices, object frame, at an order ``m >= n``: by default ``n``,
+by the estimator named in ``parameters.self_estimator``).  Per-shell reduction statistics:
 ``reduction_error (C,)`` (cumulative L1 error of the stored float field
 against the full-resolution one, eq. 1), ``level_error (C,)`` (largest error of
 the last accepted halving).
@@ -156,8 +156,8 @@ def _check(f, ctx) -> None:
 SCHEMA = register(
     Schema(
         kind="field",
-        # 2: self_visibility may have more columns than the field's order (O_v stored at
-        # the accumulation order); version-1 files (O_v at the field's order) still read.
+        # 2: self_visibility may have more columns than the field's order (an O_v of
+        # --self-order above it); version-1 files (O_v at the field's order) still read.
         version=2,
         known_versions=(1, 2),
         datasets=(

@@ -37,7 +37,8 @@ def mesh_transfer(mesh, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
                   floor: float = LOG_FLOOR, normals=None, max_distance: float | None = None,
                   progress: Callable[[int, int], None] | None = None
                   ) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Self-visibility and its log on a mesh's own vertices (the ``transfer`` asset).
+    """Self-visibility and its log on a mesh's own vertices by the full-sphere product
+    rule (the ``transfer`` asset of ``shtools transfer --estimator product``).
 
     Parameters
     ----------
@@ -54,8 +55,9 @@ def mesh_transfer(mesh, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
     -------
     visibility, log_visibility : ndarray, shape (V, n*n)
     parameters : dict
-        What was used (``order``, ``n_dirs`` actual node count, ``floor``,
-        ``offset``, ``max_distance``), for the asset's provenance.
+        What was used (``order``, ``n_dirs`` actual node count, ``estimator``
+        (``"product"``), ``floor``, ``offset``, ``max_distance``), for the asset's
+        provenance.
     """
     v = np.asarray(mesh.vertices, dtype=np.float64)
     nrm = np.asarray(mesh.vertex_normals if normals is None else normals, dtype=np.float64)
@@ -63,8 +65,8 @@ def mesh_transfer(mesh, order: int, *, n_dirs: int = DEFAULT_DIRECTIONS,
                         max_distance=max_distance)
     f = self_visibility_log(g, floor=floor)
     params = {"order": int(order), "n_dirs": int(direction_quadrature(n_dirs)[0].shape[0]),
-              "floor": float(floor), "offset": RAY_OFFSET, "offset_relative_to": "diagonal",
-              "max_distance": max_distance}
+              "estimator": "product", "floor": float(floor), "offset": RAY_OFFSET,
+              "offset_relative_to": "diagonal", "max_distance": max_distance}
     return g, f, params
 
 
@@ -340,7 +342,8 @@ def hemisphere_transfer(mesh, order: int, *, n_dirs: int = TRANSFER_DIRECTIONS,
     mesh : trimesh.Trimesh
         The object's real mesh, in its own frame.
     order : int
-        SH order (the accumulation order the runtime adds it at).
+        SH order (a ``transfer`` asset's: the accumulation order the runtime adds it
+        at; a bake's or a field's O_v: the shading order).
     n_dirs : int
         Directions per vertex (the dense set).
     n_first : int or None
@@ -398,9 +401,9 @@ def hemisphere_transfer(mesh, order: int, *, n_dirs: int = TRANSFER_DIRECTIONS,
     return g, f, params
 
 
-__all__ = ["FIRST_DIRECTIONS", "TRANSFER_DIRECTIONS", "hemisphere_transfer",
-           "hemisphere_transfer_visibility", "mesh_transfer", "refined_transfer_visibility",
-           "refinement_cells", "spatial_order"]
+#: ``parameters.self_estimator`` of a field asset whose O_v is
+#: :func:`field_self_visibility`'s (a bake uses it as stored).
+FIELD_ESTIMATOR = "hemisphere"
 
 
 def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
@@ -409,8 +412,9 @@ def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
     The estimate of the bake's traced self-transfer of a rigid object, so a field's
     O_v shades its object's own vertices as the bake would trace them (the product
     rule of :func:`~shtools.geometry.visibility.self_visibility` spends half its
-    directions below the tangent planes); the signature of that function, as
-    :func:`shtools.fields.build.sample_field` calls it.
+    directions below the tangent planes).  Called as
+    :func:`shtools.fields.build.sample_field` calls its ``self_visibility``, on the
+    object's own mesh only (``meshes`` its mesh, ``vertices`` that mesh's vertices).
 
     Parameters
     ----------
@@ -433,3 +437,8 @@ def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
         raise ValueError("field_self_visibility traces a mesh on its own vertices")
     g, _, _ = hemisphere_transfer(mesh, order, normals=normals, with_log=False)
     return g
+
+
+__all__ = ["FIELD_ESTIMATOR", "FIRST_DIRECTIONS", "TRANSFER_DIRECTIONS", "field_self_visibility",
+           "hemisphere_transfer", "hemisphere_transfer_visibility", "mesh_transfer",
+           "refined_transfer_visibility", "refinement_cells", "spatial_order"]

@@ -74,6 +74,9 @@ class FieldKind(BlockerKind):
             # the scene names a transfer asset (shtools.scene.transfer.object_self_log)
             table.self_visibility = np.asarray(fld.self_visibility, dtype=np.float32)
             table.self_order = fld.self_order
+            # "hemisphere": the estimate the bake would trace (fields sampled before
+            # hold the product rule's, which the bake traces again)
+            table.self_estimator = fld.attrs.get("parameters", {}).get("self_estimator")
         prep.blocker_data = table
         ctx.inputs[f"{prep.spec.name}.field"] = spec.path
 

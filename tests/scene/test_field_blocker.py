@@ -175,15 +175,20 @@ def torus_dir(tmp_path_factory):
 def test_field_asset_stores_the_o_v_a_bake_would_trace(torus_dir):
     """The stored O_v is at the field's order, by the bake's own estimator (hemisphere
     rays, refined), and closer to a 51,200-direction product rule than the 3,200-direction
-    product rule of ``shtools transfer`` (which spends half its rays below the planes)."""
+    product rule (``shtools transfer --estimator product``, which spends half its rays
+    below the planes)."""
     from shtools.data_formats.field import read_field
     from shtools.geometry.mesh import load_mesh
+    from shtools.geometry.transfer import hemisphere_transfer
     from shtools.geometry.visibility import self_visibility
 
     fld = read_field(torus_dir / "t.field.h5")
     mesh = load_mesh(torus_dir / "torus.obj")
     assert fld.order == 4 and fld.self_order == 4
-    assert fld.self_visibility.shape == (len(mesh.vertices), 16)
+    assert fld.attrs["parameters"]["self_estimator"] == "hemisphere"
+    # the bake's estimator itself (what scene.transfer traces without an O_v)
+    np.testing.assert_array_equal(
+        fld.self_visibility, hemisphere_transfer(mesh, 4, with_log=False)[0].astype(np.float32))
     ref = self_visibility(mesh.vertices, mesh.vertex_normals, [mesh], 4, n_dirs=51200)
     product = self_visibility(mesh.vertices, mesh.vertex_normals, [mesh], 4)
 
@@ -260,16 +265,55 @@ def test_an_o_v_above_the_shading_order_is_truncated_to_it(torus_dir, monkeypatc
         own[name] = torus.blocker_data.self_order, torus.self_transfer
     (order6, g6), (order4, g4) = own["t6.field.h5"], own["t.field.h5"]
     assert (order6, order4) == (6, 4) and g6.shape == g4.shape == (g4.shape[0], 16)
-    np.testing.assert_allclose(g6, g4, atol=1e-6)  # float32 storage
+    np.testing.assert_array_equal(g6, g4)
     assert np.abs(g4[:, 1:]).max() > 0.1  # the torus does shadow itself
+
+
+def test_a_field_without_the_estimator_is_traced_at_bake_time(torus_dir):
+    """A field sampled before ``parameters.self_estimator`` was recorded holds the product
+    rule's O_v: the bake traces the torus's own vertices instead (the hemisphere estimate,
+    not the stored O_v), and uses the stored one with ``self_visibility = false``."""
+    import shutil
+
+    import h5py
+
+    from shtools.data_formats.field import read_field
+    from shtools.geometry.mesh import load_mesh
+    from shtools.geometry.visibility import self_visibility
+    from shtools.scene.bake import prepare_scene
+    from shtools.scene.scene import load_scene
+
+    fld = read_field(torus_dir / "t.field.h5")
+    mesh = load_mesh(torus_dir / "torus.obj")
+    # an older asset: its O_v by the full-sphere product rule, no estimator recorded
+    old = self_visibility(mesh.vertices, mesh.vertex_normals, [mesh], 4).astype(np.float32)
+    shutil.copy(torus_dir / "t.field.h5", torus_dir / "old.field.h5")
+    with h5py.File(torus_dir / "old.field.h5", "r+") as f:
+        parameters = json.loads(f.attrs["parameters"])
+        del parameters["self_estimator"]
+        f.attrs["parameters"] = json.dumps(parameters)
+        f["self_visibility"][...] = old
+    assert "self_estimator" not in read_field(torus_dir / "old.field.h5").attrs["parameters"]
+    for obj_extra, traced in (("", True), ("self_visibility = false", False)):
+        path = torus_dir / "old.toml"
+        path.write_text(TORUS_SCENE.format(extra="", env=ENV, field="old.field.h5",
+                                           obj_extra=obj_extra))
+        torus = prepare_scene(load_scene(path)).objects[1]
+        if traced:  # the estimate of the new field's O_v, not the old one stored
+            assert torus.self_log is None
+            np.testing.assert_allclose(torus.self_transfer, fld.self_visibility, atol=1e-6)
+            assert np.abs(torus.self_transfer - old).max() > 1e-3
+        else:  # the stored O_v itself (pose_frame rotates it with the torus)
+            assert torus.self_transfer is None and torus.self_log is None
+            np.testing.assert_array_equal(torus.blocker_data.self_visibility, old)
 
 
 def test_the_stored_o_v_shades_the_objects_own_vertices_as_stored(run_cli, torus_dir):
     """The torus's own rows take its field's O_v itself, rotated with the torus and
     truncated to the shading order (no other blocker reaches them, so the visibility
     the bake shades is exactly that): not the exp of its log, whose round trip does not
-    give a deep self-shadow back (bench_look: the teapot's own surface 1.01 -> 0.38 %
-    off a ray tracer; the held-out spotfield's spot 0.29 % against 98bedba's 0.56 %)."""
+    give a deep self-shadow back (bench_look's teapot and held-out spotfield scenes
+    measure the difference against a ray tracer; CHANGELOG.md has the figures)."""
     from shtools.data_formats.field import read_field
     from shtools.geometry.mesh import load_mesh
     from shtools.sh import rotate
