@@ -75,11 +75,24 @@ def _run(*args) -> float:
     return time.perf_counter() - t0
 
 
+#: What a cached asset of each stage holds, raised when shtools changes it (a cached
+#: asset of another version is built again; no stamp: 1).  2: the O_v of a field and
+#: a transfer asset by the bake's hemisphere estimator.
+ASSET_VERSIONS = {"field": 2, "transfer": 2}
+
+
 def _ensure(path: Path, *args) -> float:
-    """Build ``path`` with ``shtools args`` unless cached; seconds spent (0 when cached)."""
-    if path.exists():
+    """Build ``path`` with ``shtools args`` unless cached at its stage's
+    :data:`ASSET_VERSIONS`; seconds spent (0 when cached)."""
+    version = ASSET_VERSIONS.get(str(args[0]), 1)
+    stamp = path.with_name(path.name + ".version")
+    held = int(stamp.read_text()) if stamp.exists() else 1
+    if path.exists() and held == version:
         return 0.0
-    return _run(*args, "-o", path)
+    seconds = _run(*args, "-o", path)
+    if version != 1:
+        stamp.write_text(f"{version}\n")
+    return seconds
 
 
 def placement(mesh_path: Path, height: float, x: float, z: float, yaw: float = 0.0):
@@ -123,9 +136,9 @@ _MESH_OF_TREE: dict[str, tuple[str, Path]] = {}
 def _field_for(match, pre: dict, field_options: tuple) -> str:
     """``blocker = { field = ... }`` replacing a rigid object's tree (``re`` match).
 
-    The field holds the object's O_v at the accumulation order (the default of
-    ``shtools field sample``): the one asset shadows the other receivers and the
-    object itself.
+    The field holds the object's O_v (``shtools field sample``'s default, the estimate
+    the bake would trace): the one asset shadows the other receivers and the object
+    itself.
     """
     name, mesh = _MESH_OF_TREE[match.group(1)]
     tag = "".join(str(o).lstrip("-") for o in field_options)
