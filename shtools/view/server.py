@@ -140,9 +140,11 @@ def serve(view: BakeView, port: int = 0, *, on_ready=None) -> None:
                                   name="shtools-view", daemon=True)
         thread.start()
         try:
-            if on_ready is not None:
-                on_ready(server.url)
-            with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C; SIGTERM sets stop
+            # Ctrl-C (SIGTERM sets stop) from the moment the URL is out: a signal sent
+            # as soon as a client has its first page may come before stop.wait()
+            with contextlib.suppress(KeyboardInterrupt):
+                if on_ready is not None:
+                    on_ready(server.url)
                 stop.wait()
         finally:
             server.shutdown()

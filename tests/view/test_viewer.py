@@ -177,6 +177,27 @@ def test_command_serves_then_stops_cleanly_on_a_signal(bake_path, sig):
         urllib.request.urlopen(url, timeout=2)
 
 
+def test_ctrl_c_while_the_url_is_printed_stops_cleanly(bake_path):
+    """A Ctrl-C that lands while ``on_ready`` runs (a client can fetch the page and signal
+    before the main thread waits) stops the server as one during the wait does: no
+    KeyboardInterrupt escapes, and the socket is closed."""
+    from shtools.view import BakeView, serve
+
+    urls = []
+
+    def ready(url):
+        urls.append(url)
+        assert _get(url)[0] == 200
+        raise KeyboardInterrupt
+
+    try:
+        serve(BakeView(bake_path), on_ready=ready)
+    except KeyboardInterrupt:  # (not raised on: it would stop the whole test session)
+        pytest.fail("a Ctrl-C while on_ready ran escaped serve()")
+    with pytest.raises(OSError):
+        urllib.request.urlopen(urls[0], timeout=2)
+
+
 def test_command_bad_input_is_one_line(bake_path, tmp_path, run_cli):
     (tmp_path / "not.h5").write_bytes(b"not hdf5")
     code, _, err = run_cli("view", tmp_path / "not.h5", "--no-browser")
