@@ -128,11 +128,7 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     mesh = load_mesh(mesh_path)
     sv = None
     if not no_self_visibility:
-        from shtools.geometry.transfer import (
-            FIELD_ESTIMATOR,
-            FIRST_DIRECTIONS,
-            TRANSFER_DIRECTIONS,
-        )
+        from shtools.geometry.transfer import FIRST_DIRECTIONS, TRANSFER_DIRECTIONS
         from shtools.geometry.transfer import field_self_visibility as sv
 
         # O_v: every vertex's rays besides the shells' (at most the first pass and the
@@ -154,7 +150,9 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         "cumulative", "log_floor", "log_eps", "seed")}
     if not no_self_visibility:
         parameters["self_order"] = params.resolved_self_order()
-        parameters["self_estimator"] = FIELD_ESTIMATOR  # the bake's (field_self_visibility)
+        from shtools.geometry.transfer import FIELD_ESTIMATE
+
+        parameters.update(FIELD_ESTIMATE)  # the bake's estimator (field_self_visibility)
     write_field(output, fld, inputs={"mesh": mesh_path}, parameters=parameters)
     fixed = shells * resolution * resolution * order * order
     summary = {

@@ -401,9 +401,10 @@ def hemisphere_transfer(mesh, order: int, *, n_dirs: int = TRANSFER_DIRECTIONS,
     return g, f, params
 
 
-#: ``parameters.self_estimator`` of a field asset whose O_v is
-#: :func:`field_self_visibility`'s (a bake uses it as stored).
-FIELD_ESTIMATOR = "hemisphere"
+#: What a field asset records (in ``parameters``) of an O_v by
+#: :func:`field_self_visibility`; a bake uses the O_v as stored only when these match.
+FIELD_ESTIMATE = {"self_estimator": "hemisphere", "self_n_dirs": TRANSFER_DIRECTIONS,
+                  "self_n_first": FIRST_DIRECTIONS}
 
 
 def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
@@ -439,6 +440,6 @@ def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
     return g
 
 
-__all__ = ["FIELD_ESTIMATOR", "FIRST_DIRECTIONS", "TRANSFER_DIRECTIONS", "field_self_visibility",
+__all__ = ["FIELD_ESTIMATE", "FIRST_DIRECTIONS", "TRANSFER_DIRECTIONS", "field_self_visibility",
            "hemisphere_transfer", "hemisphere_transfer_visibility", "mesh_transfer",
            "refined_transfer_visibility", "refinement_cells", "spatial_order"]

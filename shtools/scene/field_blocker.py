@@ -74,9 +74,11 @@ class FieldKind(BlockerKind):
             # the scene names a transfer asset (shtools.scene.transfer.object_self_log)
             table.self_visibility = np.asarray(fld.self_visibility, dtype=np.float32)
             table.self_order = fld.self_order
-            # "hemisphere": the estimate the bake would trace (fields sampled before
-            # hold the product rule's, which the bake traces again)
-            table.self_estimator = fld.attrs.get("parameters", {}).get("self_estimator")
+            # the estimate the bake would trace (geometry.transfer.FIELD_ESTIMATE);
+            # fields sampled before hold the product rule's, which the bake traces again
+            recorded = fld.attrs.get("parameters", {})
+            table.self_estimate = {k: recorded.get(k) for k in
+                                   ("self_estimator", "self_n_dirs", "self_n_first")}
         prep.blocker_data = table
         ctx.inputs[f"{prep.spec.name}.field"] = spec.path
 

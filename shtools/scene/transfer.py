@@ -69,8 +69,9 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
     From the first source that applies: the ``transfer`` asset the scene names
     (``self_visibility = "x.transfer.h5"``: both); the O_v stored in the object's
     shadow-field asset (``blocker = { field = ... }``, :mod:`shtools.scene.field_blocker`)
-    when it is the estimate traced here (``parameters.self_estimator``) of at least the
-    shading order (a visibility); a zero log for a convex mesh;
+    when it is the estimate traced here (``parameters.self_estimator``, ``self_n_dirs``,
+    ``self_n_first``) of at least the shading order (a visibility); a zero log for a
+    convex mesh;
     the visibility ray traced now, at the shading ``order`` (the runtime multiplies it
     in at that order, and needs no log of it).  A field's O_v and a traced visibility
     are visibilities only.
@@ -106,10 +107,10 @@ def object_self_log(obj, acc_order: int, order: int | None = None, *,
         return *_from_asset(obj, Path(source), acc_order), Path(source)
     order = acc_order if order is None else int(order)
     stored = getattr(obj.blocker_data, "self_visibility", None)
-    from shtools.geometry.transfer import FIELD_ESTIMATOR
+    from shtools.geometry.transfer import FIELD_ESTIMATE
 
     if (stored is not None and getattr(obj.blocker_data, "self_order", 0) >= order
-            and getattr(obj.blocker_data, "self_estimator", None) == FIELD_ESTIMATOR):
+            and getattr(obj.blocker_data, "self_estimate", None) == FIELD_ESTIMATE):
         # the O_v of the object's field asset (already an input), multiplied in after
         # the exp at the shading order as a transfer asset's visibility is: the round
         # trip through its eigen-log and the exp does not give it back.  Truncated to the

@@ -185,7 +185,9 @@ def test_field_asset_stores_the_o_v_a_bake_would_trace(torus_dir):
     fld = read_field(torus_dir / "t.field.h5")
     mesh = load_mesh(torus_dir / "torus.obj")
     assert fld.order == 4 and fld.self_order == 4
-    assert fld.attrs["parameters"]["self_estimator"] == "hemisphere"
+    recorded = fld.attrs["parameters"]
+    assert {k: recorded[k] for k in ("self_estimator", "self_n_dirs", "self_n_first")} == {
+        "self_estimator": "hemisphere", "self_n_dirs": 1600, "self_n_first": 256}
     # the bake's estimator itself (what scene.transfer traces without an O_v)
     np.testing.assert_array_equal(
         fld.self_visibility, hemisphere_transfer(mesh, 4, with_log=False)[0].astype(np.float32))
@@ -269,10 +271,12 @@ def test_an_o_v_above_the_shading_order_is_truncated_to_it(torus_dir, monkeypatc
     assert np.abs(g4[:, 1:]).max() > 0.1  # the torus does shadow itself
 
 
-def test_a_field_without_the_estimator_is_traced_at_bake_time(torus_dir):
+@pytest.mark.parametrize("edit", [{"self_estimator": None}, {"self_n_dirs": 800}])
+def test_a_field_of_another_estimate_is_traced_at_bake_time(torus_dir, edit):
     """A field sampled before ``parameters.self_estimator`` was recorded holds the product
-    rule's O_v: the bake traces the torus's own vertices instead (the hemisphere estimate,
-    not the stored O_v), and uses the stored one with ``self_visibility = false``."""
+    rule's O_v, and one may record other ray counts: the bake traces the torus's own
+    vertices instead (the hemisphere estimate, not the stored O_v), and uses the stored
+    one with ``self_visibility = false``."""
     import shutil
 
     import h5py
@@ -285,15 +289,20 @@ def test_a_field_without_the_estimator_is_traced_at_bake_time(torus_dir):
 
     fld = read_field(torus_dir / "t.field.h5")
     mesh = load_mesh(torus_dir / "torus.obj")
-    # an older asset: its O_v by the full-sphere product rule, no estimator recorded
+    # another asset: its O_v by the full-sphere product rule, its record edited
     old = self_visibility(mesh.vertices, mesh.vertex_normals, [mesh], 4).astype(np.float32)
     shutil.copy(torus_dir / "t.field.h5", torus_dir / "old.field.h5")
     with h5py.File(torus_dir / "old.field.h5", "r+") as f:
         parameters = json.loads(f.attrs["parameters"])
-        del parameters["self_estimator"]
+        for key, value in edit.items():
+            if value is None:  # not recorded
+                del parameters[key]
+            else:
+                parameters[key] = value
         f.attrs["parameters"] = json.dumps(parameters)
         f["self_visibility"][...] = old
-    assert "self_estimator" not in read_field(torus_dir / "old.field.h5").attrs["parameters"]
+    recorded = read_field(torus_dir / "old.field.h5").attrs["parameters"]
+    assert all(recorded.get(k) == v for k, v in edit.items())
     for obj_extra, traced in (("", True), ("self_visibility = false", False)):
         path = torus_dir / "old.toml"
         path.write_text(TORUS_SCENE.format(extra="", env=ENV, field="old.field.h5",
