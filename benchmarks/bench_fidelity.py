@@ -86,12 +86,14 @@ def _ensure(path: Path, *args) -> float:
     :data:`ASSET_VERSIONS`; seconds spent (0 when cached)."""
     version = ASSET_VERSIONS.get(str(args[0]), 1)
     stamp = path.with_name(path.name + ".version")
-    held = int(stamp.read_text()) if stamp.exists() else 1
+    try:
+        held = int(stamp.read_text()) if stamp.exists() else 1
+    except ValueError:  # an unreadable stamp: built again
+        held = None
     if path.exists() and held == version:
         return 0.0
-    seconds = _run(*args, "-o", path)
-    if version != 1:
-        stamp.write_text(f"{version}\n")
+    seconds = _run(*args, "-o", path)  # (a failed build raises: no stamp is written)
+    stamp.write_text(f"{version}\n")
     return seconds
 
 

@@ -3,8 +3,8 @@
 Per receiver of each scene, at the default settings, against the project's ray
 tracer of the posed real meshes (:func:`shtools.reference.raytrace_visibility`,
 3,200 directions, then 25,600 on every vertex some direction found blocked and two
-rings of mesh neighbours around them, ``--smooth-dirs``: :func:`converged`; 800 with
-``--quick``), shaded raw at the scene's order (:mod:`shtools.reference.look`):
+rings of mesh neighbours around them, ``--ref-dirs``: :func:`converged`; 800 and no
+second trace with ``--quick``), shaded raw at the scene's order (:mod:`shtools.reference.look`):
 
 * the **smoothness ratio** (mean |graph Laplacian| of luminance, bake over truth;
   target 0.85-1.15): at 3,200 the reference's own steps inflate a ground's energy
@@ -13,10 +13,11 @@ rings of mesh neighbours around them, ``--smooth-dirs``: :func:`converged`; 800 
   the whole receiver's, and the error within 2 bounding radii of the blockers; the
   reference as shown, with the scene's de-ringing (``deringing = "desaturate"``, the
   default: negative radiance, the order-n truncation's ringing, cannot be displayed),
-  and the raw reference's shadowed error beside (``shadowed raw``); the 3,200
-  directions' own quadrature error (a few tenths of a percent on a self-shadowed
-  surface, where an estimator on the same rule of an unturned object scored 0.00 %)
-  is below the errors' resolution at 25,600,
+  and the raw reference's shadowed error beside (``shadowed raw``); at 3,200
+  directions alone the reference's own quadrature error is a few tenths of a percent
+  on a self-shadowed surface (where an estimator on the same rule of an unturned
+  object scored 0.00 %); at 25,600 it is expected several times smaller (not
+  measured),
 * CPU per frame (one process and one frame baker, as a bake's worker; the set-up
   frame left out) and its ratio to the baseline, and the CPU of that set-up frame
   (receiver clusters, runtime, the first frame's per-bake state; the set-up cache off,
@@ -68,9 +69,11 @@ DATA = next((d / "shared" / "data" for d in (REPO.parent, REPO.parent.parent)
 CACHE = REPO / "build" / "bench_look"
 #: Receivers per block of the reference ray tracer.
 REF_BLOCK = 8192
+#: Directions of the first trace of the reference.
+REF_DIRECTIONS = 3200
 #: Directions of the reference where the first trace found something blocked
 #: (:func:`converged`).
-SMOOTH_DIRECTIONS = 25600
+CONVERGED_DIRECTIONS = 25600
 #: Alternating repeats of each code's bake (the fastest CPU kept: the machine is shared).
 REPEATS = 2
 
@@ -268,10 +271,10 @@ def _bake(code: Path, scene: dict, tag: str) -> dict:
     return dict(np.load(out))
 
 
-def references(scene: dict, n_dirs: int, smooth_dirs: int | None = None) -> dict:
+def references(scene: dict, n_dirs: int, ref_dirs: int | None = None) -> dict:
     """Ray-traced (real meshes) and unshadowed radiance per frame, receivers' faces, spheres.
 
-    At ``n_dirs`` directions, and with ``smooth_dirs`` at that many where the first trace
+    At ``n_dirs`` directions, and with ``ref_dirs`` at that many where the first trace
     found something blocked (:func:`converged`)."""
     import trimesh
 
@@ -307,8 +310,8 @@ def references(scene: dict, n_dirs: int, smooth_dirs: int | None = None) -> dict
         one[:, 0] = math.sqrt(4 * math.pi)
         ref.append(shader.shade(stored[f"g{k}"], state.vertices, state.normals,
                                 prepared.env_sh, state.lights))
-        if smooth_dirs is not None:
-            g = converged(scene, prepared, state, k, stored[f"g{k}"], smooth_dirs, digest)
+        if ref_dirs is not None:
+            g = converged(scene, prepared, state, k, stored[f"g{k}"], ref_dirs, digest)
             ref[-1] = shader.shade(g, state.vertices, state.normals, prepared.env_sh,
                                    state.lights)
         # what a viewer is shown of it: the bake's own de-ringing (negative radiance,
@@ -344,7 +347,7 @@ def converged(scene: dict, prepared, state, k: int, g, n_dirs: int, digest: str
     doubling's, at a cost a benchmark can pay: only the vertices some direction found
     blocked at the first count, and two rings of mesh neighbours around them, are
     traced again (the others are exactly unblocked at any count below a direction's
-    solid angle; equal to a full trace at 25,600 on CesiumMan and the demo).
+    solid angle; equal to a full trace at 25,600 on CesiumMan's and the demo's grounds).
     """
     import trimesh
 
@@ -366,13 +369,15 @@ def converged(scene: dict, prepared, state, k: int, g, n_dirs: int, digest: str
             blocked = blocked | (adj @ blocked.astype(np.float64) > 0)
         take.append(offsets[i] + np.flatnonzero(blocked))
     take = np.concatenate(take) if take else np.zeros(0, dtype=np.int64)
+    # the first trace's memory a block: (receivers, directions) of the ray tracer
+    block = max(1, REF_BLOCK * REF_DIRECTIONS // n_dirs)
     if f"s{k}" not in stored or len(stored[f"s{k}"]) != len(take):
         meshes = [trimesh.Trimesh(v, f, process=False) for v, f in state.blocker_meshes]
         stored[f"s{k}"] = np.concatenate([
-            raytrace_visibility(state.vertices[take[i:i + REF_BLOCK]],
-                                state.normals[take[i:i + REF_BLOCK]], meshes,
+            raytrace_visibility(state.vertices[take[i:i + block]],
+                                state.normals[take[i:i + block]], meshes,
                                 prepared.scene.settings.order, n_dirs)
-            for i in range(0, len(take), REF_BLOCK)] or [out[:0]])
+            for i in range(0, len(take), block)] or [out[:0]])
         np.savez(cache, **stored)
     out[take] = stored[f"s{k}"]
     return out
@@ -419,9 +424,10 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", help="comma-separated scene names (default all)")
     parser.add_argument("--field", type=Path, help="a field asset of teapot.obj (order 4): "
                         "adds the teapot scenes 'teapot14' and 'teapot3'")
-    parser.add_argument("--smooth-dirs", type=int, default=SMOOTH_DIRECTIONS,
+    parser.add_argument("--ref-dirs", "--smooth-dirs", type=int,
+                        default=CONVERGED_DIRECTIONS,
                         help="directions of the reference on the vertices the first trace "
-                             f"found shadowed (default {SMOOTH_DIRECTIONS}; 0: the first "
+                             f"found shadowed (default {CONVERGED_DIRECTIONS}; 0: the first "
                              "trace's)")
     parser.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -450,9 +456,9 @@ def main(argv=None) -> int:
     if args.baseline:
         codes = {("baseline" if i == 0 else f"baseline {i + 1} ({b.name})"): b.resolve()
                  for i, b in enumerate(args.baseline)} | codes
-    n_dirs = 800 if args.quick else 3200
-    smooth_dirs = 0 if args.quick else args.smooth_dirs
-    again = f", {smooth_dirs} where it finds a shadow" if smooth_dirs else ""
+    n_dirs = 800 if args.quick else REF_DIRECTIONS
+    ref_dirs = 0 if args.quick else args.ref_dirs
+    again = f", {ref_dirs} where it finds a shadow" if ref_dirs else ""
     print(f"\n### Look at the default settings vs a {n_dirs}-direction ray tracer of the real "
           f"meshes{again} (smoothness target 0.85-1.15; errors relative RMSE of radiance)\n")
     keys = ["scene", "receiver", "code", "smoothness", "error", "shadowed", "shadowed raw", "near",
@@ -471,7 +477,7 @@ def main(argv=None) -> int:
                                   "setup": baked.get(tag, {}).get("setup", math.inf)}
                 # the fastest set-up frame too, kept apart from the frames'
                 baked[tag]["setup"] = min(baked[tag]["setup"], float(run["setup"]))
-        refs = references(scene, n_dirs, smooth_dirs or None)
+        refs = references(scene, n_dirs, ref_dirs or None)
         first = next(iter(codes))
         for tag in codes:
             for row in score(baked[tag]["radiance"], refs):
@@ -483,7 +489,8 @@ def main(argv=None) -> int:
                     f"{baked[tag]['cpu'] / baked[first]['cpu']:.2f}",
                     f"{1e3 * baked[tag]['setup']:.0f}"]
                 print("| " + " | ".join(cells) + " |", flush=True)
-    print(f"\nload {os.getloadavg()[0]:.1f}; " + json.dumps({"n_dirs": n_dirs}))
+    print(f"\nload {os.getloadavg()[0]:.1f}; " + json.dumps({"n_dirs": n_dirs,
+                                                             "ref_dirs": ref_dirs}))
     return 0
 
 
