@@ -77,8 +77,8 @@ def _run(*args) -> float:
 
 #: What a cached asset of each stage holds, raised when shtools changes it (a cached
 #: asset of another version is built again; no stamp: 1).  2: the O_v of a field and
-#: a transfer asset by the bake's hemisphere estimator.
-ASSET_VERSIONS = {"field": 2, "transfer": 2}
+#: a transfer asset by the bake's hemisphere estimator; field 3: its ray counts recorded.
+ASSET_VERSIONS = {"field": 3, "transfer": 2}
 
 
 def _ensure(path: Path, *args) -> float:
