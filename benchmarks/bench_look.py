@@ -308,12 +308,10 @@ def references(scene: dict, n_dirs: int, ref_dirs: int | None = None) -> dict:
             np.savez(cache, **stored)
         one = np.zeros((len(state.vertices), order * order))
         one[:, 0] = math.sqrt(4 * math.pi)
-        ref.append(shader.shade(stored[f"g{k}"], state.vertices, state.normals,
-                                prepared.env_sh, state.lights))
-        if ref_dirs is not None:
-            g = converged(scene, prepared, state, k, stored[f"g{k}"], ref_dirs, digest)
-            ref[-1] = shader.shade(g, state.vertices, state.normals, prepared.env_sh,
-                                   state.lights)
+        g = stored[f"g{k}"] if ref_dirs is None else converged(
+            scene, prepared, state, k, stored[f"g{k}"], ref_dirs, digest)
+        ref.append(shader.shade(g, state.vertices, state.normals, prepared.env_sh,
+                                state.lights))
         # what a viewer is shown of it: the bake's own de-ringing (negative radiance,
         # the order-n truncation's ringing, cannot be displayed)
         shown.append(desaturate_negative(ref[-1]) if sc.settings.deringing == "desaturate"

@@ -128,7 +128,11 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
     mesh = load_mesh(mesh_path)
     sv = None
     if not no_self_visibility:
-        from shtools.geometry.transfer import FIRST_DIRECTIONS, TRANSFER_DIRECTIONS
+        from shtools.geometry.transfer import (
+            FIELD_ESTIMATE,
+            FIRST_DIRECTIONS,
+            TRANSFER_DIRECTIONS,
+        )
         from shtools.geometry.transfer import field_self_visibility as sv
 
         # O_v: every vertex's rays besides the shells' (at most the first pass and the
@@ -150,8 +154,6 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
         "cumulative", "log_floor", "log_eps", "seed")}
     if not no_self_visibility:
         parameters["self_order"] = params.resolved_self_order()
-        from shtools.geometry.transfer import FIELD_ESTIMATE
-
         parameters.update(FIELD_ESTIMATE)  # the bake's estimator (field_self_visibility)
     write_field(output, fld, inputs={"mesh": mesh_path}, parameters=parameters)
     fixed = shells * resolution * resolution * order * order

@@ -422,7 +422,7 @@ def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
     vertices, normals : array_like, shape (V, 3)
         The mesh's own vertices and unit normals.
     meshes : list of trimesh.Trimesh
-        The blocking geometry (the object's mesh; its vertices are ``vertices``).
+        The object's mesh alone (its vertices are ``vertices``).
     order : int
         SH order ``m`` of the result.
 
@@ -430,12 +430,10 @@ def field_self_visibility(vertices, normals, meshes, order: int) -> np.ndarray:
     -------
     ndarray, shape (V, m*m) float64
     """
-    import trimesh
-
-    mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(list(meshes))
-    if len(mesh.vertices) != len(vertices) or not np.array_equal(
-            np.asarray(mesh.vertices, dtype=np.float64), np.asarray(vertices, dtype=np.float64)):
-        raise ValueError("field_self_visibility traces a mesh on its own vertices")
+    if len(meshes) != 1 or not np.array_equal(np.asarray(meshes[0].vertices, dtype=np.float64),
+                                              np.asarray(vertices, dtype=np.float64)):
+        raise ValueError("field_self_visibility traces one mesh on its own vertices")
+    mesh = meshes[0]
     g, _, _ = hemisphere_transfer(mesh, order, normals=normals, with_log=False)
     return g
 

@@ -76,9 +76,10 @@ class FieldKind(BlockerKind):
             table.self_order = fld.self_order
             # the estimate the bake would trace (geometry.transfer.FIELD_ESTIMATE);
             # fields sampled before hold the product rule's, which the bake traces again
+            from shtools.geometry.transfer import FIELD_ESTIMATE
+
             recorded = fld.attrs.get("parameters", {})
-            table.self_estimate = {k: recorded.get(k) for k in
-                                   ("self_estimator", "self_n_dirs", "self_n_first")}
+            table.self_estimate = {k: recorded.get(k) for k in FIELD_ESTIMATE}
         prep.blocker_data = table
         ctx.inputs[f"{prep.spec.name}.field"] = spec.path
 
