@@ -44,7 +44,11 @@ DIR (e.g. the worktree of the previous release) in the same run, each bake in it
 process (the codes alternated, the fastest repeat kept), and prints them side by side;
 given again, it adds more codes (the CPU ratios are against the first).
 
-``python benchmarks/bench_look.py [--quick] [--baseline DIR] [--demo DIR]``
+``--set KEY=VALUE`` (again for more) bakes this tree's code with those ``[settings]``
+(TOML values, e.g. ``--set self_visibility_directions=64``) and the baselines at
+their defaults, scored against the same reference: what a setting costs and buys.
+
+``python benchmarks/bench_look.py [--quick] [--baseline DIR] [--demo DIR] [--set KEY=VALUE]``
 """
 
 from __future__ import annotations
@@ -256,6 +260,28 @@ def bake_worker(scene_path: str, first: int, stop: int, out_path: str) -> None:
     np.savez(out_path, radiance=np.stack(radiance), cpu=np.array(cpu), setup=setup)
 
 
+def with_settings(path: Path, settings: list[str]) -> Path:
+    """A copy of the scene file ``path`` with ``settings`` (``"key = value"`` lines) in
+    its ``[settings]`` table, in the same folder (its relative asset paths hold); the
+    caller deletes it."""
+    keys = {line.split("=", 1)[0].strip() for line in settings}
+    lines, table = [], None
+    for line in path.read_text().splitlines():
+        if line.strip().startswith("["):
+            table = line.strip()
+        elif table == "[settings]" and line.split("=", 1)[0].strip() in keys:
+            continue  # replaced below
+        lines.append(line)
+        if line.strip() == "[settings]":
+            lines.extend(settings)
+    if "[settings]" not in (x.strip() for x in lines):
+        lines = ["[settings]", *settings, "", *lines]
+    digest = hashlib.sha256("\n".join(settings).encode()).hexdigest()[:8]
+    out = path.with_name(f"{path.stem}.set-{digest}.toml")
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
 def _bake(code: Path, scene: dict, tag: str) -> dict:
     tag = "".join(c if c.isalnum() else "_" for c in tag)  # a file name's
     out = CACHE / f"{scene['path'].stem}.{tag}.npz"
@@ -427,6 +453,9 @@ def main(argv=None) -> int:
                         help="directions of the reference on the vertices the first trace "
                              f"found shadowed (default {CONVERGED_DIRECTIONS}; 0: the first "
                              "trace's)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a [settings] value for this tree's bakes (TOML, e.g. "
+                             "self_visibility_directions=64); again for more")
     parser.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.baseline is None and os.environ.get("SHTOOLS_BASELINE"):
@@ -450,7 +479,15 @@ def main(argv=None) -> int:
         CACHE.mkdir(parents=True, exist_ok=True)
         _fidelity()._ensure(args.field, "field", "sample", DATA / "meshes" / "teapot.obj",
                             "--order", 4)
-    codes = {"this": REPO}
+    settings = []
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            parser.error(f"--set {item!r}: expected KEY=VALUE, e.g. "
+                         "self_visibility_directions=64")
+        settings.append(f"{key.strip()} = {value.strip()}")
+    this = "this" if not settings else "this (" + ", ".join(args.set) + ")"
+    codes = {this: REPO}
     if args.baseline:
         codes = {("baseline" if i == 0 else f"baseline {i + 1} ({b.name})"): b.resolve()
                  for i, b in enumerate(args.baseline)} | codes
@@ -466,15 +503,20 @@ def main(argv=None) -> int:
         if wanted is not None and name not in wanted:
             continue
         baked = {}
-        for _ in range(REPEATS):
-            for tag, code in codes.items():
-                run = _bake(code, scene, tag)
-                cpu = float(np.mean(run["cpu"]))
-                if tag not in baked or cpu < baked[tag]["cpu"]:
-                    baked[tag] = {"radiance": run["radiance"], "cpu": cpu,
-                                  "setup": baked.get(tag, {}).get("setup", math.inf)}
-                # the fastest set-up frame too, kept apart from the frames'
-                baked[tag]["setup"] = min(baked[tag]["setup"], float(run["setup"]))
+        variant = dict(scene, path=with_settings(scene["path"], settings)) if settings else scene
+        try:
+            for _ in range(REPEATS):
+                for tag, code in codes.items():
+                    run = _bake(code, variant if tag == this else scene, tag)
+                    cpu = float(np.mean(run["cpu"]))
+                    if tag not in baked or cpu < baked[tag]["cpu"]:
+                        baked[tag] = {"radiance": run["radiance"], "cpu": cpu,
+                                      "setup": baked.get(tag, {}).get("setup", math.inf)}
+                    # the fastest set-up frame too, kept apart from the frames'
+                    baked[tag]["setup"] = min(baked[tag]["setup"], float(run["setup"]))
+        finally:
+            if settings:
+                variant["path"].unlink(missing_ok=True)
         refs = references(scene, n_dirs, ref_dirs or None)
         first = next(iter(codes))
         for tag in codes:
@@ -488,7 +530,8 @@ def main(argv=None) -> int:
                     f"{1e3 * baked[tag]['setup']:.0f}"]
                 print("| " + " | ".join(cells) + " |", flush=True)
     print(f"\nload {os.getloadavg()[0]:.1f}; " + json.dumps({"n_dirs": n_dirs,
-                                                             "ref_dirs": ref_dirs}))
+                                                             "ref_dirs": ref_dirs,
+                                                             "set": settings}))
     return 0
 
 
