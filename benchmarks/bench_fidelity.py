@@ -223,6 +223,16 @@ VARIANTS = {
     "tree": {"blocker": "tree", "settings": "traced_shadows = false\n"},
     "traced": {"blocker": "tree", "settings": ""},
 }
+#: What each variant's columns are, printed under the table's heading.
+VARIANT_LEGEND = {
+    "old": "sphere trees shadow everything, the objects' own vertices with the self-shadow "
+           "rules (self_visibility = false, traced_shadows = false)",
+    "self+spheres": "the objects' own vertices by their real mesh, the other receivers by "
+                    "the spheres",
+    "new": "every rigid object a shadow-field blocker, at the other defaults",
+    "tree": "sphere trees at the defaults but traced_shadows = false",
+    "traced": "sphere trees at the defaults",
+}
 
 
 def parse_variant(text: str) -> tuple[str, dict]:
@@ -868,6 +878,9 @@ def main(argv=None) -> int:
     print(f"\n### Fidelity vs the real meshes (order 4, {n_dirs}+ directions, "
           f"{subset} vertices per receiver and frame; load {load[0]:.2f} on "
           f"{os.cpu_count()} cores)\n")
+    legend = [f"**{v}**: {VARIANT_LEGEND.get(v, 'an experiment (--variant)')}" for v in variants]
+    print("Variants: " + "; ".join(legend) + ". \"vs mesh\": against the ray tracer of the "
+          "real meshes; \"vs spheres\": against ray tracing of the sphere union.\n")
     print(_markdown(all_rows))
     print("\n" + _markdown(sums))
     built = {k: round(v, 1) for k, v in pre.items() if v}

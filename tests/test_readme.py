@@ -92,24 +92,24 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
     from shtools.data_formats.bake import read_bake
 
     rgb = namespace["rgb"]
-    # the snippet is the sphere path: it matches a bake of the same scene whose objects
-    # shade the ground with their spheres (`traced_shadows = false`, as the README says)
+    # the snippet is the sphere path: it matches frame 0 of a bake of the same scene whose
+    # objects shade everything with their spheres (`traced_shadows = false`,
+    # `self_visibility = false`, as the README says)
     scene = (tmp_path / "scene.toml").read_text()
     assert "[settings]\n" in scene
-    (tmp_path / "spheres.toml").write_text(
-        scene.replace("[settings]\n", "[settings]\ntraced_shadows = false\n", 1))
+    (tmp_path / "spheres.toml").write_text(scene.replace(
+        "[settings]\n", "[settings]\ntraced_shadows = false\nself_visibility = false\n", 1))
     _run_sh("shtools bake spheres.toml -o spheres.h5 --frames 0:1", tmp_path)
     baked = read_bake(tmp_path / "spheres.h5")
     assert rgb.shape == (baked.n_vertices, 3) and np.all(np.isfinite(rgb))
-    # the runtime from Python sees the bunny's shadows like the bake of frame 0; the
-    # snippet leaves the ball (radius 0.25) out, so compare beyond 2.5 units of it, where
-    # it covers < 0.5 % of the hemisphere (<= ~1 % of the radiance with the cosine);
-    # receiver clustering differs too (the bake clusters per object): 2 %
-    ball = baked.object_names.index("ball")
-    far = np.linalg.norm(baked.frame_vertices(0) - [-1.5, 0.25, 0.8], axis=1) > 2.5
-    far[baked.object_offsets[ball]:baked.object_offsets[ball + 1]] = False
-    assert far.sum() > 500
-    np.testing.assert_allclose(rgb[far], baked.radiance[0][far], rtol=2e-2, atol=2e-3)
+    # every vertex, the ball's shadow included.  The receiver clustering differs (the bake
+    # clusters per object, the snippet all its receivers at once), and a cluster's cut of
+    # the sphere tree with it (Ren et al. Sec. 6.3): a cut sphere's shadow is its
+    # children's only to the cut threshold, so next to the blockers a few vertices
+    # differ by a few percent; every vertex within 4 %, all but 1 % of them within 2 %
+    want = np.asarray(baked.radiance[0], dtype=np.float64)
+    off = np.abs(rgb - want).max(axis=1) / np.maximum(np.abs(want).max(axis=1), 2e-3 / 2e-2)
+    assert off.max() < 4e-2 and np.mean(off > 2e-2) < 1e-2, (off.max(), np.mean(off > 2e-2))
 
     # the skinned recipe, after the Quick start (it reuses light.h5)
     from helpers.rig import write_bending_tube
