@@ -159,7 +159,7 @@ def _log_class():
         Nothing for a stage shorter than ``delay``; then at most one line per
         ``mininterval`` seconds as the work advances and a final one when it
         ends (not after an error, whose one line must stay the last), e.g.
-        ``fit: 40/120 rounds (33%), 00:12 elapsed, ETA 00:24, E=0.930``.
+        ``fit: 40/120 rounds (33%), 00:12 elapsed, ETA 00:24, objective=0.930``.
         """
 
         _failed = False
@@ -265,6 +265,56 @@ class FiniteRange(click.FloatRange):
             self.fail(f"{value!r} is not a finite number", param, ctx)
         return rv
 
+    def _describe_range(self) -> str:
+        # no bound on either side: no range in the help (click would show "x<=None")
+        if self.min is None and self.max is None:
+            return ""
+        return super()._describe_range()
+
+
+class PowerOfTwo(click.IntRange):
+    """An integer option that must be a power of two, at least ``lo`` (and at most ``hi``)."""
+
+    name = "power of two"
+
+    def __init__(self, lo: int = 1, hi: int | None = None):
+        super().__init__(max(1, lo), hi)
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if rv & (rv - 1):
+            below = 1 << (rv.bit_length() - 1)
+            self.fail(f"{rv} is not a power of two (e.g. {below} or {2 * below}).", param, ctx)
+        return rv
+
+    def _describe_range(self) -> str:
+        return f"a power of two, {super()._describe_range()}"
+
+
+def option_error(message: str) -> click.UsageError:
+    """The error of an option's value (or of options given together) found after parsing.
+
+    One line naming the option and what to give, exit 2 like a value refused while
+    parsing -- never a file: a bad value is not the fault of the mesh read or the file
+    written (:func:`naming` leaves it alone).  ``raise option_error("--k-range ...")``.
+    """
+    return click.UsageError(" ".join(str(message).split()))
+
+
+@contextlib.contextmanager
+def checking_options():
+    """Library checks of option values in the block (e.g. ``FieldParameters.validate``)
+    raise an :class:`~shtools.errors.InputError` without a file: refused as
+    :func:`option_error` (an error naming a file is one about that file, and passes)."""
+    from shtools.errors import InputError
+
+    try:
+        yield
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        raise option_error(exc.message) from None
+
 
 #: The range of every numeric option that is not a runtime setting (those come from
 #: the settings schema, :func:`setting_type`): one place, one finite check.
@@ -288,9 +338,9 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     # sphere count: the fit itself says when N exceeds what the mesh's samples allow
     "count": click.IntRange(1, None),
     "level": click.IntRange(0, 64),
-    # tables scaling: cone half-angle (its (0, 90) range is checked by the command,
-    # for the cone only), sampled k, samples and quadrature nodes
-    "alpha_deg": FiniteRange(None, None),
+    # tables scaling: cone half-angle (only the cone uses it), sampled k, samples and
+    # quadrature nodes
+    "alpha_deg": FiniteRange(0, 90, min_open=True, max_open=True),
     "k": FiniteRange(0, 1e6),
     "scaling_order": click.IntRange(1, 16),
     "scaling_samples": click.IntRange(3, 10_000),
@@ -315,6 +365,16 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "branching": click.IntRange(2, 1000),
     "bones_per_sphere": click.IntRange(1, 64),
     "check_frames": click.IntRange(0, 10_000),
+    # field sample (the bounds shtools.fields.FieldParameters.validate checks; --order and
+    # --self-order are the runtime settings order and acc_order, setting_type)
+    "shells": click.IntRange(1, 256),
+    "field_resolution": PowerOfTwo(2),
+    "min_resolution": PowerOfTwo(1),
+    "map_size": click.IntRange(4, 1024),
+    "threshold": FiniteRange(0, None, min_open=True),
+    "bits": click.IntRange(1, 8),
+    # field sample --basis haar: fraction of the Haar coefficients kept
+    "keep": FiniteRange(0, 1, min_open=True),
 }
 
 

@@ -10,6 +10,7 @@ import click
 
 from shtools.cli._common import (
     InputPath,
+    checking_options,
     errors_name,
     json_option,
     option_type,
@@ -17,6 +18,7 @@ from shtools.cli._common import (
     progress,
     report,
     scheduler_options,
+    setting_type,
 )
 from shtools.cli._limits import force_option
 
@@ -29,26 +31,29 @@ def field():
 @field.command("sample")
 @click.argument("mesh_path", metavar="MESH", type=InputPath())
 @output_option
-@click.option("--shells", default=32, show_default=True, type=int,
+@click.option("--shells", default=32, show_default=True, type=option_type("shells"),
               help="Shells C; radius r_c = 0.2 V_r (1 + c), V_r the bounding-sphere radius.")
-@click.option("--resolution", default=64, show_default=True, type=int,
-              help="Initial samples per shell, R x R (a power of two).")
-@click.option("--map", "map_size", default=64, show_default=True, type=int,
+@click.option("--resolution", default=64, show_default=True,
+              type=option_type("field_resolution"), help="Initial samples per shell, R x R.")
+@click.option("--map", "map_size", default=64, show_default=True,
+              type=option_type("map_size"),
               help="Directions per sample: a MAP x MAP (theta, phi) map, exact cell areas.")
-@click.option("--order", default=4, show_default=True, type=int, help="SH order n.")
-@click.option("--threshold", default=0.01, show_default=True, type=float,
+@click.option("--order", default=4, show_default=True, type=setting_type("order"),
+              help="SH order n.")
+@click.option("--threshold", default=0.01, show_default=True, type=option_type("threshold"),
               help="Eq. (1) error below which a shell's resolution is halved.")
-@click.option("--min-resolution", default=8, show_default=True, type=int,
-              help="Smallest R a shell is reduced to (a power of two).")
-@click.option("--bits", default=8, show_default=True, type=int,
-              help="Quantization bits per coefficient (1..8).")
+@click.option("--min-resolution", default=8, show_default=True,
+              type=option_type("min_resolution"),
+              help="Smallest R a shell is reduced to, at most --resolution.")
+@click.option("--bits", default=8, show_default=True, type=option_type("bits"),
+              help="Quantization bits per coefficient.")
 @click.option("--cumulative", is_flag=True,
               help="Check every halving against the initial samples (beyond the paper, "
                    "which compares with the previous level only).")
 @click.option("--no-self-visibility", is_flag=True,
               help="Do not store the per-vertex self-visibility O_v (the object's own "
                    "vertices then need a transfer asset or are not self-shadowed).")
-@click.option("--self-order", default=None, type=int,
+@click.option("--self-order", default=None, type=setting_type("acc_order"),
               help="SH order of the stored O_v, at least --order [default: --order; a bake "
                    "uses its first --order only].")
 @click.option("--seed", default=0, show_default=True, type=option_type("seed"),
@@ -66,7 +71,7 @@ def field():
 @click.option("--basis", default="sh", show_default=True, type=click.Choice(["sh", "haar"]),
               help="haar: an all-frequency field, each sample's MAP x MAP occlusion map in "
                    "the 2-D Haar basis, the largest --keep kept (a haar asset; no O_v).")
-@click.option("--keep", default=0.05, show_default=True, type=float,
+@click.option("--keep", default=0.05, show_default=True, type=option_type("keep"),
               help="With --basis haar: fraction of the Haar coefficients kept per sample.")
 @scheduler_options("shells")
 @force_option("4 GiB of memory, 2e10 rays")
@@ -94,10 +99,8 @@ def sample(mesh_path, output, shells, resolution, map_size, order, threshold, mi
                              order=order, threshold=threshold, min_resolution=min_resolution,
                              bits=bits, cumulative=cumulative, seed=seed,
                              self_order=self_order)
-    try:
+    with checking_options():  # what the types cannot see: --min-resolution, --self-order
         params.validate()
-    except InputError as exc:
-        raise InputError(exc.message, mesh_path) from None
     from shtools.cli._limits import check_memory, check_rays
     from shtools.cli._outputs import guard_outputs
 

@@ -6,8 +6,7 @@ Thin: validate the Haar options, load the mesh, call
 
 from __future__ import annotations
 
-from shtools.cli._common import progress, report
-from shtools.errors import InputError
+from shtools.cli._common import option_error, progress, report
 
 
 def sample_haar(mesh_path, output, params, keep: float, emission, force: bool,
@@ -21,20 +20,17 @@ def sample_haar(mesh_path, output, params, keep: float, emission, force: bool,
 
     M, R, C = params.map_size, params.resolution, params.shells
     if emission is not None:
-        raise InputError("--radiance samples a source radiance field in SH; drop --basis haar",
-                         mesh_path)
+        raise option_error("--radiance samples a source radiance field in SH; drop --basis "
+                           "haar")
     if M & (M - 1) or M > MAX_MAP_SIZE:
-        raise InputError(f"--map must be a power of two <= {MAX_MAP_SIZE} with --basis haar "
-                         f"(the Haar transform halves it; indices are 16-bit), got {M}",
-                         mesh_path)
-    if not 0 < keep <= 1:
-        raise InputError(f"--keep must be a fraction in (0, 1], got {keep!r}", mesh_path)
+        raise option_error(f"--map must be a power of two <= {MAX_MAP_SIZE} with --basis haar "
+                           f"(the Haar transform halves it; indices are 16-bit), got {M}")
     if params.self_order is not None:
-        raise InputError("--self-order sets the O_v of an SH field; a haar asset stores none "
-                         "(drop it, or self-shadow the object with a transfer asset)", mesh_path)
+        raise option_error("--self-order sets the O_v of an SH field; a haar asset stores "
+                           "none (drop it, or self-shadow the object with a transfer asset)")
     if params.bits != 8:
-        raise InputError(f"--bits must be 8 with --basis haar (values are stored as uint8), "
-                         f"got {params.bits}", mesh_path)
+        raise option_error(f"--bits must be 8 with --basis haar (values are stored as "
+                           f"uint8), got {params.bits}")
     # one shell's maps in flight: float32 samples, the float64 reduction copy, its 2 x 2
     # averages and the interpolated comparison chunk
     peak = R * R * M * M * (4 + 8 + 8 + 8)

@@ -59,7 +59,9 @@ def fit(mesh_paths, count, output, method, seed, thickness, iterations, restarts
     """Fit N spheres bounding the solid of MESH with minimal outside volume.
 
     Writes a 'spheres' asset with centers, radii and outside_volume_ratio
-    E = sum_i V(S_i - T) / V(T).  Several meshes (`meshes/*.obj -o out/`) are
+    E = sum_i V(S_i - T) / V(T), the E of the final line (the progress shows the
+    search's objective instead: E on sample points, before the spheres are grown to
+    hold the whole surface).  Several meshes (`meshes/*.obj -o out/`) are
     fitted as independent tasks on the local cores or a Dask cluster, one
     asset per mesh in the folder OUTPUT (docs/scale-out.md).
     """

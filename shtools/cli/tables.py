@@ -8,7 +8,14 @@ from pathlib import Path
 
 import click
 
-from shtools.cli._common import json_option, option_type, output_option, report, setting_type
+from shtools.cli._common import (
+    json_option,
+    option_error,
+    option_type,
+    output_option,
+    report,
+    setting_type,
+)
 from shtools.cli._limits import check_memory, force_option
 from shtools.errors import InputError
 
@@ -53,8 +60,8 @@ def log_cmd(order, output, samples, plot_path, as_json):
     if plot_path and Path(plot_path).suffix.lower() != ".png":
         raise InputError("--plot writes a PNG; give a file name ending in .png", plot_path)
     if plot_path and order < 2:
-        raise InputError("order 1 has no band above DC, so there are no OL curves to plot; "
-                         "use --order 2 or more with --plot", plot_path)
+        raise option_error("--order 1 has no band above DC, so there are no OL curves to "
+                           "plot; use --order 2 or more with --plot")
     start = time.perf_counter()
     built = build_log_tables(order, samples=samples)
     # both outputs or neither: the plot is drawn into its temporary file first and
@@ -94,7 +101,7 @@ def log_cmd(order, output, samples, plot_path, as_json):
               "(environment on a sphere of radius R, k = d/R).")
 @click.option("--alpha", "alpha_deg", type=option_type("alpha_deg"), default=45.0,
               show_default=True,
-              help="Cone half-angle in degrees, in (0, 90) (cone only; Wang et al. use 45).")
+              help="Cone half-angle in degrees (cone only; Wang et al. use 45).")
 @click.option("--energy-preserving", is_flag=True,
               help="Energy-preserving scaling (Lambda = sin(phi) phi', keeps the integral).")
 @click.option("--samples", type=option_type("scaling_samples"), default=40, show_default=True,
@@ -125,12 +132,9 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
     from shtools.sh.scaling import build_scaling_table
 
     guard_outputs({"-o": output})
-    if function == "cone" and not 0.0 < alpha_deg < 90.0:
-        raise InputError(f"--alpha {alpha_deg:g} is outside (0, 90) degrees; give the cone "
-                         "half-angle about the radial axis, e.g. 45", output)
     if k_range is not None and not k_range[0] < k_range[1]:
-        raise InputError(f"--k-range {k_range[0]:g} {k_range[1]:g} is inverted or empty; "
-                         "give LO < HI", output)
+        raise option_error(f"--k-range {k_range[0]:g} {k_range[1]:g} is inverted or empty; "
+                           "give LO < HI")
     _check_scaling_memory(order, samples, nodes, force, output)
     start = time.perf_counter()
     try:
@@ -139,8 +143,8 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
             samples=samples, k_range=None if k_range is None else tuple(k_range),
             interpolation=interpolation, nodes=nodes,
         )
-    except ValueError as exc:
-        raise InputError(f"{exc}", output) from None
+    except ValueError as exc:  # the k range or interpolation asked for
+        raise option_error(f"{exc}") from None
     params = {"order": order, "function": function, "energy_preserving": energy_preserving,
               "samples": samples, "k_range": [float(table["k"][0]), float(table["k"][-1])],
               "interpolation": interpolation, "nodes": table["quadrature_nodes"]}

@@ -172,7 +172,9 @@ def _fit_once(mesh, n, *, method, seed, thickness, max_iterations, max_teleport_
     bar.total = max_iterations  # known once the solid is sampled; shown at the next update
 
     def progress(rounds: float, energy: float) -> None:
-        bar.set_postfix(E=f"{energy:.3f}", refresh=False)
+        # the search's objective: E on the solid's sample points, before the spheres are
+        # grown to hold the whole surface -- not the accurate E the result reports
+        bar.set_postfix(objective=f"{energy:.3f}", refresh=False)
         bar.update(min(int(rounds), bar.total) - bar.n)
 
     rng = np.random.default_rng(seed)
