@@ -24,13 +24,14 @@ ALLOWED = {
     "tasks": {"errors", "registry"},  # a package: pool, workers, dask_cluster
     "cache": set(),  # the set-up cache: stdlib and numpy only
     "blend": set(),  # the one smoothstep of every continuous transition, a leaf
+    "field_limits": set(),  # a shadow field's parameter bounds (the CLI's and the sampler's)
     "sh": {"errors", "registry", "blend"},
     "data_formats": {"errors", "registry", "sh"},
     "runtime": {"errors", "registry", "blend", "tasks", "sh", "data_formats"},
     "geometry": {"errors", "registry", "progress", "cache", "tasks", "sh", "data_formats",
                  "runtime"},
-    "fields": {"errors", "registry", "progress", "cache", "tasks", "sh", "data_formats",
-               "runtime", "geometry"},
+    "fields": {"errors", "registry", "progress", "cache", "tasks", "field_limits", "sh",
+               "data_formats", "runtime", "geometry"},
     "lighting": {"errors", "registry", "progress", "cache", "sh", "data_formats", "runtime"},
     "reference": {"errors", "registry", "progress", "cache", "tasks", "sh", "data_formats",
                   "runtime", "geometry", "fields", "lighting"},

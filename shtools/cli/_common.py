@@ -12,6 +12,7 @@ import sys
 import click
 import numpy as np
 
+from shtools import field_limits
 from shtools.cli._limits import ImageSize
 
 output_option = click.option(
@@ -365,14 +366,14 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     "branching": click.IntRange(2, 1000),
     "bones_per_sphere": click.IntRange(1, 64),
     "check_frames": click.IntRange(0, 10_000),
-    # field sample (the bounds shtools.fields.FieldParameters.validate checks; --order and
+    # field sample (shtools.field_limits, which FieldParameters.validate checks too; --order and
     # --self-order are the runtime settings order and acc_order, setting_type)
-    "shells": click.IntRange(1, 256),
+    "shells": click.IntRange(*field_limits.SHELLS),
     "field_resolution": PowerOfTwo(2),
     "min_resolution": PowerOfTwo(1),
-    "map_size": click.IntRange(4, 1024),
+    "map_size": click.IntRange(*field_limits.MAP_SIZE),
     "threshold": FiniteRange(0, None, min_open=True),
-    "bits": click.IntRange(1, 8),
+    "bits": click.IntRange(*field_limits.BITS),
     # field sample --basis haar: fraction of the Haar coefficients kept
     "keep": FiniteRange(0, 1, min_open=True),
 }

@@ -27,6 +27,7 @@ import numpy as np
 
 from shtools.data_formats.field import ShadowField
 from shtools.errors import InputError
+from shtools.field_limits import BITS, MAP_SIZE, SHELLS
 from shtools.fields.quantize import quantize
 from shtools.fields.reduction import ERROR_QUAD_DEGREE, reduce_shell
 from shtools.fields.sampling import (
@@ -73,21 +74,23 @@ class FieldParameters:
         def pow2(x):
             return isinstance(x, int) and x >= 1 and (x & (x - 1)) == 0
 
-        if not (isinstance(self.shells, int) and 1 <= self.shells <= 256):
-            raise InputError(f"--shells must be an integer 1..256, got {self.shells!r}")
+        if not (isinstance(self.shells, int) and SHELLS[0] <= self.shells <= SHELLS[1]):
+            raise InputError(f"--shells must be an integer {SHELLS[0]}..{SHELLS[1]}, got "
+                             f"{self.shells!r}")
         if not pow2(self.resolution) or self.resolution < 2:
             raise InputError(f"--resolution must be a power of two >= 2, got {self.resolution!r}")
         if not pow2(self.min_resolution) or self.min_resolution > self.resolution:
             raise InputError(f"--min-resolution must be a power of two <= --resolution "
                              f"({self.resolution}), got {self.min_resolution!r}")
-        if not (isinstance(self.map_size, int) and 4 <= self.map_size <= 1024):
-            raise InputError(f"--map must be an integer 4..1024, got {self.map_size!r}")
+        if not (isinstance(self.map_size, int) and MAP_SIZE[0] <= self.map_size <= MAP_SIZE[1]):
+            raise InputError(f"--map must be an integer {MAP_SIZE[0]}..{MAP_SIZE[1]}, got "
+                             f"{self.map_size!r}")
         if not (isinstance(self.order, int) and 1 <= self.order <= MAX_ORDER):
             raise InputError(f"--order must be an integer 1..{MAX_ORDER}, got {self.order!r}")
         if not (self.threshold > 0 and math.isfinite(self.threshold)):
             raise InputError(f"--threshold must be > 0, got {self.threshold!r}")
-        if not (isinstance(self.bits, int) and 1 <= self.bits <= 8):
-            raise InputError(f"--bits must be an integer 1..8, got {self.bits!r}")
+        if not (isinstance(self.bits, int) and BITS[0] <= self.bits <= BITS[1]):
+            raise InputError(f"--bits must be an integer {BITS[0]}..{BITS[1]}, got {self.bits!r}")
         if not 0 < self.log_floor < 1:
             raise InputError(f"log floor must be in (0, 1), got {self.log_floor!r}")
         if self.self_order is not None and not (isinstance(self.self_order, int)
