@@ -6,7 +6,7 @@ light whose angular radius (seen from the ground under the mesh) sweeps
 0.01-0.3 rad.  Receivers are the ground vertices and the mesh's own vertices.
 
 Ground truth: the directly ray-traced visible fraction ``S`` and the
-cosine-weighted light (``shtools.reference.light_visible_fraction``, 256
+cosine-weighted light (``shtools.reference.light_fraction.light_visible_fraction``, 256
 stratified rays per receiver).  Per method and radius:
 
 * ``S`` MAE and max over true-penumbra receivers (``0.02 < S_ref < 0.98``, light

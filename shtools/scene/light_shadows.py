@@ -15,7 +15,7 @@ keeps existing bakes unchanged):
   the penumbra, a few per cent of the receivers).  Settings: the light's
   ``ssoc = { ... }`` table (:class:`SSOCSettings`, plus ``rays``).
 * ``"raytrace"``: the visible, cosine-weighted light ray-traced directly
-  (:func:`shtools.reference.light_visible_fraction`, ``samples`` strata per
+  (:func:`shtools.reference.light_fraction.light_visible_fraction`, ``samples`` strata per
   receiver) -- the ground truth, and the slow path.
 * ``"auto"``: ``"ssoc"`` while the light's angular radius seen from the
   receivers (median over receivers of ``asin(r/D)``) is below

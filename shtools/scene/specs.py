@@ -17,9 +17,9 @@ import numpy as np
 #: Strata per receiver that ``shadows = "ssoc"`` traces where the occlusion camera finds
 #: penumbra (0: none; :func:`shtools.scene.light_shadows.ssoc_radiance`).
 #: ``benchmarks/bench_ssoc.py`` (docs/ssoc.md): on the bunny's dark ground 4.7-5.5 %
-#: against 7.3-12.2 % for the camera alone (64-ray tracing of every receiver 3.7-4.3 %),
-#: at 1.1-1.5x the camera's time; 256 rays: 1.6-3.4 %, but 2-3x the camera's time on
-#: 100k receivers (the bunny's own vertices are penumbra too), close to tracing all.
+#: against 7.3-12.2 % for the camera alone (64-ray tracing of every receiver 3.7-4.3 %);
+#: 256 rays: 1.6-3.4 %, at 2.5-3.9x the camera's time on 100k receivers at 0.01-0.02
+#: rad (the bunny's own vertices are penumbra too), close to tracing them all.
 PENUMBRA_RAYS = 64
 
 
