@@ -12,8 +12,9 @@ Scenes built from ``../shared/data`` (never committed):
 Every scene is baked with each variant (:data:`VARIANTS`, ``--variants``; the
 assets are shared): the **old default** (``self_visibility = false``: every
 blocker, the objects' own included, as spheres with the self-shadow rules),
-**self+spheres** (exact self-shadowing from a ``transfer`` asset, the objects' spheres
-shadowing the other receivers) and **new**: every rigid object a shadow-field
+**self+spheres** (exact self-shadowing from a ``transfer`` asset, sphere trees as the
+objects' blockers, whose real meshes near them are traced on the other receivers as
+by default, ``traced_shadows``) and **new**: every rigid object a shadow-field
 blocker (``blocker = { field = ... }``) whose asset also holds its O_v, so the
 real mesh shadows the other receivers and the object itself (skinned objects
 keep their bound spheres for the other receivers and, with ``self_visibility``
@@ -209,8 +210,8 @@ def scenes(quick: bool, only=None) -> dict[str, dict]:
 #: Bake variants: how rigid objects cast on other receivers ("tree": their spheres,
 #: "field": their real mesh through a shadow field, which also holds their
 #: self-visibility unless "transfer" keeps the transfer asset) and the settings.  "old" has no
-#: self-visibility, "self+spheres" exact self-shadowing with sphere shadows on the
-#: other receivers, "new" the current default.
+#: self-visibility and no traced shadows, "self+spheres" exact self-shadowing over sphere
+#: trees (the ground traced near them, as by default), "new" the current default.
 VARIANTS = {
     "old": {"blocker": "tree", "settings": 'self_visibility = false\nlocal_visibility = false\n'
                                            'deringing = "none"\ntraced_shadows = false\n'},
@@ -223,16 +224,12 @@ VARIANTS = {
     "tree": {"blocker": "tree", "settings": "traced_shadows = false\n"},
     "traced": {"blocker": "tree", "settings": ""},
 }
-#: What each variant's columns are, printed under the table's heading.
-VARIANT_LEGEND = {
-    "old": "sphere trees shadow everything, the objects' own vertices with the self-shadow "
-           "rules (self_visibility = false, traced_shadows = false)",
-    "self+spheres": "the objects' own vertices by their real mesh, the other receivers by "
-                    "the spheres",
-    "new": "every rigid object a shadow-field blocker, at the other defaults",
-    "tree": "sphere trees at the defaults but traced_shadows = false",
-    "traced": "sphere trees at the defaults",
-}
+def describe_variant(variant: dict) -> str:
+    """What a variant bakes, from its own entry: its blockers and the settings it sets."""
+    lines = [x.strip() for x in variant.get("settings", "").splitlines() if x.strip()]
+    kind = {"tree": "sphere-tree blockers", "field": "shadow-field blockers"}.get(
+        variant.get("blocker"), f"{variant.get('blocker')} blockers")
+    return kind + (", " + ", ".join(f"`{x}`" for x in lines) if lines else ", the defaults")
 
 
 def parse_variant(text: str) -> tuple[str, dict]:
@@ -878,7 +875,7 @@ def main(argv=None) -> int:
     print(f"\n### Fidelity vs the real meshes (order 4, {n_dirs}+ directions, "
           f"{subset} vertices per receiver and frame; load {load[0]:.2f} on "
           f"{os.cpu_count()} cores)\n")
-    legend = [f"**{v}**: {VARIANT_LEGEND.get(v, 'an experiment (--variant)')}" for v in variants]
+    legend = [f"**{name}**: {describe_variant(v)}" for name, v in variants.items()]
     print("Variants: " + "; ".join(legend) + ". \"vs mesh\": against the ray tracer of the "
           "real meshes; \"vs spheres\": against ray tracing of the sphere union.\n")
     print(_markdown(all_rows))

@@ -59,6 +59,7 @@ import importlib.util
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import time
@@ -260,25 +261,48 @@ def bake_worker(scene_path: str, first: int, stop: int, out_path: str) -> None:
     np.savez(out_path, radiance=np.stack(radiance), cpu=np.array(cpu), setup=setup)
 
 
+#: A ``[settings]`` table header line (spaces and a comment allowed).
+_SETTINGS_HEADER = re.compile(r"^\s*\[\s*settings\s*\]\s*(#.*)?$")
+
+
 def with_settings(path: Path, settings: list[str]) -> Path:
-    """A copy of the scene file ``path`` with ``settings`` (``"key = value"`` lines) in
-    its ``[settings]`` table, in the same folder (its relative asset paths hold); the
-    caller deletes it."""
-    keys = {line.split("=", 1)[0].strip() for line in settings}
-    lines, table = [], None
+    """A copy of the scene file ``path`` with ``settings`` (``"key = value"`` lines; the
+    last of a repeated key wins) in its ``[settings]`` table, in the same folder (its
+    relative asset paths hold); the caller deletes it.  Raises ``ValueError`` when the
+    copy does not hold them (a line the scene's TOML cannot take), before any bake."""
+    import tomllib
+
+    wanted = {}
+    for line in settings:
+        key, _, value = line.partition("=")
+        wanted[key.strip().strip('"').strip("'")] = value.strip()
+    lines, table, placed = [], None, False
     for line in path.read_text().splitlines():
-        if line.strip().startswith("["):
-            table = line.strip()
-        elif table == "[settings]" and line.split("=", 1)[0].strip() in keys:
-            continue  # replaced below
+        if line.lstrip().startswith("["):
+            table = "settings" if _SETTINGS_HEADER.match(line) else line.strip()
+        elif table == "settings":
+            key = line.split("=", 1)[0].strip().strip('"').strip("'")
+            if "=" in line and key in wanted:
+                continue  # replaced below
         lines.append(line)
-        if line.strip() == "[settings]":
-            lines.extend(settings)
-    if "[settings]" not in (x.strip() for x in lines):
-        lines = ["[settings]", *settings, "", *lines]
+        if table == "settings" and not placed:
+            lines.extend(f"{k} = {v}" for k, v in wanted.items())
+            placed = True
+    if not placed:  # a table of its own at the end (before it, a dotted key would move)
+        lines += ["", "[settings]", *(f"{k} = {v}" for k, v in wanted.items())]
+    text = "\n".join(lines) + "\n"
+    try:
+        held = tomllib.loads(text).get("settings", {})
+        want = {k: tomllib.loads(f"x = {v}")["x"] for k, v in wanted.items()}
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: --set {', '.join(settings)} does not make a TOML scene "
+                         f"({exc})") from None
+    if any(held.get(k) != v for k, v in want.items()):
+        raise ValueError(f"{path}: --set {', '.join(settings)} did not land in its [settings] "
+                         "table (a dotted or inline settings key?)")
     digest = hashlib.sha256("\n".join(settings).encode()).hexdigest()[:8]
     out = path.with_name(f"{path.stem}.set-{digest}.toml")
-    out.write_text("\n".join(lines) + "\n")
+    out.write_text(text)
     return out
 
 
@@ -503,7 +527,11 @@ def main(argv=None) -> int:
         if wanted is not None and name not in wanted:
             continue
         baked = {}
-        variant = dict(scene, path=with_settings(scene["path"], settings)) if settings else scene
+        try:
+            variant = (dict(scene, path=with_settings(scene["path"], settings)) if settings
+                       else scene)
+        except ValueError as exc:
+            parser.error(str(exc))
         try:
             for _ in range(REPEATS):
                 for tag, code in codes.items():

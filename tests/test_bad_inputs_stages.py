@@ -153,9 +153,9 @@ CASES = [
     ("eval-png-is-field", ["eval", "--mesh", "{k}/mesh.obj", "--field", "{k}/field.png", "--png",
                            "{k}/field.png"], 1, ["field.png", "also an input"]),
     ("eval-methods-typo", ["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5",
-                           "--methods", "zz"], 1, ["--methods", "zz"]),
+                           "--methods", "zz"], 2, ["--methods", "zz"]),
     ("eval-methods-order", ["eval", "--mesh", "{k}/mesh.obj", "--spheres", "{k}/spheres.h5",
-                            "--methods", "auto@99"], 1, ["--methods", "auto@99"]),
+                            "--methods", "auto@99"], 2, ["--methods", "auto@99"]),
     ("plot-not-png", ["tables", "log", "-n", "2", "-o", "{o}/t.h5", "--plot", "{o}/p.txt"], 1,
      ["p.txt", "--plot", ".png"]),
     *[(f"empty-input-{'-'.join(argv[:2])}", argv, 2, ["is empty"]) for argv in (

@@ -102,14 +102,31 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
     _run_sh("shtools bake spheres.toml -o spheres.h5 --frames 0:1", tmp_path)
     baked = read_bake(tmp_path / "spheres.h5")
     assert rgb.shape == (baked.n_vertices, 3) and np.all(np.isfinite(rgb))
-    # every vertex, the ball's shadow included.  The receiver clustering differs (the bake
-    # clusters per object, the snippet all its receivers at once), and a cluster's cut of
-    # the sphere tree with it (Ren et al. Sec. 6.3): a cut sphere's shadow is its
-    # children's only to the cut threshold, so next to the blockers a few vertices
-    # differ by a few percent; every vertex within 4 %, all but 1 % of them within 2 %
-    want = np.asarray(baked.radiance[0], dtype=np.float64)
-    off = np.abs(rgb - want).max(axis=1) / np.maximum(np.abs(want).max(axis=1), 2e-3 / 2e-2)
-    assert off.max() < 4e-2 and np.mean(off > 2e-2) < 1e-2, (off.max(), np.mean(off > 2e-2))
+    # every vertex, the ball's shadow included.  What differs is the receiver clusters, and
+    # the sphere tree's cut of each (Ren et al. Sec. 6.3): the bake clusters each object
+    # apart, the snippet all its receivers as one group.  Measured: 3.3 % at most, 0.3 %
+    # of the vertices above 2 % (bright ground 0.9 from the bunny); with the bake's
+    # per-object clusters 0.7 %; without the hierarchy on both sides equal (below).
+    # Radiance below 0.1 (the ball's underside) is compared absolutely.
+    def off(got, want):
+        want = np.asarray(want, dtype=np.float64)
+        return np.abs(got - want).max(axis=1) / np.maximum(np.abs(want).max(axis=1), 0.1)
+
+    worst = off(rgb, baked.radiance[0])
+    assert worst.max() < 4e-2 and np.mean(worst > 2e-2) < 1e-2, (worst.max(), worst.mean())
+    # the same path without the tree's cuts: the snippet's spheres are the bake's exactly
+    from shtools.runtime import ShadowRuntime, ShadowSettings
+
+    (tmp_path / "flat.toml").write_text(scene.replace(
+        "[settings]\n", "[settings]\ntraced_shadows = false\nself_visibility = false\n"
+        "hierarchy = false\n", 1))
+    _run_sh("shtools bake flat.toml -o flat.h5 --frames 0:1", tmp_path)
+    with ShadowRuntime(ShadowSettings(order=4, hierarchy=False)) as rt:
+        flat = rt.shade(rt.visibility(namespace["vertices"], namespace["normals"],
+                                      [namespace["bunny"], namespace["ball"]]),
+                        namespace["vertices"], namespace["normals"], namespace["coeffs"])
+    # float32 accumulation in both, the same sums: rounding only
+    assert off(flat, read_bake(tmp_path / "flat.h5").radiance[0]).max() < 1e-4
 
     # the skinned recipe, after the Quick start (it reuses light.h5)
     from helpers.rig import write_bending_tube

@@ -266,12 +266,6 @@ class FiniteRange(click.FloatRange):
             self.fail(f"{value!r} is not a finite number", param, ctx)
         return rv
 
-    def _describe_range(self) -> str:
-        # no bound on either side: no range in the help (click would show "x<=None")
-        if self.min is None and self.max is None:
-            return ""
-        return super()._describe_range()
-
 
 class PowerOfTwo(click.IntRange):
     """An integer option that must be a power of two, at least ``lo`` (and at most ``hi``)."""
@@ -282,10 +276,15 @@ class PowerOfTwo(click.IntRange):
         super().__init__(max(1, lo), hi)
 
     def convert(self, value, param, ctx):
-        rv = super().convert(value, param, ctx)
-        if rv & (rv - 1):
-            below = 1 << (rv.bit_length() - 1)
-            self.fail(f"{rv} is not a power of two (e.g. {below} or {2 * below}).", param, ctx)
+        # the range's own message would read "not in the range a power of two, x>=2"
+        rv = click.INT.convert(value, param, ctx)
+        if rv < self.min or (self.max is not None and rv > self.max) or rv & (rv - 1):
+            top = "" if self.max is None else f" and <= {self.max}"
+            hint = ""
+            if rv >= 1 and rv & (rv - 1):
+                below = 1 << (rv.bit_length() - 1)
+                hint = f" (e.g. {below} or {2 * below})"
+            self.fail(f"{rv} is not a power of two >= {self.min}{top}{hint}.", param, ctx)
         return rv
 
     def _describe_range(self) -> str:
@@ -369,8 +368,8 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     # field sample (shtools.field_limits, which FieldParameters.validate checks too; --order and
     # --self-order are the runtime settings order and acc_order, setting_type)
     "shells": click.IntRange(*field_limits.SHELLS),
-    "field_resolution": PowerOfTwo(2),
-    "min_resolution": PowerOfTwo(1),
+    "field_resolution": PowerOfTwo(field_limits.RESOLUTION_MIN),
+    "min_resolution": PowerOfTwo(field_limits.MIN_RESOLUTION_MIN),
     "map_size": click.IntRange(*field_limits.MAP_SIZE),
     "threshold": FiniteRange(0, None, min_open=True),
     "bits": click.IntRange(*field_limits.BITS),

@@ -25,6 +25,7 @@ from shtools.cli._common import (
     InputPath,
     errors_name,
     json_option,
+    option_error,
     option_type,
     report,
     setting_type,
@@ -89,7 +90,7 @@ def eval_cmd(scene, mesh, spheres_path, tree_path, field_path, field_space, ligh
     try:
         parse_methods(methods)  # fail early on a typo
     except InputError as exc:
-        raise InputError(f"--methods: {exc.message}", exc.path) from None
+        raise option_error(f"--methods: {exc.message}") from None
     if png_path is not None:
         from shtools.cli._outputs import guard_outputs
 

@@ -10,6 +10,7 @@ from shtools.cli._common import (
     InputPath,
     errors_name,
     json_option,
+    option_error,
     option_type,
     output_option,
     progress,
@@ -80,7 +81,8 @@ def export(baked, output, frame, frames_text, sequence, quantity, target, rig, d
     if rig is not None:
         name, sep, rig_path = rig.partition("=")
         if not sep or not name or not rig_path:
-            raise InputError(f"--rig '{rig}' is not OBJECT=RIG.glb")
+            raise option_error(f"--rig '{rig}' is not OBJECT=RIG.glb; give the object's "
+                               "name and its rig, e.g. --rig character=character.glb")
         rig = (name, rig_path)
     inputs = [baked, rig[1] if rig else None]
     guard_outputs({"-o": output}, inputs)

@@ -129,22 +129,27 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
 
     from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.scaling import write_scaling
-    from shtools.sh.scaling import build_scaling_table
+    from shtools.sh.scaling import build_scaling_table, k_samples
 
     guard_outputs({"-o": output})
     if k_range is not None and not k_range[0] < k_range[1]:
         raise option_error(f"--k-range {k_range[0]:g} {k_range[1]:g} is inverted or empty; "
                            "give LO < HI")
+    if k_range is not None:
+        try:  # the library's rule for the range of each function, before any work
+            k_samples(function, samples, *k_range)
+        except ValueError as exc:
+            raise option_error(f"--k-range {k_range[0]:g} {k_range[1]:g}: {exc}") from None
+    if interpolation == "linear-log-k" and function != "cone":
+        raise option_error("--interpolation linear-log-k needs k > 0: cone tables only "
+                           "(--function cone)")
     _check_scaling_memory(order, samples, nodes, force, output)
     start = time.perf_counter()
-    try:
-        table = build_scaling_table(
-            order, function, alpha=math.radians(alpha_deg), energy_preserving=energy_preserving,
-            samples=samples, k_range=None if k_range is None else tuple(k_range),
-            interpolation=interpolation, nodes=nodes,
-        )
-    except ValueError as exc:  # the k range or interpolation asked for
-        raise option_error(f"{exc}") from None
+    table = build_scaling_table(
+        order, function, alpha=math.radians(alpha_deg), energy_preserving=energy_preserving,
+        samples=samples, k_range=None if k_range is None else tuple(k_range),
+        interpolation=interpolation, nodes=nodes,
+    )
     params = {"order": order, "function": function, "energy_preserving": energy_preserving,
               "samples": samples, "k_range": [float(table["k"][0]), float(table["k"][-1])],
               "interpolation": interpolation, "nodes": table["quadrature_nodes"]}

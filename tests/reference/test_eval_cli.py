@@ -63,15 +63,16 @@ def test_eval_human_table(run_cli, capsule_assets):
     assert "| ps* |" in out and "| spheres, ray traced |" in out
 
 
-@pytest.mark.parametrize("args,message", [
-    (["--methods", "magic"], "unknown method"),
-    (["--methods", "hyb@x"], "accumulation order"),
-    (["--png", "out.jpg"], ".png"),
+@pytest.mark.parametrize("args,message,want", [
+    # a bad option value: a usage error (exit 2, as click's own); a bad output file: 1
+    (["--methods", "magic"], "unknown method", 2),
+    (["--methods", "hyb@x"], "accumulation order", 2),
+    (["--png", "out.jpg"], ".png", 1),
 ])
-def test_eval_rejects_bad_options(run_cli, capsule_assets, args, message):
+def test_eval_rejects_bad_options(run_cli, capsule_assets, args, message, want):
     mesh, spheres, _ = capsule_assets
     code, _, err = run_cli("eval", "--mesh", mesh, "--spheres", spheres, *args)
-    assert code == 1
+    assert code == want
     assert message in err and "Traceback" not in err
 
 

@@ -45,3 +45,26 @@ def test_a_file_without_a_settings_table_gets_one(tmp_path):
                     .replace("[settings]\n", ""))
     copy = bench_look.with_settings(path, ["traced_shadow_directions = 48"])
     assert load_scene(copy).settings.traced_shadow_directions == 48
+
+
+def test_headers_with_comments_quoted_and_repeated_keys(tmp_path):
+    from shtools.scene.scene import load_scene
+
+    path = tmp_path / "s.toml"
+    path.write_text(SCENE.replace("[settings]\n", "[ settings ]  # the bake\n")
+                    .replace("traced_shadow_directions = 96",
+                             '"traced_shadow_directions" = 96  # rays'))
+    copy = bench_look.with_settings(path, ["traced_shadow_directions = 48",
+                                           "traced_shadow_directions = 24"])
+    assert load_scene(copy).settings.traced_shadow_directions == 24  # the last one wins
+
+
+def test_a_setting_the_toml_cannot_take_is_refused_before_any_bake(tmp_path):
+    import pytest
+
+    path = tmp_path / "s.toml"
+    path.write_text(SCENE)
+    for bad in (["traced shadow = 3"], ["order = four"]):
+        with pytest.raises(ValueError, match="--set"):
+            bench_look.with_settings(path, bad)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]  # no copy left
