@@ -60,7 +60,7 @@ def test_field_sample_help_shows_its_ranges(run_cli):
     ("map_size", range(-1, 1100)),
     ("bits", range(-1, 12)),
     ("order", range(-1, 12)),
-    ("threshold", (-1.0, 0.0, 1e-9, 0.5, 1.0, 1e9)),
+    ("threshold", (-1.0, 0.0, 1e-9, 0.5, 1.0, 1e9, float("inf"), float("nan"))),
 ])
 def test_field_sample_types_accept_what_the_library_accepts(name, values):
     """The CLI's bounds of field sample are the library's (FieldParameters.validate)."""
