@@ -224,12 +224,23 @@ VARIANTS = {
     "tree": {"blocker": "tree", "settings": "traced_shadows = false\n"},
     "traced": {"blocker": "tree", "settings": ""},
 }
+
+
 def describe_variant(variant: dict) -> str:
-    """What a variant bakes, from its own entry: its blockers and the settings it sets."""
-    lines = [x.strip() for x in variant.get("settings", "").splitlines() if x.strip()]
+    """What a variant bakes, from its own entry: its blockers, the settings it sets (the
+    last of a repeated key, as its scene file takes it) and its assets' options."""
+    last = {}
+    for line in variant.get("settings", "").splitlines():
+        if line.strip():
+            last[line.split("=", 1)[0].strip()] = line.strip()
     kind = {"tree": "sphere-tree blockers", "field": "shadow-field blockers"}.get(
         variant.get("blocker"), f"{variant.get('blocker')} blockers")
-    return kind + (", " + ", ".join(f"`{x}`" for x in lines) if lines else ", the defaults")
+    parts = [f"`{x}`" for x in last.values()] or ["the defaults"]
+    if variant.get("field_options"):
+        parts.append("fields sampled with `" + " ".join(map(str, variant["field_options"])) + "`")
+    if variant.get("transfer"):
+        parts.append("transfer assets")
+    return kind + ", " + ", ".join(parts)
 
 
 def parse_variant(text: str) -> tuple[str, dict]:

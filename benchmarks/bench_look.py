@@ -63,6 +63,7 @@ import re
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -269,8 +270,9 @@ def with_settings(path: Path, settings: list[str]) -> Path:
     """A copy of the scene file ``path`` with ``settings`` (``"key = value"`` lines; the
     last of a repeated key wins) in its ``[settings]`` table, in the same folder (its
     relative asset paths hold); the caller deletes it.  Raises ``ValueError`` when the
-    copy does not hold them (a line the scene's TOML cannot take), before any bake."""
-    import tomllib
+    copy does not hold them, before any bake.  The scene's ``[settings]`` lines are
+    edited as single lines (the scenes benchmarked have no multi-line setting; one
+    makes the copy fail that check, never pass it wrongly)."""
 
     wanted = {}
     for line in settings:
@@ -297,7 +299,7 @@ def with_settings(path: Path, settings: list[str]) -> Path:
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: --set {', '.join(settings)} does not make a TOML scene "
                          f"({exc})") from None
-    if any(held.get(k) != v for k, v in want.items()):
+    if any(held.get(k) != v and v == v for k, v in want.items()):  # (nan != nan)
         raise ValueError(f"{path}: --set {', '.join(settings)} did not land in its [settings] "
                          "table (a dotted or inline settings key?)")
     digest = hashlib.sha256("\n".join(settings).encode()).hexdigest()[:8]
@@ -504,12 +506,16 @@ def main(argv=None) -> int:
         _fidelity()._ensure(args.field, "field", "sample", DATA / "meshes" / "teapot.obj",
                             "--order", 4)
     settings = []
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            parser.error(f"--set {item!r}: expected KEY=VALUE, e.g. "
+    for item in args.set:  # each checked alone, before any work
+        key, sep, value = (x.strip() for x in item.partition("="))
+        if not sep or not re.fullmatch(r"[A-Za-z0-9_-]+", key) or not value:
+            parser.error(f"--set {item!r}: expected KEY=VALUE with a bare key, e.g. "
                          "self_visibility_directions=64")
-        settings.append(f"{key.strip()} = {value.strip()}")
+        try:
+            tomllib.loads(f"x = {value}")
+        except tomllib.TOMLDecodeError as exc:
+            parser.error(f"--set {item!r}: {value!r} is not a TOML value ({exc})")
+        settings.append(f"{key} = {value}")
     this = "this" if not settings else "this (" + ", ".join(args.set) + ")"
     codes = {this: REPO}
     if args.baseline:

@@ -47,16 +47,16 @@ def test_field_sample_help_shows_its_ranges(run_cli):
     code, out, _ = run_cli("field", "sample", "--help")
     help_text = " ".join(out.split())
     assert code == 0
-    for shown in ("[default: 32; 1<=x<=256]", "[default: 64; a power of two, x>=2]",
+    for shown in ("[default: 32; 1<=x<=256]", "[default: 64; a power of two, 2<=x<=4096]",
                   "[default: 64; 4<=x<=1024]", "[default: 4; 1<=x<=8]",
-                  "[default: 0.01; x>0]", "[default: 8; a power of two, x>=1]",
+                  "[default: 0.01; x>0]", "[default: 8; a power of two, 1<=x<=4096]",
                   "[default: 8; 1<=x<=8]", "[default: 0.05; 0<x<=1]"):
         assert shown in help_text, shown
 
 
 @pytest.mark.parametrize(("name", "values"), [
     ("shells", range(-1, 260)),
-    ("resolution", range(-1, 300)),
+    ("resolution", [*range(-1, 300), 4096, 8192, 2**70]),
     ("map_size", range(-1, 1100)),
     ("bits", range(-1, 12)),
     ("order", range(-1, 12)),
@@ -94,7 +94,11 @@ def box(tmp_path):
 @pytest.mark.parametrize(("args", "named"), [
     (("--shells", 0), "'--shells': 0 is not in the range 1<=x<=256"),
     (("--bits", 12), "'--bits': 12 is not in the range 1<=x<=8"),
-    (("--resolution", 30), "'--resolution': 30 is not a power of two"),
+    (("--resolution", 30), "'--resolution': must be a power of two >= 2 and <= 4096, got 30 "
+                         "(e.g. 16 or 32)"),
+    (("--resolution", 0), "'--resolution': must be a power of two >= 2 and <= 4096, got 0 "
+                        "(e.g. 2)"),
+    (("--resolution", 8192), "got 8192 (e.g. 4096)"),
     # checked after parsing (the library's validate): still the option, no file
     (("--resolution", 8, "--min-resolution", 16), "--min-resolution must be"),
     (("--order", 3, "--self-order", 2), "--self-order must be"),
@@ -115,6 +119,9 @@ def test_field_option_errors_name_the_option_not_the_mesh(run_cli, tmp_path, box
     (("--function", "cone", "--alpha", 95), "'--alpha': 95.0 is not in the range 0<x<90"),
     (("--function", "cone", "--k-range", 2, 1), "--k-range 2 1 is inverted"),
     (("--function", "cone", "--k-range", 2, 8), "0 < lo < 1 < hi"),
+    # in range as degrees but 0 in radians: refused as the option, not an internal error
+    (("--function", "cone", "--alpha", "5e-324"), "is not a cone half-angle"),
+    (("--function", "cone", "--k-range", "5e-324", 2), "hi / lo finite"),
 ])
 def test_scaling_option_errors_name_the_option_not_the_output(run_cli, tmp_path, args,
                                                                named):

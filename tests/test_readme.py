@@ -113,7 +113,8 @@ def test_quick_start_and_skinned_recipe_run_as_written(tmp_path):
         return np.abs(got - want).max(axis=1) / np.maximum(np.abs(want).max(axis=1), 0.1)
 
     worst = off(rgb, baked.radiance[0])
-    assert worst.max() < 4e-2 and np.mean(worst > 2e-2) < 1e-2, (worst.max(), worst.mean())
+    assert worst.max() < 4e-2 and np.mean(worst > 2e-2) < 1e-2, (worst.max(),
+                                                                 np.mean(worst > 2e-2))
     # the same path without the tree's cuts: the snippet's spheres are the bake's exactly
     from shtools.runtime import ShadowRuntime, ShadowSettings
 

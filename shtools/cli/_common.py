@@ -280,11 +280,17 @@ class PowerOfTwo(click.IntRange):
         rv = click.INT.convert(value, param, ctx)
         if rv < self.min or (self.max is not None and rv > self.max) or rv & (rv - 1):
             top = "" if self.max is None else f" and <= {self.max}"
-            hint = ""
-            if rv >= 1 and rv & (rv - 1):
-                below = 1 << (rv.bit_length() - 1)
-                hint = f" (e.g. {below} or {2 * below})"
-            self.fail(f"{rv} is not a power of two >= {self.min}{top}{hint}.", param, ctx)
+            lowest = 1 << max(0, self.min - 1).bit_length()  # the smallest allowed
+            if rv < lowest:
+                near = [lowest]
+            elif self.max is not None and rv > self.max:
+                near = [1 << (self.max.bit_length() - 1)]  # the largest allowed
+            else:  # the powers of two on either side
+                near = [x for x in (1 << (rv.bit_length() - 1), 1 << rv.bit_length())
+                        if self.max is None or x <= self.max]
+            hint = f" (e.g. {' or '.join(map(str, near))})" if near else ""
+            self.fail(f"must be a power of two >= {self.min}{top}, got {rv}{hint}.",
+                      param, ctx)
         return rv
 
     def _describe_range(self) -> str:
@@ -368,8 +374,8 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     # field sample (shtools.field_limits, which FieldParameters.validate checks too; --order and
     # --self-order are the runtime settings order and acc_order, setting_type)
     "shells": click.IntRange(*field_limits.SHELLS),
-    "field_resolution": PowerOfTwo(field_limits.RESOLUTION_MIN),
-    "min_resolution": PowerOfTwo(field_limits.MIN_RESOLUTION_MIN),
+    "field_resolution": PowerOfTwo(*field_limits.RESOLUTION),
+    "min_resolution": PowerOfTwo(field_limits.MIN_RESOLUTION_MIN, field_limits.RESOLUTION[1]),
     "map_size": click.IntRange(*field_limits.MAP_SIZE),
     "threshold": FiniteRange(0, None, min_open=True),
     "bits": click.IntRange(*field_limits.BITS),

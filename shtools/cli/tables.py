@@ -140,13 +140,17 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
             k_samples(function, samples, *k_range)
         except ValueError as exc:
             raise option_error(f"--k-range {k_range[0]:g} {k_range[1]:g}: {exc}") from None
+    alpha = math.radians(alpha_deg)
+    if function == "cone" and not 0.0 < alpha < math.pi / 2:  # (rounds to 0 below 3e-322)
+        raise option_error(f"--alpha {alpha_deg:g} is not a cone half-angle in (0, 90) "
+                           "degrees")
     if interpolation == "linear-log-k" and function != "cone":
         raise option_error("--interpolation linear-log-k needs k > 0: cone tables only "
                            "(--function cone)")
     _check_scaling_memory(order, samples, nodes, force, output)
     start = time.perf_counter()
     table = build_scaling_table(
-        order, function, alpha=math.radians(alpha_deg), energy_preserving=energy_preserving,
+        order, function, alpha=alpha, energy_preserving=energy_preserving,
         samples=samples, k_range=None if k_range is None else tuple(k_range),
         interpolation=interpolation, nodes=nodes,
     )

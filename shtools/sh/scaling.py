@@ -284,8 +284,9 @@ def k_samples(function: str, count: int, lo: float, hi: float) -> tuple[np.ndarr
     if function == "cone":
         if count < 3:
             raise ValueError("a cone table needs at least 3 samples of k")
-        if not 0 < lo < 1 < hi:
-            raise ValueError(f"cone k range must satisfy 0 < lo < 1 < hi, got [{lo}, {hi}]")
+        if not 0 < lo < 1 < hi or not math.isfinite(math.log(hi / lo)):
+            raise ValueError(f"cone k range must satisfy 0 < lo < 1 < hi (hi / lo finite), "
+                             f"got [{lo}, {hi}]")
         n_lo = round((count - 1) * math.log(1 / lo) / math.log(hi / lo))
         n_lo = min(max(n_lo, 1), count - 2)
         below = np.geomspace(lo, 1.0, n_lo + 1)
