@@ -166,8 +166,8 @@ CASES = [
         ["eval", "--mesh", "", "--spheres", "{k}/spheres.h5"])],
     # --- sizes: refused with the size and the way out
     ("field-resolution-huge", ["field", "sample", "{k}/mesh.obj", "-o", "{o}/f.h5", "--shells",
-                               "1", "--resolution", "1048576", "--map", "4"], 1,
-     ["mesh.obj", "GiB", "--force"]),
+                               "1", "--resolution", "1048576", "--map", "4"], 2,
+     ["--resolution", "4096"]),  # past the option's bound, before any size is planned
     ("field-all-huge", ["field", "sample", "{k}/mesh.obj", "-o", "{o}/f.h5", "--shells", "256",
                         "--resolution", "4096", "--map", "1024"], 1,
      ["mesh.obj", "GiB", "--force"]),
