@@ -269,15 +269,16 @@ _SETTINGS_HEADER = re.compile(r"^\s*\[\s*settings\s*\]\s*(#.*)?$")
 def with_settings(path: Path, settings: list[str]) -> Path:
     """A copy of the scene file ``path`` with ``settings`` (``"key = value"`` lines; the
     last of a repeated key wins) in its ``[settings]`` table, in the same folder (its
-    relative asset paths hold); the caller deletes it.  Raises ``ValueError`` when the
-    copy does not hold them, before any bake.  The scene's ``[settings]`` lines are
-    edited as single lines (the scenes benchmarked have no multi-line setting; one
-    makes the copy fail that check, never pass it wrongly)."""
+    relative asset paths hold), never over an existing file; the caller deletes it.
 
+    Raises ``ValueError`` when the copy does not hold them, before any bake.  The
+    scene's ``[settings]`` lines are edited as single lines (the scenes benchmarked have
+    no multi-line setting; one makes the copy fail that check, never pass it wrongly).
+    """
     wanted = {}
     for line in settings:
         key, _, value = line.partition("=")
-        wanted[key.strip().strip('"').strip("'")] = value.strip()
+        wanted[key.strip()] = value.strip()
     lines, table, placed = [], None, False
     for line in path.read_text().splitlines():
         if line.lstrip().startswith("["):
@@ -304,7 +305,12 @@ def with_settings(path: Path, settings: list[str]) -> Path:
                          "table (a dotted or inline settings key?)")
     digest = hashlib.sha256("\n".join(settings).encode()).hexdigest()[:8]
     out = path.with_name(f"{path.stem}.set-{digest}.toml")
-    out.write_text(text)
+    try:  # a new file only: never over one of the user's (a left-over copy included)
+        with open(out, "x") as f:
+            f.write(text)
+    except FileExistsError:
+        raise ValueError(f"{out} exists (a copy a stopped run left?); remove it and run "
+                         "again") from None
     return out
 
 

@@ -12,7 +12,6 @@ SHELLS = (1, 256)
 MAP_SIZE = (4, 1024)
 #: Bits of a quantized coefficient (``--bits``; the asset stores at most 8).
 BITS = (1, 8)
-#: Direction-map resolution of a shell (``--resolution``, a power of two), and the
-#: smallest of its adaptive subdivision (``--min-resolution``, at most the resolution).
+#: Direction-map resolution of a shell (``--resolution``, a power of two; the smallest
+#: of its adaptive subdivision, ``--min-resolution``, any power of two up to it).
 RESOLUTION = (2, 4096)
-MIN_RESOLUTION_MIN = 1

@@ -120,7 +120,7 @@ def test_field_option_errors_name_the_option_not_the_mesh(run_cli, tmp_path, box
     (("--function", "cone", "--k-range", 2, 1), "--k-range 2 1 is inverted"),
     (("--function", "cone", "--k-range", 2, 8), "0 < lo < 1 < hi"),
     # in range as degrees but 0 in radians: refused as the option, not an internal error
-    (("--function", "cone", "--alpha", "5e-324"), "is not a cone half-angle"),
+    (("--function", "cone", "--alpha", "5e-324"), "--alpha 4.94066e-324: cone half-angle"),
     (("--function", "cone", "--k-range", "5e-324", 2), "hi / lo finite"),
 ])
 def test_scaling_option_errors_name_the_option_not_the_output(run_cli, tmp_path, args,

@@ -375,7 +375,7 @@ OPTION_TYPES: dict[str, click.ParamType] = {
     # --self-order are the runtime settings order and acc_order, setting_type)
     "shells": click.IntRange(*field_limits.SHELLS),
     "field_resolution": PowerOfTwo(*field_limits.RESOLUTION),
-    "min_resolution": PowerOfTwo(field_limits.MIN_RESOLUTION_MIN, field_limits.RESOLUTION[1]),
+    "min_resolution": PowerOfTwo(1, field_limits.RESOLUTION[1]),
     "map_size": click.IntRange(*field_limits.MAP_SIZE),
     "threshold": FiniteRange(0, None, min_open=True),
     "bits": click.IntRange(*field_limits.BITS),

@@ -129,24 +129,31 @@ def scaling_cmd(order, function, alpha_deg, energy_preserving, samples, k_range,
 
     from shtools.cli._outputs import guard_outputs
     from shtools.data_formats.scaling import write_scaling
-    from shtools.sh.scaling import build_scaling_table, k_samples
+    from shtools.sh.scaling import (
+        build_scaling_table,
+        check_alpha,
+        check_interpolation,
+        k_samples,
+    )
 
     guard_outputs({"-o": output})
     if k_range is not None and not k_range[0] < k_range[1]:
         raise option_error(f"--k-range {k_range[0]:g} {k_range[1]:g} is inverted or empty; "
                            "give LO < HI")
-    if k_range is not None:
-        try:  # the library's rule for the range of each function, before any work
-            k_samples(function, samples, *k_range)
-        except ValueError as exc:
-            raise option_error(f"--k-range {k_range[0]:g} {k_range[1]:g}: {exc}") from None
+    # the library's own rules, before any work, each refused as its option
     alpha = math.radians(alpha_deg)
-    if function == "cone" and not 0.0 < alpha < math.pi / 2:  # (rounds to 0 below 3e-322)
-        raise option_error(f"--alpha {alpha_deg:g} is not a cone half-angle in (0, 90) "
-                           "degrees")
-    if interpolation == "linear-log-k" and function != "cone":
-        raise option_error("--interpolation linear-log-k needs k > 0: cone tables only "
-                           "(--function cone)")
+    checks = [("--interpolation " + interpolation,
+               lambda: check_interpolation(function, interpolation))]
+    if k_range is not None:
+        checks.append((f"--k-range {k_range[0]:g} {k_range[1]:g}",
+                       lambda: k_samples(function, samples, *k_range)))
+    if function == "cone":  # (a tiny --alpha is 0 in radians)
+        checks.append((f"--alpha {alpha_deg:g}", lambda: check_alpha(alpha)))
+    for option, check in checks:
+        try:
+            check()
+        except ValueError as exc:
+            raise option_error(f"{option}: {exc}") from None
     _check_scaling_memory(order, samples, nodes, force, output)
     start = time.perf_counter()
     table = build_scaling_table(

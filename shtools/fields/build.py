@@ -27,7 +27,7 @@ import numpy as np
 
 from shtools.data_formats.field import ShadowField
 from shtools.errors import InputError
-from shtools.field_limits import BITS, MAP_SIZE, MIN_RESOLUTION_MIN, RESOLUTION, SHELLS
+from shtools.field_limits import BITS, MAP_SIZE, RESOLUTION, SHELLS
 from shtools.fields.quantize import quantize
 from shtools.fields.reduction import ERROR_QUAD_DEGREE, reduce_shell
 from shtools.fields.sampling import (
@@ -80,8 +80,7 @@ class FieldParameters:
         if not pow2(self.resolution) or not RESOLUTION[0] <= self.resolution <= RESOLUTION[1]:
             raise InputError(f"--resolution must be a power of two {RESOLUTION[0]}..{RESOLUTION[1]}"
                              f", got {self.resolution!r}")
-        if (not pow2(self.min_resolution) or self.min_resolution < MIN_RESOLUTION_MIN
-                or self.min_resolution > self.resolution):
+        if not pow2(self.min_resolution) or self.min_resolution > self.resolution:
             raise InputError(f"--min-resolution must be a power of two <= --resolution "
                              f"({self.resolution}), got {self.min_resolution!r}")
         if not (isinstance(self.map_size, int) and MAP_SIZE[0] <= self.map_size <= MAP_SIZE[1]):

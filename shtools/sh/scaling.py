@@ -63,7 +63,8 @@ QUADRATURE_TARGET = 1e-12
 MAX_NODES = 25_600
 
 
-def _check_alpha(alpha: float) -> float:
+def check_alpha(alpha: float) -> float:
+    """``alpha`` as a float, or ``ValueError`` unless a cone half-angle in ``(0, pi/2)`` rad."""
     alpha = float(alpha)
     if not 0.0 < alpha < math.pi / 2:
         raise ValueError(f"cone half-angle alpha must be in (0, pi/2), got {alpha!r} rad")
@@ -95,7 +96,7 @@ def angular_map(theta, k, function: str = "cone", alpha: float = DEFAULT_ALPHA):
     if function == "cone":
         if np.any(k <= 0):
             raise ValueError("cone scale k must be > 0")
-        cot = math.cos(_check_alpha(alpha)) / math.sin(alpha)
+        cot = math.cos(check_alpha(alpha)) / math.sin(alpha)
         y = k * s
         x = c + (1.0 - k) * cot * s
         # x y' - y x' = k (cos^2 + sin^2): the derivative has no cancellation.
@@ -303,6 +304,16 @@ def k_samples(function: str, count: int, lo: float, hi: float) -> tuple[np.ndarr
     raise ValueError(f"unknown angular map {function!r}; use one of {', '.join(FUNCTIONS)}")
 
 
+def check_interpolation(function: str, interpolation: str) -> None:
+    """``ValueError`` unless ``interpolation`` is a rule a ``function`` table can use
+    (``linear-log-k`` needs k > 0: cone tables only)."""
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"unknown interpolation {interpolation!r}; use one of "
+                         f"{', '.join(INTERPOLATIONS)}")
+    if interpolation == "linear-log-k" and function != "cone":
+        raise ValueError("linear-log-k interpolation needs k > 0 (cone tables only)")
+
+
 def build_scaling_table(order: int, function: str = "cone", *, alpha: float = DEFAULT_ALPHA,
                         energy_preserving: bool = False, samples: int = 40,
                         k_range: tuple[float, float] | None = None,
@@ -338,14 +349,10 @@ def build_scaling_table(order: int, function: str = "cone", *, alpha: float = DE
     if function not in FUNCTIONS:
         raise ValueError(f"unknown angular map {function!r}; use one of {', '.join(FUNCTIONS)}")
     if function == "cone":
-        alpha = _check_alpha(alpha)
+        alpha = check_alpha(alpha)
     if k_range is None:
         k_range = (1 / 8, 8.0) if function == "cone" else (0.0, 0.95)
-    if interpolation not in INTERPOLATIONS:
-        raise ValueError(f"unknown interpolation {interpolation!r}; use one of "
-                         f"{', '.join(INTERPOLATIONS)}")
-    if interpolation == "linear-log-k" and function != "cone":
-        raise ValueError("linear-log-k interpolation needs k > 0 (cone tables only)")
+    check_interpolation(function, interpolation)
     k, spacing = k_samples(function, samples, *k_range)
     kw = {"alpha": alpha, "energy_preserving": energy_preserving}
     auto = nodes is None

@@ -68,3 +68,15 @@ def test_a_setting_the_toml_cannot_take_is_refused_before_any_bake(tmp_path):
         with pytest.raises(ValueError, match="--set"):
             bench_look.with_settings(path, bad)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]  # no copy left
+
+
+def test_an_existing_file_of_the_copys_name_is_never_written_over(tmp_path):
+    import pytest
+
+    path = tmp_path / "s.toml"
+    path.write_text(SCENE)
+    copy = bench_look.with_settings(path, ["traced_shadow_directions = 48"])
+    copy.write_text("mine")  # a user's file (or a copy a stopped run left)
+    with pytest.raises(ValueError, match="exists"):
+        bench_look.with_settings(path, ["traced_shadow_directions = 48"])
+    assert copy.read_text() == "mine"
